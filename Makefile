@@ -1,0 +1,41 @@
+# lidarcam: `make help` lists the targets.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+export OMP_NUM_THREADS ?= 1
+export OPENBLAS_NUM_THREADS ?= 1
+export MKL_NUM_THREADS ?= 1
+
+.DEFAULT_GOAL := help
+.PHONY: help setup test test-slow lint bench reproduce-paper clean
+
+help: ## List the targets
+	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "lidarcam needs Python 3.11+"'
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+setup: $(STAMP) ## Create .venv and install lidarcam with its dev tools
+
+test: $(STAMP) ## Run the fast test suite (< 5 min on 2 cores)
+	$(PY) -m pytest
+
+test-slow: $(STAMP) ## Run only the slow, opt-in tests
+	$(PY) -m pytest -m slow
+
+lint: $(STAMP) ## ruff check
+	$(VENV)/bin/ruff check .
+
+bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughput
+	$(PY) -m experiments.bench
+
+reproduce-paper: $(STAMP) ## Run the paper's sweeps, write results/paper/ (tables, figures 3-7, REPORT.md)
+	$(PY) -m experiments.reproduce
+
+clean: ## Remove the virtual environment and caches
+	rm -rf $(VENV) .pytest_cache .ruff_cache outputs multirun

@@ -1,0 +1,15 @@
+"""lidarcam's calibration library: data model, solvers, selection, refinement and metrics.
+
+Frames: ``{L}`` lidar (scan plane z = 0), ``{C}`` camera, ``{W}_i`` board i. ``T_a_b`` maps points of
+frame b into frame a; the unknown extrinsic is ``T_lidar_cam`` (the paper's ``p_L = R p_C + t``).
+Units inside the library: metres and radians.
+"""
+
+from .errors import CalibrationError, LidarcamError, ObservationError
+from .io import extrinsic_yaml, load_observations, observations_from_dict, observations_to_dict, save_observations
+from .observations import BoardObservation, Observations
+
+__all__ = [
+    "BoardObservation", "CalibrationError", "LidarcamError", "ObservationError", "Observations",
+    "extrinsic_yaml", "load_observations", "observations_from_dict", "observations_to_dict", "save_observations",
+]

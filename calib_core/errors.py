@@ -1,0 +1,43 @@
+"""Exception types of calib_core: every bad-input error names its file, board and field."""
+
+from __future__ import annotations
+
+
+class LidarcamError(Exception):
+    """Base class of every error raised by lidarcam."""
+
+
+class ObservationError(LidarcamError, ValueError):
+    """Bad observation data: names the file, the board index and the field where known.
+
+    ``str(err)`` reads ``"obs.json: board 3: field 'scan': fewer than 2 points"``.
+    """
+
+    def __init__(self, message: str, *, file: str | None = None, board: int | None = None,
+                 field: str | None = None) -> None:
+        self.message = message
+        self.file = file
+        self.board = board
+        self.field = field
+        super().__init__(self._render())
+
+    def _render(self) -> str:
+        parts = []
+        if self.file is not None:
+            parts.append(str(self.file))
+        if self.board is not None:
+            parts.append(f"board {self.board}")
+        if self.field is not None:
+            parts.append(f"field '{self.field}'")
+        parts.append(self.message)
+        return ": ".join(parts)
+
+    def within(self, *, file: str | None = None, board: int | None = None) -> ObservationError:
+        """The same error with the file and/or board filled in (kept where already set)."""
+        return ObservationError(self.message, file=self.file if self.file is not None else file,
+                                board=self.board if self.board is not None else board,
+                                field=self.field)
+
+
+class CalibrationError(LidarcamError):
+    """A method was asked for something it cannot do (unknown method name, bad option)."""

@@ -1,0 +1,122 @@
+"""File formats: observation JSON (``lidarcam.observations/1``) and the YAML export of an extrinsic."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ObservationError
+from .observations import BoardObservation, Observations
+from .transforms import invert_T, quaternion_xyzw
+
+OBS_SCHEMA = "lidarcam.observations/1"
+
+
+def observations_to_dict(obs: Observations) -> dict:
+    """Plain-JSON form of ``obs`` under schema ``lidarcam.observations/1``."""
+    d: dict = {"schema": OBS_SCHEMA,
+               "boards": [{"T_cam_board": b.T_cam_board.tolist(), "outline": b.outline.tolist(),
+                           "scan": b.scan.tolist()} for b in obs.boards]}
+    if obs.T_lidar_cam_true is not None:
+        d["ground_truth"] = {"T_lidar_cam": obs.T_lidar_cam_true.tolist()}
+    if obs.meta:
+        d["meta"] = obs.meta
+    return d
+
+
+def observations_from_dict(data, source: str | None = None) -> Observations:
+    """Parse and validate the ``lidarcam.observations/1`` form; errors name ``source``, board and field."""
+    def fail(msg, board=None, field=None):
+        return ObservationError(msg, file=source, board=board, field=field)
+
+    if not isinstance(data, dict):
+        raise fail("top level must be a JSON object")
+    schema = data.get("schema")
+    if schema is None:
+        raise fail("missing key", field="schema")
+    if schema != OBS_SCHEMA:
+        raise fail(f"unsupported schema {schema!r} (expected {OBS_SCHEMA!r})", field="schema")
+    raw_boards = data.get("boards")
+    if raw_boards is None:
+        raise fail("missing key", field="boards")
+    if not isinstance(raw_boards, list):
+        raise fail("must be a list", field="boards")
+    boards = []
+    for i, rb in enumerate(raw_boards):
+        if not isinstance(rb, dict):
+            raise fail("must be an object", board=i)
+        for key in ("T_cam_board", "outline", "scan"):
+            if key not in rb:
+                raise fail("missing key", board=i, field=key)
+        try:
+            boards.append(BoardObservation(rb["T_cam_board"], rb["outline"], rb["scan"]))
+        except ObservationError as err:
+            raise err.within(file=source, board=i) from None
+    T_true = None
+    if "ground_truth" in data and data["ground_truth"] is not None:
+        gt = data["ground_truth"]
+        if not isinstance(gt, dict) or "T_lidar_cam" not in gt:
+            raise fail("missing key", field="ground_truth.T_lidar_cam")
+        T_true = gt["T_lidar_cam"]
+    meta = data.get("meta") or {}
+    try:
+        return Observations(tuple(boards), T_true, dict(meta))
+    except ObservationError as err:
+        raise err.within(file=source) from None
+
+
+def _reject_constant(name: str):
+    raise ValueError(f"non-finite number {name}")
+
+
+def load_observations(path) -> Observations:
+    """Read and validate an observation JSON file; raises ObservationError naming file, board, field."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ObservationError(f"cannot read ({exc.strerror})", file=str(path)) from None
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
+    except ValueError as exc:
+        msg = str(exc)
+        if msg.startswith("non-finite"):
+            msg += " (NaN/inf are not allowed)"
+        raise ObservationError(f"not valid JSON ({msg})", file=str(path)) from None
+    return observations_from_dict(data, source=str(path))
+
+
+def save_observations(obs: Observations, path) -> None:
+    """Write ``obs`` as ``lidarcam.observations/1`` JSON (floats in full precision: round trip is exact)."""
+    Path(path).write_text(json.dumps(observations_to_dict(obs), indent=1, allow_nan=False) + "\n")
+
+
+def _fmt_matrix(M: np.ndarray, indent: str) -> str:
+    return "\n".join(f"{indent}- [{', '.join(repr(float(v)) for v in row)}]" for row in M)
+
+
+def extrinsic_yaml(T_lidar_cam: np.ndarray, extra: dict | None = None) -> str:
+    """YAML text of an extrinsic: both 4x4 directions, quaternion (x, y, z, w) and translation, commented.
+
+    ``extra`` adds top-level scalar keys (method name, 1-sigma figures, ...).
+    """
+    T = np.asarray(T_lidar_cam, float)
+    Ti = invert_T(T)
+    lines = ["# lidarcam extrinsic calibration. Units: metres. T_a_b maps points of frame b into frame a.",
+             "# lidar frame: scan plane z = 0, x forward; camera frame: z optical axis, y down."]
+    for k, v in (extra or {}).items():
+        if isinstance(v, float) and not math.isfinite(v):
+            v = ".nan"
+        lines.append(f"{k}: {v}")
+    for name, M, comment in (("T_lidar_cam", T, "maps camera points into the lidar frame: p_L = T_lidar_cam p_C"),
+                             ("T_cam_lidar", Ti, "maps lidar points into the camera frame: p_C = T_cam_lidar p_L")):
+        q = quaternion_xyzw(M[:3, :3])
+        lines += [f"# {comment}", f"{name}:", "  matrix:", _fmt_matrix(M, "    "),
+                  "  # rotation as a unit quaternion, order (x, y, z, w), scalar last",
+                  f"  quaternion_xyzw: [{', '.join(repr(float(v)) for v in q)}]",
+                  "  # translation (metres): the origin of the source frame in the target frame",
+                  f"  translation: [{', '.join(repr(float(v)) for v in M[:3, 3])}]"]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,164 @@
+"""The data model: one board view (camera pose of the board + lidar scan on it) and a set of them.
+
+Frames (see METHOD.md): ``{L}`` lidar, scan plane z = 0; ``{C}`` camera (z optical axis, y down);
+``{W}_i`` board i, board plane z = 0. Units: metres, radians. ``T_a_b`` maps points of b into a.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .errors import ObservationError
+from .transforms import ROTATION_TOL, rotation_defect
+
+MIN_SCAN_POINTS = 2
+
+
+def _frozen_array(value, name: str, shape: tuple) -> np.ndarray:
+    """Float copy of ``value``, checked against ``shape`` (None = any length) and for finiteness, read-only."""
+    try:
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ObservationError(f"not a numeric array ({exc})", field=name) from None
+    if a.ndim != len(shape) or any(s is not None and s != n for s, n in zip(shape, a.shape, strict=True)):
+        want = "x".join("N" if s is None else str(s) for s in shape)
+        raise ObservationError(f"expected shape {want}, got {'x'.join(map(str, a.shape)) or 'scalar'}",
+                               field=name)
+    if not np.all(np.isfinite(a)):
+        raise ObservationError("contains NaN or inf", field=name)
+    a.setflags(write=False)
+    return a
+
+
+def _segments_cross(p1, p2, q1, q2) -> bool:
+    """True when closed segments p1p2 and q1q2 intersect (2D)."""
+    def orient(a, b, c):
+        return np.sign((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+
+    def on_seg(a, b, c):
+        return min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= c[1] <= max(a[1], b[1])
+
+    o1, o2, o3, o4 = orient(p1, p2, q1), orient(p1, p2, q2), orient(q1, q2, p1), orient(q1, q2, p2)
+    if o1 != o2 and o3 != o4:
+        return True
+    return bool((o1 == 0 and on_seg(p1, p2, q1)) or (o2 == 0 and on_seg(p1, p2, q2))
+                or (o3 == 0 and on_seg(q1, q2, p1)) or (o4 == 0 and on_seg(q1, q2, p2)))
+
+
+def check_simple_polygon(outline: np.ndarray) -> str | None:
+    """Why ``outline`` (V,2) is not a simple polygon with positive area, or None when it is."""
+    V = len(outline)
+    if V < 3:
+        return f"needs at least 3 vertices, got {V}"
+    x, y = outline[:, 0], outline[:, 1]
+    area = 0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    if abs(area) < 1e-12:
+        return "has zero area"
+    for i in range(V):
+        for j in range(i + 1, V):
+            if j == i + 1 or (i == 0 and j == V - 1):
+                continue  # adjacent edges share a vertex
+            if _segments_cross(outline[i], outline[(i + 1) % V], outline[j], outline[(j + 1) % V]):
+                return f"is not a simple polygon (edges {i} and {j} cross)"
+    return None
+
+
+@dataclass(frozen=True, eq=False)
+class BoardObservation:
+    """One view of a planar calibration board by both sensors.
+
+    Attributes:
+        T_cam_board: 4x4 pose of the board in the camera, maps board-frame points (board plane z = 0)
+            into the camera frame; metres.
+        outline: (V,2) ordered vertices of the board's physical outline in its own frame (z = 0), metres.
+            The paper's square of side c is ``[[0,0],[c,0],[c,c],[0,c]]``.
+        scan: (K,2) lidar points on this board, in the lidar frame (scan plane z = 0), ordered by bearing;
+            metres.
+    """
+
+    T_cam_board: np.ndarray
+    outline: np.ndarray
+    scan: np.ndarray
+
+    def __post_init__(self) -> None:
+        T = _frozen_array(self.T_cam_board, "T_cam_board", (4, 4))
+        if not np.allclose(T[3], [0, 0, 0, 1], atol=ROTATION_TOL):
+            raise ObservationError("last row must be [0, 0, 0, 1]", field="T_cam_board")
+        defect = rotation_defect(T[:3, :3])
+        if defect > ROTATION_TOL:
+            what = "is a reflection or singular" if not np.isfinite(defect) else \
+                f"is not orthonormal (|R^T R - I| = {defect:.2g} > {ROTATION_TOL:g})"
+            raise ObservationError(f"rotation {what}", field="T_cam_board")
+        outline = _frozen_array(self.outline, "outline", (None, 2))
+        why = check_simple_polygon(outline)
+        if why:
+            raise ObservationError(f"outline {why}", field="outline")
+        scan = _frozen_array(self.scan, "scan", (None, 2))
+        if len(scan) < MIN_SCAN_POINTS:
+            raise ObservationError(f"fewer than {MIN_SCAN_POINTS} scan points ({len(scan)})", field="scan")
+        object.__setattr__(self, "T_cam_board", T)
+        object.__setattr__(self, "outline", outline)
+        object.__setattr__(self, "scan", scan)
+
+    @property
+    def normal_cam(self) -> np.ndarray:
+        """Unit normal ``n = Phi e3`` of the board plane in the camera frame."""
+        return self.T_cam_board[:3, 2]
+
+    @property
+    def offset_cam(self) -> float:
+        """Plane offset ``d = n . Delta`` (metres): the plane is ``{p_C : n . p_C = d}``."""
+        return float(self.normal_cam @ self.T_cam_board[:3, 3])
+
+    @property
+    def scan_3d(self) -> np.ndarray:
+        """(K,3) scan points in the lidar frame with z = 0."""
+        return np.column_stack([self.scan, np.zeros(len(self.scan))])
+
+
+@dataclass(frozen=True, eq=False)
+class Observations:
+    """The boards of one calibration problem, with optional ground truth.
+
+    Attributes:
+        boards: the board views.
+        T_lidar_cam_true: optional 4x4 true extrinsic (maps camera points into the lidar frame;
+            the paper's ``p_L = R p_C + t``).
+        meta: free-form provenance (simulator settings, seed, source file); not used by the solvers.
+    """
+
+    boards: tuple[BoardObservation, ...]
+    T_lidar_cam_true: np.ndarray | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        boards = tuple(self.boards)
+        for i, b in enumerate(boards):
+            if not isinstance(b, BoardObservation):
+                raise ObservationError(f"not a BoardObservation ({type(b).__name__})", board=i)
+        object.__setattr__(self, "boards", boards)
+        if self.T_lidar_cam_true is not None:
+            T = _frozen_array(self.T_lidar_cam_true, "ground_truth.T_lidar_cam", (4, 4))
+            if rotation_defect(T[:3, :3]) > ROTATION_TOL or not np.allclose(T[3], [0, 0, 0, 1]):
+                raise ObservationError("not a rigid transform", field="ground_truth.T_lidar_cam")
+            object.__setattr__(self, "T_lidar_cam_true", T)
+
+    def __len__(self) -> int:
+        return len(self.boards)
+
+    @property
+    def n_boards(self) -> int:
+        return len(self.boards)
+
+    def subset(self, indices) -> Observations:
+        """The same problem with only the boards at ``indices`` (in that order)."""
+        return Observations(tuple(self.boards[i] for i in indices), self.T_lidar_cam_true, dict(self.meta))
+
+    def planes_cam(self) -> tuple[np.ndarray, np.ndarray]:
+        """Board planes in the camera frame: normals (N,3) and offsets (N,), plane ``n . p_C = d``."""
+        n = np.array([b.normal_cam for b in self.boards]).reshape(-1, 3)
+        d = np.array([b.offset_cam for b in self.boards])
+        return n, d

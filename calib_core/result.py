@@ -1,0 +1,107 @@
+"""The outcome of one calibration: ``CalibrationResult`` and its JSON form ``lidarcam.result/1``."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import LidarcamError
+from .transforms import invert_T
+
+RESULT_SCHEMA = "lidarcam.result/1"
+
+
+class SolveFailure(LidarcamError):
+    """Raised inside a method when it cannot solve; ``calibrate`` turns it into ``ok=False`` with the reason.
+
+    ``candidates`` (M,4,4) are the candidates considered before failing, kept for the benchmark.
+    """
+
+    def __init__(self, reason: str, candidates: np.ndarray | None = None) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.candidates = np.zeros((0, 4, 4)) if candidates is None else np.asarray(candidates, float)
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationResult:
+    """One method's answer on one set of observations.
+
+    Attributes:
+        method: registry name of the method that produced it.
+        ok: True when the method returned a solution; False with ``reason`` otherwise (never a guess).
+        T_lidar_cam: 4x4 extrinsic mapping camera points into the lidar frame (metres); None when not ok.
+        reason: why the method failed, or None.
+        candidates: (M,4,4) every candidate ``T_lidar_cam`` the method considered (M may be 0).
+        seconds: wall time of the call.
+        covariance: optional 6x6 covariance of the result, tangent-space rotation (rad, left perturbation
+            of R in the lidar frame) then translation (m).
+        info: method-specific diagnostics (chosen candidate index, costs, conditioning, warnings).
+    """
+
+    method: str
+    ok: bool
+    T_lidar_cam: np.ndarray | None = None
+    reason: str | None = None
+    candidates: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    seconds: float = 0.0
+    covariance: np.ndarray | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def T_cam_lidar(self) -> np.ndarray | None:
+        """4x4 inverse extrinsic, mapping lidar points into the camera frame; None when not ok."""
+        return None if self.T_lidar_cam is None else invert_T(self.T_lidar_cam)
+
+    @property
+    def n_candidates(self) -> int:
+        return int(len(self.candidates))
+
+    @property
+    def sigma_rot_deg(self) -> float | None:
+        """1-sigma rotation uncertainty in degrees (root of the trace of the rotation block), or None."""
+        if self.covariance is None:
+            return None
+        return float(np.degrees(np.sqrt(np.trace(self.covariance[:3, :3]))))
+
+    @property
+    def sigma_trans_mm(self) -> float | None:
+        """1-sigma translation uncertainty in millimetres (root of the trace of the translation block), or None."""
+        if self.covariance is None:
+            return None
+        return float(1000.0 * np.sqrt(np.trace(self.covariance[3:, 3:])))
+
+    def to_dict(self) -> dict:
+        """JSON form under schema ``lidarcam.result/1``."""
+        d = {"schema": RESULT_SCHEMA, "method": self.method, "ok": bool(self.ok), "reason": self.reason,
+             "T_lidar_cam": None if self.T_lidar_cam is None else self.T_lidar_cam.tolist(),
+             "T_cam_lidar": None if self.T_cam_lidar is None else self.T_cam_lidar.tolist(),
+             "n_candidates": self.n_candidates, "seconds": float(self.seconds)}
+        if self.covariance is not None:
+            d["covariance"] = np.asarray(self.covariance).tolist()
+            d["sigma_rot_deg"] = self.sigma_rot_deg
+            d["sigma_trans_mm"] = self.sigma_trans_mm
+        return d
+
+    def save(self, path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+
+
+def load_result(path) -> dict:
+    """Read a ``lidarcam.result/1`` JSON file into a dict with numpy 4x4 arrays (None where not ok)."""
+    from .errors import ObservationError
+
+    try:
+        d = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise ObservationError(f"cannot read result ({exc})", file=str(path)) from None
+    if d.get("schema") != RESULT_SCHEMA:
+        raise ObservationError(f"expected schema {RESULT_SCHEMA!r}", file=str(path), field="schema")
+    for k in ("T_lidar_cam", "T_cam_lidar", "covariance"):
+        if d.get(k) is not None:
+            d[k] = np.asarray(d[k], float)
+    return d
