@@ -35,6 +35,8 @@ def _cmd_calibrate(args) -> int:
             print("  " + "  ".join(f"{v: .6f}" for v in row))
         if res.covariance is not None:
             print(f"1-sigma: rotation {res.sigma_rot_deg:.3f} deg, translation {res.sigma_trans_mm:.1f} mm")
+        if "conditioning" in res.info:
+            print(f"conditioning (inverse condition number, 1 = ideal, < 1e-3 poor): {res.info['conditioning']:.2e}")
         for w in res.info.get("warnings", []):
             print(f"warning: {w}")
         if obs.T_lidar_cam_true is not None:
@@ -50,8 +52,10 @@ def _cmd_calibrate(args) -> int:
             extra = {"method": res.method}
             if res.covariance is not None:
                 extra.update(sigma_rot_deg=res.sigma_rot_deg, sigma_trans_mm=res.sigma_trans_mm)
+            if "conditioning" in res.info:
+                extra["conditioning"] = float(res.info["conditioning"])
             with open(args.yaml, "w") as f:
-                f.write(extrinsic_yaml(res.T_lidar_cam, extra))
+                f.write(extrinsic_yaml(res.T_lidar_cam, extra, covariance=res.covariance))
             print(f"wrote {args.yaml}")
     return 0 if res.ok else 1
 
@@ -65,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=_cmd_methods)
     sp = sub.add_parser("calibrate", help="calibrate from an observation JSON file")
     sp.add_argument("observations", help="lidarcam.observations/1 JSON file")
-    sp.add_argument("--method", default="peng2022", choices=list(METHODS), help="method (default: %(default)s)")
+    sp.add_argument("--method", default="lidarcam", choices=list(METHODS), help="method (default: %(default)s)")
     sp.add_argument("--out", help="write the result JSON (lidarcam.result/1) here")
     sp.add_argument("--yaml", help="write the extrinsic as YAML here")
     sp.set_defaults(func=_cmd_calibrate)

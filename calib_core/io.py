@@ -98,16 +98,23 @@ def _fmt_matrix(M: np.ndarray, indent: str) -> str:
     return "\n".join(f"{indent}- [{', '.join(repr(float(v)) for v in row)}]" for row in M)
 
 
-def extrinsic_yaml(T_lidar_cam: np.ndarray, extra: dict | None = None) -> str:
+def extrinsic_yaml(T_lidar_cam: np.ndarray, extra: dict | None = None, covariance: np.ndarray | None = None) -> str:
     """YAML text of an extrinsic: both 4x4 directions, quaternion (x, y, z, w) and translation, commented.
 
-    ``extra`` adds top-level scalar keys (method name, 1-sigma figures, ...).
+    ``extra`` adds top-level scalar keys (method name, 1-sigma figures, ...). ``covariance`` (6x6, rotation
+    tangent of ``T_lidar_cam`` in the lidar frame (rad) then translation (m)) adds its 1-sigma figures
+    ``sigma_rot_deg`` and ``sigma_trans_mm`` (unless in ``extra``) and the matrix.
     """
+    extra = dict(extra or {})
+    if covariance is not None:
+        cov = np.asarray(covariance, float)
+        extra.setdefault("sigma_rot_deg", float(np.degrees(np.sqrt(np.trace(cov[:3, :3])))))
+        extra.setdefault("sigma_trans_mm", float(1000 * np.sqrt(np.trace(cov[3:, 3:]))))
     T = np.asarray(T_lidar_cam, float)
     Ti = invert_T(T)
     lines = ["# lidarcam extrinsic calibration. Units: metres. T_a_b maps points of frame b into frame a.",
              "# lidar frame: scan plane z = 0, x forward; camera frame: z optical axis, y down."]
-    for k, v in (extra or {}).items():
+    for k, v in extra.items():
         if isinstance(v, float) and not math.isfinite(v):
             v = ".nan"
         lines.append(f"{k}: {v}")
@@ -119,4 +126,8 @@ def extrinsic_yaml(T_lidar_cam: np.ndarray, extra: dict | None = None) -> str:
                   f"  quaternion_xyzw: [{', '.join(repr(float(v)) for v in q)}]",
                   "  # translation (metres): the origin of the source frame in the target frame",
                   f"  translation: [{', '.join(repr(float(v)) for v in M[:3, 3])}]"]
+    if covariance is not None:
+        lines += ["# 6x6 covariance of T_lidar_cam: rotation vector of the left perturbation exp(w) R in the lidar",
+                  "# frame (rad), then translation (m); sigma_rot_deg / sigma_trans_mm are the roots of the traces",
+                  "covariance:", _fmt_matrix(cov, "  ")]
     return "\n".join(lines) + "\n"

@@ -14,7 +14,8 @@ class Method:
     """One registered method.
 
     ``func(obs, **options) -> (T_lidar_cam 4x4, candidates (M,4,4), info dict)``; it raises
-    ``SolveFailure`` with a reason when it cannot solve.
+    ``SolveFailure`` with a reason when it cannot solve. An ``info["covariance"]`` (6x6) becomes the result's
+    covariance.
     """
 
     name: str
@@ -25,6 +26,10 @@ class Method:
 
 
 METHODS: dict[str, Method] = {}
+
+SUFFIXES: dict[str, Callable[[Method], Method]] = {}
+"""Method-name suffixes (``"ml"`` for ``X+ml``, ...): each makes a derived method from its base method. A name
+``X+s`` that is not registered is built on first use from ``X`` and ``SUFFIXES[s]``."""
 
 
 def register(name: str, *, min_boards: int, citation: str, summary: str):
@@ -39,7 +44,12 @@ def register(name: str, *, min_boards: int, citation: str, summary: str):
 
 def get_method(name: str) -> Method:
     """The registered method ``name``; CalibrationError listing the known names otherwise."""
+    if name not in METHODS and "+" in name:
+        base, _, suffix = name.rpartition("+")
+        if suffix in SUFFIXES and (base in METHODS or "+" in base):
+            METHODS[name] = SUFFIXES[suffix](get_method(base))
     try:
         return METHODS[name]
     except KeyError:
-        raise CalibrationError(f"unknown method {name!r}; known: {', '.join(METHODS)}") from None
+        raise CalibrationError(f"unknown method {name!r}; known: {', '.join(METHODS)} "
+                               f"(and X+{'/X+'.join(SUFFIXES)} for any X)") from None

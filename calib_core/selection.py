@@ -2,7 +2,9 @@
 
 A scorer is ``f(obs, candidates (M,4,4) T_lidar_cam, **options) -> (M,) cost``. ``point_to_plane`` is
 Vasconcelos' choice; ``peng2022`` is the paper's uncertainty-weighted joint likelihood of the point-line
-error (METHOD.md eq. 1-12), returned as minus its log.
+error (METHOD.md eq. 1-12), returned as minus its log; ``lidarcam`` is ours: a negative log-likelihood that
+uses all the evidence (every scan point's range residual, both endpoints against the board edges, scan points
+inside the board outline, boards in front of the camera).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     ends = np.array([[b.scan_3d[0], b.scan_3d[-1]] for b in obs.boards])   # (N,2,3) lidar frame
     T_cb = np.array([b.T_cam_board for b in obs.boards])                    # (N,4,4)
     R, t = candidates[:, :3, :3], candidates[:, :3, 3]
-    p_C = np.einsum("mba,nkb->mnka", R, ends[None] - t[:, None, None, :])  # R^T (p - t)
+    p_C = np.einsum("mba,mnkb->mnka", R, ends[None] - t[:, None, None, :])  # R^T (p - t)
     return np.einsum("nba,mnkb->mnka", T_cb[:, :3, :3], p_C - T_cb[None, :, None, :3, 3])
 
 
@@ -135,4 +137,81 @@ def peng2022(obs: Observations, candidates: np.ndarray, *, delta_m: float = 0.03
     return cost
 
 
-SCORERS = {"point_to_plane": point_to_plane, "peng2022": peng2022}
+def range_distances(obs: Observations, candidates: np.ndarray) -> np.ndarray:
+    """(M,K) range residuals (metres) of every scan point under every candidate: measured range minus the range at
+    which its beam meets its board plane (as ``calib_core.residuals.range_residuals``).
+
+    The point-to-plane distance is the range residual times ``m . b`` (plane normal in the lidar frame dot beam);
+    beams nearly parallel to a candidate's plane get residuals of a kilometre or more rather than inf.
+    """
+    data = ScanData.from_observations(obs)
+    m = np.einsum("mab,nb->mna", candidates[:, :3, :3], data.normals)[:, data.board]   # (M,K,3)
+    b = data.points / np.linalg.norm(data.points, axis=1, keepdims=True)
+    mb = np.einsum("mka,ka->mk", m, b)
+    mb = np.where(np.abs(mb) < 1e-6, np.copysign(1e-6, mb), mb)
+    return plane_distances(obs, candidates) / mb
+
+
+def points_in_boards(obs: Observations, candidates: np.ndarray) -> list[np.ndarray]:
+    """Per board, (M,K_i,3) its scan points in the board frame under every candidate (as ``endpoints_in_board``)."""
+    R, t = candidates[:, :3, :3], candidates[:, :3, 3]
+    out = []
+    for b in obs.boards:
+        p_C = np.einsum("mba,mkb->mka", R, b.scan_3d[None] - t[:, None, :])
+        out.append(np.einsum("ba,mkb->mka", b.T_cam_board[:3, :3], p_C - b.T_cam_board[:3, 3]))
+    return out
+
+
+def outside_outline(xy: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """Distance (metres) of 2D points ``xy`` (...,2) outside the simple polygon ``outline`` (V,2); 0 inside."""
+    a, b = outline, np.roll(outline, -1, axis=0)                                # edges a_k -> b_k
+    ab = b - a
+    w = xy[..., None, :] - a                                                    # (...,V,2)
+    s = np.clip(np.einsum("...vc,vc->...v", w, ab) / np.sum(ab**2, axis=1), 0.0, 1.0)
+    dist = np.linalg.norm(w - s[..., None] * ab, axis=-1).min(axis=-1)
+    x, y = xy[..., 0, None], xy[..., 1, None]                                   # even-odd rule
+    crosses = (a[:, 1] > y) != (b[:, 1] > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_at = a[:, 0] + (y - a[:, 1]) * ab[:, 0] / ab[:, 1]
+    inside = np.sum(crosses & (x < x_at), axis=-1) % 2 == 1
+    return np.where(inside, 0.0, dist)
+
+
+def lidarcam(obs: Observations, candidates: np.ndarray, *, sigma_m: float = 0.02, edge_sigma_m: float = 0.03,
+             outline_sigma_m: float = 0.03, behind_penalty: float = np.inf, return_details: bool = False):
+    """Our selection cost: a negative log-likelihood over all the evidence, per candidate (lower is better).
+
+    ``cost = 0.5 sum_k (e_k / sigma)^2 + 0.5 sum_{i,end} (d_{i,end} / edge_sigma)^2 + 0.5 sum_k (o_k / outline_sigma)^2
+    + behind_penalty * (boards behind the camera)`` with ``e_k`` the range residual of every scan point against
+    its board plane, ``d`` the point-line errors of the two endpoints of every board (METHOD.md eq. 8-12), ``o_k``
+    the distance of every scan point, mapped into its board's frame, outside the board outline, and a board
+    "behind the camera" when the centroid of its scan points mapped into the camera frame has depth <= 0.
+
+    Args:
+        sigma_m: range-noise std (metres).
+        edge_sigma_m, outline_sigma_m: scales (metres) of the endpoint and outline terms; they absorb the
+            range noise and the beam spacing at the board edges (0.25 deg at 5 m is 22 mm).
+        behind_penalty: cost per board behind the camera (inf: such a candidate is never chosen).
+    Returns:
+        (M,) cost; with ``return_details`` also a dict of the four terms, each (M,).
+    """
+    candidates = np.asarray(candidates, float).reshape(-1, 4, 4)
+    rng_term = 0.5 * np.sum((range_distances(obs, candidates) / sigma_m) ** 2, axis=1)
+    edge_term = 0.5 * np.sum((point_line_errors(obs, candidates) / edge_sigma_m) ** 2, axis=(1, 2))
+    out_term = np.zeros(len(candidates))
+    behind = np.zeros(len(candidates))
+    R, t = candidates[:, :3, :3], candidates[:, :3, 3]
+    for b, P in zip(obs.boards, points_in_boards(obs, candidates), strict=True):
+        out_term += 0.5 * np.sum((outside_outline(P[..., :2], b.outline) / outline_sigma_m) ** 2, axis=1)
+        depth = np.einsum("ma,ma->m", R[:, :, 2], b.scan_3d.mean(axis=0) - t)   # z of R^T (c - t)
+        behind += depth <= 0
+    with np.errstate(invalid="ignore"):
+        pen = np.where(behind > 0, behind * behind_penalty, 0.0)
+    cost = rng_term + edge_term + out_term + pen
+    cost = np.where(np.isnan(cost), np.inf, cost)
+    if return_details:
+        return cost, {"range": rng_term, "edge": edge_term, "outline": out_term, "behind": behind}
+    return cost
+
+
+SCORERS = {"point_to_plane": point_to_plane, "peng2022": peng2022, "lidarcam": lidarcam}

@@ -1,0 +1,221 @@
+"""Uncertainty of the extrinsic: covariance at an optimum, Fisher information and CRLB of the range-noise model,
+a scale-free conditioning measure and degeneracy warnings for a board set.
+
+Parameters are those of ``calib_core.residuals``: ``x = (w, dt)``, ``w`` a left rotation perturbation in the
+lidar frame (radians), ``dt`` the translation (metres). A 6x6 covariance is ordered rotation then translation.
+Noise model: every scan point is its beam times the true range plus zero-mean Gaussian noise of std ``sigma``
+along the beam (the simulator's and the paper's model); camera-side board poses are taken as exact.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import LidarcamError
+from .lines import fit_line
+from .observations import Observations
+from .residuals import ScanData, range_residuals
+
+
+class UncertaintyError(LidarcamError):
+    """The uncertainty cannot be computed: too few residuals, a singular information matrix, no extrinsic."""
+
+
+def _inverse_information(A: np.ndarray, rcond: float) -> np.ndarray:
+    """Inverse of a symmetric positive semi-definite 6x6 ``A``; UncertaintyError when (nearly) singular."""
+    A = 0.5 * (A + A.T)
+    # scale to unit diagonal first, so that radians and metres do not decide the rank test
+    s = np.sqrt(np.clip(np.diag(A), 1e-300, None))
+    An = A / np.outer(s, s)
+    lam, V = np.linalg.eigh(An)
+    if not np.all(np.isfinite(lam)) or lam[0] <= rcond * lam[-1]:
+        raise UncertaintyError(f"information matrix is singular (eigenvalue ratio {lam[0] / lam[-1]:.1e}): "
+                               "the board set does not determine all 6 degrees of freedom")
+    return (V / lam) @ V.T / np.outer(s, s)
+
+
+def covariance(jacobian: np.ndarray, residuals: np.ndarray, sigma_m: float | None = None, *,
+               rcond: float = 1e-12) -> np.ndarray:
+    """Gauss-Newton covariance ``sigma^2 (J^T J)^-1`` (6x6, rotation then translation) of a least-squares optimum.
+
+    Args:
+        jacobian: (K,6) residual Jacobian at the optimum (parameters as in ``calib_core.residuals``).
+        residuals: (K,) residuals at the optimum (metres).
+        sigma_m: the residuals' noise std (metres); ``None`` estimates it as ``sqrt(|e|^2 / (K - 6))``.
+    Raises:
+        UncertaintyError: fewer than 7 residuals with ``sigma_m=None``, or a singular ``J^T J``.
+    """
+    J = np.asarray(jacobian, float)
+    e = np.asarray(residuals, float)
+    if sigma_m is None:
+        dof = len(e) - J.shape[1]
+        if dof <= 0:
+            raise UncertaintyError(f"{len(e)} residuals leave no degrees of freedom to estimate the noise")
+        sigma2 = float(e @ e) / dof
+    else:
+        sigma2 = float(sigma_m) ** 2
+    return sigma2 * _inverse_information(J.T @ J, rcond)
+
+
+def _extrinsic(obs: Observations, T_lidar_cam) -> np.ndarray:
+    if T_lidar_cam is not None:
+        return np.asarray(T_lidar_cam, float)
+    if obs.T_lidar_cam_true is None:
+        raise UncertaintyError("no extrinsic given and the observations carry no ground truth")
+    return obs.T_lidar_cam_true
+
+
+def fisher_information(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: float) -> np.ndarray:
+    """Fisher information (6x6) of the range-noise model at ``T_lidar_cam``: ``J^T J / sigma^2``.
+
+    ``J`` is the (K,6) Jacobian of the range residuals. It depends on the beam directions, the board planes and
+    the extrinsic only, not on the measured ranges, so noisy scans give the exact information of their beams.
+    """
+    _, J = range_residuals(np.asarray(T_lidar_cam, float), ScanData.from_observations(obs), jacobian=True)
+    return J.T @ J / float(sigma_m) ** 2
+
+
+@dataclass(frozen=True)
+class Crlb:
+    """Cramer-Rao lower bound of an unbiased estimator of the extrinsic.
+
+    Attributes:
+        rot_rms_deg: ``sqrt(trace(cov[:3,:3]))`` in degrees: the bound on the RMS of the norm of the rotation-vector
+            error ``log(R R_true^T)``, i.e. the RMS of the geodesic angle, which is exactly ``e_R`` of METHOD.md
+            eq. 13. Compare it with ``sqrt(mean(e_R^2))`` over trials, not with ``mean(e_R)``: for a Gaussian
+            error with isotropic covariance, ``mean(e_R)`` is about 0.92 times the RMS.
+        trans_rms_m: ``sqrt(trace(cov[3:,3:]))``: the bound on the RMS of ``e_t = |t - t_true|`` (metres).
+        cov: the 6x6 inverse Fisher information (rotation in rad, translation in m).
+    """
+
+    rot_rms_deg: float
+    trans_rms_m: float
+    cov: np.ndarray
+
+
+def crlb(obs: Observations, sigma_m: float, T_lidar_cam: np.ndarray | None = None) -> Crlb:
+    """CRLB of the extrinsic for range noise of std ``sigma_m`` (metres), at ``T_lidar_cam`` (default: the truth).
+
+    Raises UncertaintyError for a singular Fisher information or a missing extrinsic.
+    """
+    cov = _inverse_information(fisher_information(obs, _extrinsic(obs, T_lidar_cam), sigma_m), 1e-12)
+    return Crlb(float(np.degrees(np.sqrt(np.trace(cov[:3, :3])))), float(np.sqrt(np.trace(cov[3:, 3:]))), cov)
+
+
+def typical_range(obs: Observations) -> float:
+    """RMS range (metres) of all scan points: the lever arm that turns a rotation into a displacement."""
+    pts = np.concatenate([b.scan for b in obs.boards])
+    return float(np.sqrt(np.mean(np.sum(pts**2, axis=1))))
+
+
+def conditioning(obs: Observations, T_lidar_cam: np.ndarray | None = None, *, scale_m: float | None = None) -> float:
+    """Inverse condition number (in [0, 1], scale-free) of the range-residual Jacobian with translation in units
+    of ``scale_m`` (default: ``typical_range(obs)``), at ``T_lidar_cam`` (default: the ground truth).
+
+    1 means every direction of the 6-dof extrinsic (rotation in radians, translation in ranges) is constrained
+    equally; 0 means some combination is not constrained at all (a degenerate board set). It does not depend
+    on the noise level or on the number of points, only on the board geometry. Typical well-spread sets of
+    6 boards at 3-6 m give about 1e-2; below 1e-3 the extrinsic is poorly determined along one direction.
+    """
+    T = _extrinsic(obs, T_lidar_cam)
+    _, J = range_residuals(T, ScanData.from_observations(obs), jacobian=True)
+    L = typical_range(obs) if scale_m is None else float(scale_m)
+    s = np.linalg.svd(J * np.r_[np.ones(3), np.full(3, L)], compute_uv=False)
+    return float(s[-1] / s[0]) if s[0] > 0 else 0.0
+
+
+def normal_spread_deg(obs: Observations) -> float:
+    """How far the board normals are from all lying in one plane, in degrees (0 = degenerate).
+
+    ``asin(sqrt(2 lambda_min))`` of the mean of ``n n^T`` over the boards: for normals spread evenly on a cone of
+    half-angle ``a`` it is ``a``; normals in one plane (e.g. all boards parallel to one axis) give 0, and then
+    no three planes meet in a single point (the minimal solver's degeneracy).
+    """
+    n, _ = obs.planes_cam()
+    lam = np.linalg.eigvalsh(n.T @ n / len(n))
+    return float(np.degrees(np.arcsin(np.sqrt(np.clip(2 * lam[0], 0.0, 1.0)))))
+
+
+def degeneracy_warnings(obs: Observations, T_lidar_cam: np.ndarray | None = None, *, min_boards: int = 4,
+                        min_normal_spread_deg: float = 5.0, min_conditioning: float = 1e-3) -> list[str]:
+    """Plain-language warnings about a board set (empty when none): too few boards, board normals nearly in
+    one plane (near-parallel boards), poor conditioning of the extrinsic (needs ``T_lidar_cam`` or ground
+    truth; skipped when neither is given).
+
+    Args:
+        min_boards: fewer boards than this is flagged (with 3, the candidates of the minimal solver all fit
+            the scan lines exactly and cannot be told apart by the scan residuals).
+        min_normal_spread_deg: threshold on ``normal_spread_deg``.
+        min_conditioning: threshold on ``conditioning``.
+    """
+    out = []
+    if obs.n_boards < min_boards:
+        out.append(f"only {obs.n_boards} boards (fewer than {min_boards}): the solution may be ambiguous; "
+                   "add board poses")
+    if obs.n_boards:
+        spread = normal_spread_deg(obs)
+        if spread < min_normal_spread_deg:
+            out.append(f"board normals nearly in one plane (spread {spread:.1f} deg < {min_normal_spread_deg:g} "
+                       "deg): tilt the board in more different directions")
+    if T_lidar_cam is not None or obs.T_lidar_cam_true is not None:
+        c = conditioning(obs, T_lidar_cam)
+        if c < min_conditioning:
+            out.append(f"poorly conditioned board set (inverse condition number {c:.1e} < {min_conditioning:g}): "
+                       "some direction of the extrinsic is barely constrained")
+    return out
+
+
+def scan_noise_estimate(obs: Observations, *, floor_m: float = 1e-6) -> float:
+    """Range-noise std (metres) estimated from the scan lines alone, without an extrinsic.
+
+    Each board's points are fitted with a 2D line; a range error ``n`` along beam ``b`` moves a point by
+    ``n |b . nu|`` off the line (``nu`` its normal), so ``sigma^2 = sum d^2 / sum (b . nu)^2``, with the two
+    degrees of freedom per line taken out. At least ``floor_m``.
+    """
+    num = den = 0.0
+    k = 0
+    for b in obs.boards:
+        if len(b.scan) < 3:
+            continue
+        ln = fit_line(b.scan, min_points=3, min_aspect=0.0)
+        nu = np.array([-ln.direction[1], ln.direction[0]])
+        d = (b.scan - ln.point) @ nu
+        c = (b.scan / np.linalg.norm(b.scan, axis=1, keepdims=True)) @ nu
+        num += float(d @ d)
+        den += float(c @ c) * (len(b.scan) - 2) / len(b.scan)
+        k += 1
+    if k == 0 or den <= 0:
+        raise UncertaintyError("no board has 3 or more scan points to estimate the noise from")
+    return max(float(np.sqrt(num / den)), floor_m)
+
+
+def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str = "range",
+                          sigma_m: float | None = None) -> np.ndarray:
+    """Covariance (6x6) of the minimiser of the ``residual`` least squares at ``T_lidar_cam``, under range noise.
+
+    ``"range"``: ``sigma^2 (J^T J)^-1`` (the ML estimate's covariance). ``"plane"``: the point-to-plane distance is
+    the range residual times ``w = m . b``, so its noise is not identically distributed; the sandwich
+    ``A^-1 J^T diag(sigma^2 w^2) J A^-1`` with ``A = J^T J`` of the plane residuals. ``sigma_m=None``: estimated
+    from the range residuals at ``T_lidar_cam`` (``K - 6`` degrees of freedom).
+    """
+    T = np.asarray(T_lidar_cam, float)
+    e_r, J_r = range_residuals(T, data, jacobian=True)
+    if residual == "range":
+        return covariance(J_r, e_r, sigma_m)
+    if residual != "plane":
+        raise UncertaintyError(f"unknown residual {residual!r}; 'range' or 'plane'")
+    from .residuals import plane_residuals
+
+    if sigma_m is None:
+        if len(e_r) <= 6:
+            raise UncertaintyError(f"{len(e_r)} residuals leave no degrees of freedom to estimate the noise")
+        sigma2 = float(e_r @ e_r) / (len(e_r) - 6)
+    else:
+        sigma2 = float(sigma_m) ** 2
+    _, J_p = plane_residuals(T, data, jacobian=True)
+    m = (data.normals @ T[:3, :3].T)[data.board]
+    w = np.einsum("kj,kj->k", m, data.points / np.linalg.norm(data.points, axis=1, keepdims=True))
+    Ai = _inverse_information(J_p.T @ J_p, 1e-12)
+    return Ai @ (J_p.T @ (J_p * (sigma2 * w**2)[:, None])) @ Ai
