@@ -114,7 +114,9 @@ def test_plane_refinement_covariance_is_consistent(rng):
         P = refinement_covariance(data, r.T_lidar_cam, "plane", 0.02)
         e = error_vector(r.T_lidar_cam, T)
         nees.append(e @ np.linalg.solve(P, e))
-    assert 3.0 < np.mean(nees) < 10.0
+    # the median: the point-to-plane cost has far-off minima that a refinement from the truth can slide into
+    # (about 1 draw in 60 here, NEES in the thousands): a local covariance cannot describe those
+    assert 3.5 < np.median(nees) < 8.0      # median of chi2(6) is 5.35
     # and the plane residual is not the likelihood: its covariance is no smaller than the ML one
     P_ml = refinement_covariance(data, r.T_lidar_cam, "range", 0.02)
     assert np.trace(P) >= np.trace(P_ml) * (1 - 1e-9)
