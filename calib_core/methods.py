@@ -8,6 +8,7 @@ import numpy as np
 
 from .candidates import minimal_candidates
 from .errors import CalibrationError
+from .lines import fit_line
 from .observations import Observations
 from .refine import refine
 from .registry import SUFFIXES, Method, get_method, register
@@ -148,8 +149,16 @@ def lidarcam(obs: Observations, *, sigma_m: float | None = None, n_refine: int =
        pose's conditioning is below ``min_conditioning``.
     """
     reasons, pools = [], []
+    # boards whose scan is not line-like take no part in the minimal solver, but count in the score and refinement
+    good = []
+    for i, b in enumerate(obs.boards):
+        try:
+            fit_line(b.scan)
+            good.append(i)
+        except SolveFailure as fail:
+            reasons.append(f"board {i}: {fail.reason}")
     try:
-        cands = minimal_candidates(obs, **solver_options)
+        cands = minimal_candidates(obs.subset(good), **solver_options)
         pools.append(cands.T_lidar_cam)
         if len(cands.T_lidar_cam) == 0:
             reasons.append(f"minimal solver: {cands.summary()}")

@@ -1,0 +1,149 @@
+"""Our method ``lidarcam`` and the ``X+ml`` / ``X+plane`` refinement suffixes, through ``calibrate`` and the CLI."""
+
+import json
+
+import numpy as np
+import pytest
+from scenes import make_observations, random_extrinsic
+from test_uncertainty import error_vector, vertical_board_poses
+
+from calib_core import METHODS, calibrate, get_method, load_result
+from calib_core.cli import main
+from calib_core.errors import CalibrationError
+from calib_core.io import save_observations
+from calib_core.metrics import pose_errors
+from calib_core.refine import robust_cost
+from calib_core.residuals import ScanData, range_residuals
+from calib_core.transforms import make_T
+
+BASES = ["zhang_pless_linear", "vasconcelos", "peng2022"]
+
+
+def test_suffixed_methods_are_registered_and_built_on_demand():
+    for b in BASES:
+        for s in ("ml", "plane"):
+            assert f"{b}+{s}" in METHODS
+    assert "lidarcam" in METHODS
+    m = get_method("zhang_pless+ml")          # not in the table: built from its base on first use
+    assert m.min_boards == get_method("zhang_pless").min_boards
+    with pytest.raises(CalibrationError, match="unknown method"):
+        get_method("peng2022+nope")
+    with pytest.raises(CalibrationError, match="unknown method"):
+        get_method("nope+ml")
+
+
+@pytest.mark.parametrize("base", BASES)
+def test_ml_suffix_stays_at_the_truth_on_noise_free_data(rng, base):
+    obs = make_observations(rng, 6, 0.0)
+    for suffix in ("ml", "plane"):
+        r = calibrate(obs, f"{base}+{suffix}")
+        assert r.ok, r.reason
+        np.testing.assert_allclose(r.T_lidar_cam, obs.T_lidar_cam_true, atol=1e-8)
+
+
+@pytest.mark.parametrize("base", BASES + ["zhang_pless"])
+def test_ml_suffix_refines_without_raising_the_cost_and_reports_a_covariance(rng, base):
+    n_near = 0
+    for _ in range(4):
+        obs = make_observations(rng, 7, 0.02)
+        b = calibrate(obs, base)
+        r = calibrate(obs, f"{base}+ml", loss="huber")
+        assert r.ok == b.ok
+        if not b.ok:
+            continue
+        assert r.info["refine_cost"] <= r.info["refine_initial_cost"] + 1e-15
+        np.testing.assert_allclose(r.info["base_T_lidar_cam"], b.T_lidar_cam, atol=1e-12)
+        assert r.covariance.shape == (6, 6) and np.all(np.linalg.eigvalsh(r.covariance) > 0)
+        if np.all(np.array(pose_errors(b.T_lidar_cam, obs.T_lidar_cam_true)) < [3, 0.3]):   # a good start
+            n_near += 1
+            e_R, e_t = pose_errors(r.T_lidar_cam, obs.T_lidar_cam_true)
+            assert e_R < 5 * r.sigma_rot_deg and 1000 * e_t < 5 * r.sigma_trans_mm   # ML estimate near the truth
+    assert n_near >= 1
+
+
+def test_suffix_options_go_to_the_right_place(rng):
+    obs = make_observations(rng, 6, 0.02)
+    r = calibrate(obs, "peng2022+ml", loss="cauchy", f_scale=0.05, sigma_m=0.02, delta_m=0.04)
+    assert r.ok and r.info["refine_loss"] == "cauchy"
+    P = calibrate(obs, "peng2022+ml", sigma_m=0.02).covariance
+    P2 = calibrate(obs, "peng2022+ml", sigma_m=0.04).covariance
+    np.testing.assert_allclose(P2, 4 * P, rtol=1e-6)
+    with pytest.raises(CalibrationError):
+        calibrate(obs, "peng2022+ml", bogus=1)
+
+
+@pytest.mark.parametrize("n_boards", [3, 4, 6, 8])
+def test_lidarcam_stays_at_the_truth_on_noise_free_data(rng, n_boards):
+    for _ in range(3):
+        obs = make_observations(rng, n_boards, 0.0)
+        r = calibrate(obs)                                       # lidarcam is the default
+        assert r.method == "lidarcam"
+        assert r.ok, r.reason
+        np.testing.assert_allclose(r.T_lidar_cam, obs.T_lidar_cam_true, atol=1e-8)
+
+
+def test_lidarcam_final_cost_is_no_more_than_at_its_start(rng):
+    for _ in range(5):
+        obs = make_observations(rng, 6, 0.02)
+        r = calibrate(obs, "lidarcam")
+        assert r.ok
+        assert r.info["cost"] <= r.info["score_start"] + 1e-9
+        data = ScanData.from_observations(obs)
+        # the answer is a stationary point of the range likelihood: no step of the 6 parameters lowers it
+        e, J = range_residuals(r.T_lidar_cam, data, jacobian=True)
+        assert np.linalg.norm(J.T @ e) < 1e-6 * np.linalg.norm(J, axis=0).max() * np.linalg.norm(e)
+        assert robust_cost(e) == pytest.approx(r.info["refine_cost"], rel=1e-9)
+
+
+def test_lidarcam_nees_and_error_match_its_covariance(rng):
+    nees, valid = [], []
+    for _ in range(60):
+        obs = make_observations(rng, 8, 0.02)
+        r = calibrate(obs, "lidarcam")
+        valid.append(r.ok and bool(np.all(np.array(pose_errors(r.T_lidar_cam, obs.T_lidar_cam_true)) < [8, 0.8])))
+        e = error_vector(r.T_lidar_cam, obs.T_lidar_cam_true)
+        nees.append(e @ np.linalg.solve(r.covariance, e))
+    assert np.mean(valid) >= 0.95
+    assert 3.0 < np.mean(nees) < 10.0
+
+
+def test_lidarcam_fails_with_a_reason_on_two_boards_and_degenerate_sets(rng):
+    T = random_extrinsic(rng)
+    two = make_observations(rng, 2, 0.02, T_lidar_cam=T)
+    r = calibrate(two, "lidarcam")
+    assert not r.ok and "at least 3 boards" in r.reason and r.T_lidar_cam is None
+    flat = make_observations(rng, 6, 0.02, T_lidar_cam=T, poses=vertical_board_poses(6))
+    r = calibrate(flat, "lidarcam")
+    assert not r.ok and r.reason and r.T_lidar_cam is None
+    # all boards parallel (same orientation, moved sideways): the minimal solver and Zhang & Pless both refuse
+    P0 = vertical_board_poses(1)[0]
+    poses = [P0 @ make_T(np.eye(3), [dx, 0.0, dz]) for dx, dz in ((-1.5, 0.0), (0.0, 0.5), (1.5, -0.3),
+                                                                  (-3.0, 1.0), (3.0, 1.5))]
+    par = make_observations(rng, noise_m=0.02, T_lidar_cam=T, poses=poses)
+    r = calibrate(par, "lidarcam")
+    assert not r.ok and "no candidate" in r.reason
+
+
+def test_lidarcam_warns_on_three_boards(rng):
+    obs = make_observations(rng, 3, 0.0)
+    r = calibrate(obs, "lidarcam")
+    assert r.ok and any("only 3 boards" in w for w in r.info["warnings"])
+    assert 0 < r.info["conditioning"] <= 1
+
+
+def test_covariance_in_result_json_yaml_and_cli(rng, tmp_path, capsys):
+    obs = make_observations(rng, 6, 0.02)
+    save_observations(obs, tmp_path / "obs.json")
+    rc = main(["calibrate", str(tmp_path / "obs.json"), "--out", str(tmp_path / "r.json"),
+               "--yaml", str(tmp_path / "r.yaml")])
+    out = capsys.readouterr().out
+    assert rc == 0 and out.startswith("lidarcam: ok")
+    assert "1-sigma: rotation" in out and "conditioning" in out
+    d = load_result(tmp_path / "r.json")
+    assert d["covariance"].shape == (6, 6) and d["sigma_rot_deg"] > 0
+    raw = json.loads((tmp_path / "r.json").read_text())
+    assert raw["sigma_trans_mm"] == pytest.approx(1000 * np.sqrt(np.trace(d["covariance"][3:, 3:])))
+    y = (tmp_path / "r.yaml").read_text()
+    assert f"sigma_trans_mm: {raw['sigma_trans_mm']}" in y and "covariance:" in y and "conditioning:" in y
+    main(["methods"])
+    assert "peng2022+ml" in capsys.readouterr().out
