@@ -51,7 +51,7 @@ from .errors import LidarcamError
 REASON_NONFINITE = "non-finite input"
 REASON_PLANES = "planes do not meet in one point (sigma_min(N) < min_plane_sv)"
 REASON_SCAN_LINES = "scan lines nearly parallel (|sin angle| < min_line_sin)"
-REASON_TRIANGLE = "scan triangle degenerate (2 area / longest side^2 < min_triangle)"
+REASON_TRIANGLE = "scan triangle degenerate (2 area / longest side^2 < min_triangle, or longest side < min_side)"
 REASON_QUARTIC = "degenerate quartic (roots at both 0 and infinity)"
 REASON_NO_REAL = "no real solution"
 
@@ -266,32 +266,37 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def _abs_orientation_3pt(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """R (K,3,3), t (K,3) with ``Q ~ R P + t`` for point triples P, Q (K,3,3), closed form.
+def _abs_orientation_3pt(P: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R (K,3,3), t (K,3) with ``[q, 0] ~ R P + t`` for camera triangles P (K,3,3) and scan-plane triangles q (K,3,2).
 
-    Aligns the triangles' planes (oriented normals) and then takes the least-squares in-plane angle; equal
-    to Kabsch/SVD (det +1) for congruent triangles and to first order for nearly congruent ones.
+    Closed form: align the triangles' oriented planes, then take the least-squares in-plane angle.  Equal to
+    Kabsch/SVD (det +1) for congruent triangles and to first order for nearly congruent ones.  The scan
+    triangle lies in z = 0, so its frame is the identity up to the sign of its orientation.
     """
-
-    def frame(X):
-        c = X.mean(axis=1)
-        e1 = _unit(X[:, 1] - X[:, 0])
-        nrm = _unit(_cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]))
-        e2 = _cross(nrm, e1)
-        Y = X - c[:, None, :]
-        return c, np.stack([e1, e2, nrm], axis=-1), _dot(Y, e1[:, None, :]), _dot(Y, e2[:, None, :])
-
-    cP, FP, xp, yp = frame(P)
-    cQ, FQ, xq, yq = frame(Q)
-    sn = np.sum(xp * yq - yp * xq, axis=1)
-    cs = np.sum(xp * xq + yp * yq, axis=1)
+    cP = P.mean(axis=1)
+    Y = P - cP[:, None, :]
+    a = P[:, 1] - P[:, 0]
+    e1 = a / np.sqrt(np.einsum("ki,ki->k", a, a))[:, None]
+    nrm = _cross(a, P[:, 2] - P[:, 0])
+    nrm /= np.sqrt(np.einsum("ki,ki->k", nrm, nrm))[:, None]
+    e2 = _cross(nrm, e1)
+    xp = np.einsum("kni,ki->kn", Y, e1)
+    yp = np.einsum("kni,ki->kn", Y, e2)
+    cq = q.mean(axis=1)
+    xq, yq = q[:, :, 0] - cq[:, :1], q[:, :, 1] - cq[:, 1:]
+    sgn = np.where(_cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]) >= 0, 1.0, -1.0)
+    yq = yq * sgn[:, None]  # coordinates in the frame (x, sgn y, sgn z), whose third axis is the normal
+    sn = np.einsum("kn,kn->k", xp, yq) - np.einsum("kn,kn->k", yp, xq)
+    cs = np.einsum("kn,kn->k", xp, xq) + np.einsum("kn,kn->k", yp, yq)
     h = np.hypot(sn, cs)
     h = np.where(h > 0, h, 1.0)
-    co, si = cs / h, sn / h
-    Rz = np.zeros(P.shape[:1] + (3, 3))
-    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = co, -si, si, co, 1.0
-    R = FQ @ Rz @ np.swapaxes(FP, -1, -2)
-    t = cQ - np.einsum("kij,kj->ki", R, cP)
+    co, si = (cs / h)[:, None], (sn / h)[:, None]
+    R = np.empty(P.shape[:1] + (3, 3))
+    R[:, 0] = co * e1 - si * e2
+    R[:, 1] = sgn[:, None] * (si * e1 + co * e2)
+    R[:, 2] = sgn[:, None] * nrm
+    t = -np.einsum("kij,kj->ki", R, cP)
+    t[:, :2] += cq
     return R, t
 
 
@@ -316,6 +321,7 @@ def kabsch(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
                   imag_tol: float = 1e-8, near_real_tol: float | None = None,
                   min_plane_sv: float = 1e-3, min_line_sin: float = 1e-3, min_triangle: float = 1e-3,
+                  min_side: float = 1e-6,
                   quartic: str = "closed", root_newton_iters: int = 2,
                   lambda_newton_iters: int = 2) -> MinimalSolutions:
     """Every real ``T_lidar_cam`` of B plane-line triples (Vasconcelos, Barreto & Nunes, TPAMI 2012).
@@ -337,7 +343,9 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
             this (the planes' common point ``O`` is at or near infinity).
         min_line_sin: degenerate when two scan lines meet at an angle whose |sine| is below this.
         min_triangle: degenerate when the scan triangle's ``2 area / longest side^2`` is below this
-            (equilateral: 0.866); also covers three concurrent scan lines.
+            (equilateral: 0.866).
+        min_side: degenerate when the triangle's longest side is below this (metres): three concurrent
+            scan lines.
         quartic: ``"closed"`` (Ferrari, fast) or ``"eig"`` (companion-matrix eigenvalues, reference).
         root_newton_iters: complex Newton steps on each quartic root before the real test.
         lambda_newton_iters: Newton steps on the three distance equations per candidate.
@@ -383,7 +391,7 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
                        np.sum((q[:, 1] - q[:, 2]) ** 2, -1)], axis=-1)
     longest2 = sides2.max(axis=1)
     area2 = np.abs(_cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]))
-    bad_tri = ~(area2 >= min_triangle * longest2) | ~(longest2 > 0)
+    bad_tri = ~(area2 >= min_triangle * longest2) | ~(longest2 >= min_side**2)
     bad_tri &= ~bad_lines
     reasons[idx[bad_tri]] = REASON_TRIANGLE
     reasons[idx[bad_lines]] = REASON_SCAN_LINES
@@ -454,11 +462,9 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     s = np.stack([s, -s], axis=1).reshape(-1, 3)
     k_tr2 = np.repeat(k_tr, 2)
     P = O[k_tr2, None, :] + s[:, :, None] * Vg[k_tr2]
-    Q3 = np.zeros(P.shape)
-    Q3[:, :, :2] = Qg[k_tr2]
 
     # 5. Absolute orientation: lidar = R camera + t.
-    R, t = _abs_orientation_3pt(P, Q3)
+    R, t = _abs_orientation_3pt(P, Qg[k_tr2])
     T = np.zeros((R.shape[0], 4, 4))
     T[:, :3, :3] = R
     T[:, :3, 3] = t
