@@ -40,7 +40,6 @@ Method, per triple, all vectorised over triples (no Python loop over triples or 
 from __future__ import annotations
 
 import itertools
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,6 +55,11 @@ REASON_QUARTIC = "degenerate quartic (roots at both 0 and infinity)"
 REASON_NO_REAL = "no real solution"
 
 MAX_SOLUTIONS = 8
+
+# Registry entry (name, minimum boards, maximum solutions per triple, citation).
+SOLVER_INFO = {"name": "vasconcelos2012", "min_boards": 3, "max_solutions": MAX_SOLUTIONS,
+               "citation": "F. Vasconcelos, J. P. Barreto, U. Nunes, A Minimal Solution for the Extrinsic Calibration "
+                           "of a Camera and a Laser-Rangefinder, IEEE TPAMI 34(11), 2012"}
 
 # Grunert point k (k = 1, 2, 3) -> original line index (0: v_12, 1: v_13, 2: v_23), chosen by the longest side.
 # Sides: 0 = |q12 q13|, 1 = |q12 q23|, 2 = |q13 q23|; Grunert's b is the side between points 1 and 3.
@@ -487,53 +491,3 @@ def solve_triple(n3: np.ndarray, d3: np.ndarray, p3: np.ndarray, u3: np.ndarray,
     sol = solve_triples(np.asarray(n3, float)[None], np.asarray(d3, float)[None], np.asarray(p3, float)[None],
                         np.asarray(u3, float)[None], **options)
     return list(sol.T_lidar_cam)
-
-
-# ----------------------------------------------------------------------------------------------------------
-# Synthetic instances and throughput
-
-
-def random_instance(rng: np.random.Generator, n_triples: int, *, max_tilt_deg: float = 60.0,
-                    depth_range: tuple[float, float] = (2.0, 6.0), translation_std: float = 0.3):
-    """Random noise-free triples with their truth: ``(T_lidar_cam (B,4,4), n, d, p, u)``.
-
-    Rotation uniformly random, translation N(0, translation_std^2) per axis (metres).  Board i is the plane
-    through a point at depth in ``depth_range`` in front of the camera, its normal within ``max_tilt_deg``
-    of the viewing axis; its scan line is that plane, in the lidar frame, cut with z = 0.
-    """
-    B = int(n_triples)
-    quat = rng.normal(size=(B, 4))
-    quat /= np.linalg.norm(quat, axis=1, keepdims=True)
-    x, y, zq, w = quat.T
-    R = np.stack([np.stack([1 - 2 * (y * y + zq * zq), 2 * (x * y - zq * w), 2 * (x * zq + y * w)], -1),
-                  np.stack([2 * (x * y + zq * w), 1 - 2 * (x * x + zq * zq), 2 * (y * zq - x * w)], -1),
-                  np.stack([2 * (x * zq - y * w), 2 * (y * zq + x * w), 1 - 2 * (x * x + y * y)], -1)], axis=1)
-    t = rng.normal(scale=translation_std, size=(B, 3))
-    T = np.zeros((B, 4, 4))
-    T[:, :3, :3], T[:, :3, 3], T[:, 3, 3] = R, t, 1.0
-    centre = np.concatenate([rng.uniform(-1.0, 1.0, size=(B, 3, 2)),
-                             rng.uniform(*depth_range, size=(B, 3, 1))], axis=-1)
-    tilt = np.radians(max_tilt_deg) * np.sqrt(rng.uniform(size=(B, 3)))
-    az = rng.uniform(0, 2 * np.pi, size=(B, 3))
-    n = np.stack([np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), -np.cos(tilt)], axis=-1)
-    d = _dot(n, centre)
-    nL = np.einsum("bij,bkj->bki", R, n)
-    dL = d + _dot(nL, t[:, None, :])
-    g = nL[..., :2]
-    g2 = np.sum(g * g, -1, keepdims=True)
-    p = dL[..., None] * g / g2
-    u = np.stack([-g[..., 1], g[..., 0]], -1) / np.sqrt(g2)
-    return T, n, d, p, u
-
-
-def throughput(n_triples: int = 10_000, seed: int = 0, repeats: int = 5, **options) -> dict:
-    """Triples solved per second (best of ``repeats``) on random noise-free triples; run with OMP_NUM_THREADS=1."""
-    rng = np.random.default_rng(seed)
-    _, n, d, p, u = random_instance(rng, n_triples)
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        sol = solve_triples(n, d, p, u, **options)
-        best = min(best, time.perf_counter() - t0)
-    return {"n_triples": n_triples, "seconds": best, "triples_per_s": n_triples / best,
-            "solutions_per_triple": len(sol) / n_triples}

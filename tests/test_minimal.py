@@ -16,7 +16,6 @@ from calib_core.minimal import (
     MinimalSolutions,
     board_triples,
     kabsch,
-    random_instance,
     solve_triple,
     solve_triples,
 )
@@ -221,7 +220,8 @@ def test_degenerate_triples_return_no_solution_with_reason():
 
 def test_near_real_option_adds_flagged_candidates_only():
     rng = rng_for("test_near_real_option_adds_flagged_candidates_only")
-    _, n, d, p, u = random_instance(rng, 3000)
+    scenes = [random_scene(rng) for _ in range(500)]
+    _, n, d, p, u = (np.array(x) for x in zip(*scenes, strict=True))
     p = p + rng.normal(scale=0.02, size=p.shape)
     n = n + rng.normal(scale=0.01, size=n.shape)
     strict = solve_triples(n, d, p, u)
