@@ -78,7 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-_VERB_MODULES: list[str] = []
+_VERB_MODULES: list[str] = ["simulate.cli"]
 
 
 def main(argv=None) -> int:
