@@ -118,6 +118,22 @@ for _base in ("zhang_pless_linear", "vasconcelos", "peng2022"):
         get_method(f"{_base}+{_suffix}")
 
 
+def _polish(obs: Observations, T0: np.ndarray, sigma: float, edge_sigma: float, outline_sigma: float,
+            max_nfev: int) -> np.ndarray:
+    """Minimise the ``lidarcam`` selection cost (all evidence) from ``T0``; finite-difference Jacobian."""
+    from scipy.optimize import least_squares
+
+    from .residuals import perturb
+    from .selection import lidarcam_residuals
+
+    def fun(x):
+        return lidarcam_residuals(obs, perturb(T0, x), sigma_m=sigma, edge_sigma_m=edge_sigma,
+                                  outline_sigma_m=outline_sigma)
+
+    sol = least_squares(fun, np.zeros(6), method="trf", diff_step=1e-7, max_nfev=max_nfev)
+    return perturb(T0, sol.x)
+
+
 def _distinct(T: np.ndarray, chosen: list[np.ndarray], rot_deg: float, trans_m: float) -> bool:
     for C in chosen:
         dr = np.degrees(np.linalg.norm(matrix_to_rotvec(T[:3, :3] @ C[:3, :3].T)))
@@ -134,7 +150,7 @@ def lidarcam(obs: Observations, *, sigma_m: float | None = None, n_refine: int =
              behind_penalty: float = np.inf, use_zhang_pless: bool = True, distinct_rot_deg: float = 1.0,
              distinct_trans_m: float = 0.05, min_conditioning: float = 1e-6, warn_min_boards: int = 4,
              warn_min_normal_spread_deg: float = 5.0, warn_min_conditioning: float = 1e-3, max_nfev: int = 100,
-             **solver_options):
+             polish: bool = True, polish_threshold: float = 10.0, **solver_options):
     """Our method.
 
     1. Candidates: the minimal solver on all board triples (``solver_options`` go to it), plus the linear
@@ -143,10 +159,13 @@ def lidarcam(obs: Observations, *, sigma_m: float | None = None, n_refine: int =
        ``sigma_m``, default estimated from the scan lines; endpoint and outline terms; boards behind the camera).
     3. Refine the ``n_refine`` best distinct candidates (differing by ``distinct_rot_deg`` or
        ``distinct_trans_m``) by maximum likelihood on the range residuals (``loss``, ``f_scale``); keep the one
-       whose refined pose scores least.
+       whose refined pose scores least. With ``polish``, a refined pose whose endpoint and outline terms exceed
+       ``polish_threshold`` (the range optimum puts scan points off the boards) is refined further on the whole
+       ``selection.lidarcam`` cost (numerical Jacobian) and kept when that scores less.
     4. Covariance ``sigma^2 (J^T J)^-1`` (``sigma_m`` or estimated from the final residuals), conditioning and
-       ``info["warnings"]``. Fails with a reason when no candidate exists, none scores finite, or the refined
-       pose's conditioning is below ``min_conditioning``.
+       ``info["warnings"]``; after a polish the covariance is still that of the range model at the answer
+       (it ignores the outline information: conservative). Fails with a reason when no candidate
+       exists, none scores finite, or the refined pose's conditioning is below ``min_conditioning``.
     """
     reasons, pools = [], []
     # boards whose scan is not line-like take no part in the minimal solver, but count in the score and refinement
@@ -189,22 +208,32 @@ def lidarcam(obs: Observations, *, sigma_m: float | None = None, n_refine: int =
     for T0 in starts:
         r = refine(data, T0, residual="range", loss=loss, f_scale=f_scale if f_scale is not None else 2.5 * sigma,
                    max_nfev=max_nfev)
-        final = float(SCORERS["lidarcam"](obs, r.T_lidar_cam[None], **sopts)[0])
+        T1 = r.T_lidar_cam
+        final, parts = SCORERS["lidarcam"](obs, T1[None], **sopts, return_details=True)
+        final = float(final[0])
+        polished = False
+        if polish and parts["edge"][0] + parts["outline"][0] > polish_threshold:
+            # the range optimum disagrees with the board outlines: minimise the whole evidence from there
+            T2 = _polish(obs, T1, sigma, edge_sigma_m, outline_sigma_m, max_nfev)
+            f2 = float(SCORERS["lidarcam"](obs, T2[None], **sopts)[0])
+            if f2 < final:
+                T1, final, polished = T2, f2, True
         if best is None or final < best[0]:
-            best = (final, r, T0)
-    final, r, T0 = best
-    cond = conditioning(obs, r.T_lidar_cam)
+            best = (final, r, T0, T1, polished)
+    final, r, T0, T_best, polished = best
+    cond = conditioning(obs, T_best)
     if not cond >= min_conditioning:
         raise SolveFailure(f"lidarcam: degenerate board set, the extrinsic is not determined (inverse condition "
                            f"number {cond:.1e} < {min_conditioning:g})", C)
     try:
-        cov = refinement_covariance(data, r.T_lidar_cam, "range", sigma_m)
+        cov = refinement_covariance(data, T_best, "range", sigma_m)
     except UncertaintyError as err:
         raise SolveFailure(f"lidarcam: {err}", C) from None
-    warnings = degeneracy_warnings(obs, r.T_lidar_cam, min_boards=warn_min_boards,
+    warnings = degeneracy_warnings(obs, T_best, min_boards=warn_min_boards,
                                    min_normal_spread_deg=warn_min_normal_spread_deg,
                                    min_conditioning=warn_min_conditioning)
-    return r.T_lidar_cam, C, {"cost": final, "score_start": float(SCORERS["lidarcam"](obs, T0[None], **sopts)[0]),
+    start = float(SCORERS["lidarcam"](obs, T0[None], **sopts)[0])
+    return T_best, C, {"cost": final, "polished": polished, "score_start": start,
                               "n_refined": len(starts), "sigma_m_selection": sigma, "refine_cost": r.cost,
                               "refine_nfev": r.nfev, "covariance": cov, "conditioning": cond,
                               "warnings": warnings}

@@ -214,4 +214,16 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, sigma_m: float = 0.02
     return cost
 
 
+def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, sigma_m: float = 0.02,
+                       edge_sigma_m: float = 0.03, outline_sigma_m: float = 0.03) -> np.ndarray:
+    """The residual vector of the ``lidarcam`` cost at one extrinsic (its squared norm / 2 is the cost without the
+    behind-the-camera penalty): range residuals / sigma, endpoint errors / edge sigma, outline distances / outline
+    sigma."""
+    C = np.asarray(T_lidar_cam, float)[None]
+    parts = [range_distances(obs, C)[0] / sigma_m, point_line_errors(obs, C)[0].ravel() / edge_sigma_m]
+    parts += [outside_outline(P[0, :, :2], b.outline) / outline_sigma_m
+              for b, P in zip(obs.boards, points_in_boards(obs, C), strict=True)]
+    return np.concatenate(parts)
+
+
 SCORERS = {"point_to_plane": point_to_plane, "peng2022": peng2022, "lidarcam": lidarcam}
