@@ -13,3 +13,9 @@ __all__ = [
     "BoardObservation", "CalibrationError", "LidarcamError", "ObservationError", "Observations",
     "extrinsic_yaml", "load_observations", "observations_from_dict", "observations_to_dict", "save_observations",
 ]
+
+from .methods import calibrate  # noqa: E402
+from .registry import METHODS, get_method  # noqa: E402
+from .result import CalibrationResult, SolveFailure, load_result  # noqa: E402
+
+__all__ += ["METHODS", "CalibrationResult", "SolveFailure", "calibrate", "get_method", "load_result"]

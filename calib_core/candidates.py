@@ -1,0 +1,51 @@
+"""Candidate extrinsics from the minimal solver over all board triples of a problem."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .lines import fit_lines
+from .observations import Observations
+from .result import SolveFailure
+
+
+@dataclass(frozen=True, eq=False)
+class CandidateSet:
+    """Pooled minimal-solver candidates.
+
+    Attributes:
+        T_lidar_cam: (M,4,4) candidates. triple: (M,) index into ``triples`` of the triple each came from.
+        triples: (C,3) board indices of every triple solved. reasons: (C,) why a triple gave no solution
+        (None where it was solved).
+    """
+
+    T_lidar_cam: np.ndarray
+    triple: np.ndarray
+    triples: np.ndarray
+    reasons: np.ndarray
+
+    def summary(self) -> str:
+        """Why there are no candidates: counts of the reasons over triples."""
+        vals, counts = np.unique([r for r in self.reasons if r is not None], return_counts=True)
+        parts = [f"{c}x {v}" for v, c in zip(vals, counts, strict=True)]
+        return f"{len(self.triples)} triples, no real solution" + (f" ({'; '.join(parts)})" if parts else "")
+
+
+def minimal_candidates(obs: Observations, **solver_options) -> CandidateSet:
+    """Run the Vasconcelos minimal solver on all ``C(N,3)`` board triples and pool the solutions.
+
+    Raises SolveFailure for fewer than 3 boards or a board whose scan line cannot be fitted.
+    """
+    if obs.n_boards < 3:
+        raise SolveFailure(f"the minimal solver needs at least 3 boards, got {obs.n_boards}")
+    from .minimal import board_triples, solve_triples  # the solver module is the heavy part: load on use
+
+    lines = fit_lines(obs)
+    n, d = obs.planes_cam()
+    p = np.array([ln.point for ln in lines])
+    u = np.array([ln.direction for ln in lines])
+    tri = board_triples(obs.n_boards)
+    sol = solve_triples(n[tri], d[tri], p[tri], u[tri], **solver_options)
+    return CandidateSet(sol.T_lidar_cam, sol.triple, tri, sol.reasons)

@@ -1,0 +1,92 @@
+"""The ``lidarcam`` command line: thin verbs over the library. Bad input exits 2 with one line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .errors import LidarcamError
+
+
+def _cmd_methods(args) -> int:
+    from .methods import METHODS  # noqa: F401  (registers the methods)
+    from .registry import METHODS as table
+
+    w = max(len(n) for n in table)
+    print(f"{'method':<{w}}  min boards  citation / summary")
+    for m in table.values():
+        print(f"{m.name:<{w}}  {m.min_boards:>10}  {m.citation}\n{'':<{w}}  {'':>10}  {m.summary}")
+    return 0
+
+
+def _cmd_calibrate(args) -> int:
+    from .io import extrinsic_yaml, load_observations
+    from .methods import calibrate
+    from .metrics import pose_errors
+
+    obs = load_observations(args.observations)
+    res = calibrate(obs, method=args.method)
+    if not res.ok:
+        print(f"{args.method}: failed: {res.reason}")
+    else:
+        print(f"{args.method}: ok, {res.n_candidates} candidates, {1000 * res.seconds:.1f} ms")
+        print("T_lidar_cam (maps camera points into the lidar frame, metres):")
+        for row in res.T_lidar_cam:
+            print("  " + "  ".join(f"{v: .6f}" for v in row))
+        if res.covariance is not None:
+            print(f"1-sigma: rotation {res.sigma_rot_deg:.3f} deg, translation {res.sigma_trans_mm:.1f} mm")
+        for w in res.info.get("warnings", []):
+            print(f"warning: {w}")
+        if obs.T_lidar_cam_true is not None:
+            e_R, e_t = pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)
+            print(f"against ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm")
+    if args.out:
+        res.save(args.out)
+        print(f"wrote {args.out}")
+    if args.yaml:
+        if not res.ok:
+            print(f"no YAML written: {args.method} failed", file=sys.stderr)
+        else:
+            extra = {"method": res.method}
+            if res.covariance is not None:
+                extra.update(sigma_rot_deg=res.sigma_rot_deg, sigma_trans_mm=res.sigma_trans_mm)
+            with open(args.yaml, "w") as f:
+                f.write(extrinsic_yaml(res.T_lidar_cam, extra))
+            print(f"wrote {args.yaml}")
+    return 0 if res.ok else 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .registry import METHODS
+
+    p = argparse.ArgumentParser(prog="lidarcam", description="2D lidar - camera extrinsic calibration")
+    sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
+    sp = sub.add_parser("methods", help="list the calibration methods")
+    sp.set_defaults(func=_cmd_methods)
+    sp = sub.add_parser("calibrate", help="calibrate from an observation JSON file")
+    sp.add_argument("observations", help="lidarcam.observations/1 JSON file")
+    sp.add_argument("--method", default="peng2022", choices=list(METHODS), help="method (default: %(default)s)")
+    sp.add_argument("--out", help="write the result JSON (lidarcam.result/1) here")
+    sp.add_argument("--yaml", help="write the extrinsic as YAML here")
+    sp.set_defaults(func=_cmd_calibrate)
+    for mod in _VERB_MODULES:
+        __import__(mod, fromlist=["add_parser"]).add_parser(sub)
+    return p
+
+
+_VERB_MODULES: list[str] = []
+
+
+def main(argv=None) -> int:
+    from . import methods  # noqa: F401  (fills the registry)
+
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except LidarcamError as err:
+        print(f"lidarcam {args.verb}: error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

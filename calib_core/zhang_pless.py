@@ -1,0 +1,56 @@
+"""Zhang & Pless 2004: the linear solution of the lidar-camera extrinsic from plane-line pairs.
+
+Zhang, Q., Pless, R., "Extrinsic calibration of a camera and laser range finder (improves camera
+calibration)", IROS 2004. With ``p_C = Phi p_L + Delta`` and scan points ``(x, y, 0)``, write
+``Phi p_L + Delta = H (x, y, 1)^T`` with ``H = [phi1 phi2 Delta]``; every scan point on board i gives one
+linear equation ``N_i^T H (x, y, 1)^T = |N_i|^2`` with ``N_i = d_i n_i`` (camera frame, metres).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .observations import Observations
+from .result import SolveFailure
+from .transforms import invert_T, make_T, project_to_so3
+
+MIN_BOARDS = 5
+
+
+def linear_H(obs: Observations, *, weighting: str = "paper") -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares ``H`` (3x3) and the singular values of the scaled design matrix.
+
+    ``weighting="paper"`` uses the equations ``N_i^T H q = |N_i|^2`` as printed; ``"unit"`` divides each by
+    ``|N_i|`` (``n_i^T H q = d_i``: every equation is a point-to-plane distance in metres).
+    """
+    n, d = obs.planes_cam()
+    rows, rhs = [], []
+    for i, b in enumerate(obs.boards):
+        q = np.column_stack([b.scan, np.ones(len(b.scan))])           # (K,3) = (x, y, 1)
+        N = d[i] * n[i] if weighting == "paper" else n[i]
+        rows.append(np.einsum("j,kl->kjl", N, q).reshape(len(q), 9))  # coefficient of H[j,l] is N_j q_l
+        rhs.append(np.full(len(q), N @ N if weighting == "paper" else d[i]))
+    if weighting not in ("paper", "unit"):
+        raise ValueError(f"weighting must be 'paper' or 'unit', got {weighting!r}")
+    A, y = np.concatenate(rows), np.concatenate(rhs)
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    h, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
+    sv = np.linalg.svd(A / scale, compute_uv=False)
+    return (h / scale).reshape(3, 3), sv
+
+
+def zhang_pless_linear(obs: Observations, *, weighting: str = "paper", rank_tol: float = 1e-9) -> np.ndarray:
+    """The linear Zhang & Pless solution as ``T_lidar_cam`` (4x4), ``Phi`` projected onto SO(3).
+
+    Raises SolveFailure for fewer than 5 boards or a rank-deficient system (e.g. all boards parallel).
+    """
+    if obs.n_boards < MIN_BOARDS:
+        raise SolveFailure(f"zhang_pless needs at least {MIN_BOARDS} boards, got {obs.n_boards}")
+    H, sv = linear_H(obs, weighting=weighting)
+    if sv[-1] < rank_tol * sv[0]:
+        raise SolveFailure(f"degenerate board set: the linear system is rank deficient "
+                           f"(singular value ratio {sv[-1] / sv[0]:.1e}); boards parallel or too few poses")
+    phi1, phi2, Delta = H[:, 0], H[:, 1], H[:, 2]
+    Phi = project_to_so3(np.column_stack([phi1, phi2, np.cross(phi1, phi2)]))
+    return invert_T(make_T(Phi, Delta))
