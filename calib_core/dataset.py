@@ -73,15 +73,17 @@ class BoardSpec:
         cols, rows: inner corners per row / per column (OpenCV's ``patternSize = (cols, rows)``).
         square: side of one square (m).
         outline: (V,2) physical outline of the board in the board frame (m).
-        origin_square_dark: colour of the square spanning x in [0, square], y in [0, square]; used to undo a
-            detector's 180-degree reversal of the corner order (possible only when cols + rows is odd).
+        origin_square_dark: colour of the square spanning x in [0, square], y in [0, square] (True dark, False
+            light); used to undo a 180-degree reversal of the corner order (possible only when cols + rows is
+            odd). None: keep the detector's order (``findChessboardCornersSB`` starts next to a light outer square
+            on an odd x even board, i.e. a light origin square).
     """
 
     cols: int
     rows: int
     square: float
     outline: np.ndarray
-    origin_square_dark: bool = True
+    origin_square_dark: bool | None = None
 
     @property
     def corners(self) -> np.ndarray:
@@ -257,8 +259,8 @@ def load_camera(path) -> CameraModel:
 
 def load_board(path) -> BoardSpec:
     """Read board.yaml: ``cols``, ``rows`` (inner corners), ``square_m``, ``outline_m`` [[x, y], ...] and the
-    optional ``origin_square`` (``dark`` | ``light``, default dark). Without ``outline_m`` the outline is the
-    squares' extent: one square beyond the outer inner corners on every side."""
+    optional ``origin_square`` (``dark`` | ``light``; absent: keep the detector's order). Without ``outline_m``
+    the outline is the squares' extent: one square beyond the outer inner corners on every side."""
     path = Path(path)
     data = read_yaml(path)
     try:
@@ -278,11 +280,12 @@ def load_board(path) -> BoardSpec:
     why = check_simple_polygon(outline)
     if why:
         raise DatasetError(f"'outline_m' {why}", file=path)
-    colour = str(data.get("origin_square", "dark")).lower()
-    if colour not in ("dark", "light", "black", "white"):
+    colour = data.get("origin_square")
+    if colour is not None and str(colour).lower() not in ("dark", "light", "black", "white"):
         raise DatasetError(f"'origin_square' must be dark or light, got {colour!r}", file=path)
     outline.setflags(write=False)
-    return BoardSpec(cols, rows, square, outline, colour in ("dark", "black"))
+    dark = None if colour is None else str(colour).lower() in ("dark", "black")
+    return BoardSpec(cols, rows, square, outline, dark)
 
 
 # --------------------------------------------------------------------------------------------------- scans

@@ -139,8 +139,8 @@ def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags:
     """Find the checkerboard in ``gray`` and its pose ``T_cam_board``; raises ExtractionError when not found.
 
     The detector's corner order is made canonical: the board frame is right-handed with z pointing away from the
-    camera (a mirrored order is reversed along rows) and, when ``cols + rows`` is odd, the origin square has the
-    colour that board.yaml states (a 180-degree reversal is undone).
+    camera (a mirrored order is reversed along rows) and, when ``cols + rows`` is odd and board.yaml states the
+    origin square's colour, a 180-degree reversal is undone.
     """
     import cv2
 
@@ -155,7 +155,7 @@ def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags:
     if T[:3, 2] @ T[:3, 3] < 0:  # mirrored order: the board's z axis points at the camera
         corners = corners.reshape(board.rows, board.cols, 2)[:, ::-1].reshape(-1, 2).copy()
         T, rms = _solve_pose(obj, corners, camera)
-    if not board.reversible:
+    if not board.reversible and board.origin_square_dark is not None:
         c = board.cols
         origin = _square_mean(gray, corners[[0, 1, c + 1, c]])
         neighbour = _square_mean(gray, corners[[1, 2, c + 2, c + 1]])
