@@ -187,8 +187,8 @@ def read_yaml(path: Path) -> dict:
         text = path.read_text()
     except OSError as exc:
         raise DatasetError(f"cannot read ({exc.strerror})", file=path) from None
-    text = re.sub(r"^%YAML[: ]1\.0\s*\n", "", text)  # OpenCV's header is not valid YAML 1.1
-    text = text.replace("%YAML:1.0", "")
+    # OpenCV writes "%YAML:1.0" (not valid YAML) or "%YAML 1.2" (PyYAML reads 1.1): drop the directive
+    text = re.sub(r"^\s*%YAML[: ]?[0-9.]*[^\n]*\n", "", text, count=1)
     try:
         data = yaml.load(text, Loader=_Loader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as exc:

@@ -23,6 +23,9 @@ from .observations import BoardObservation, Observations
 from .transforms import make_T, transform_points
 
 
+UNDISTORT_CRITERIA = (3, 50, 1e-10)  # cv2.TERM_CRITERIA_COUNT | EPS: OpenCV's default of 5 iterations is too few
+
+
 class ExtractionError(LidarcamError):
     """A pose's board or scan segment could not be found; the message is the skip reason."""
 
@@ -124,7 +127,8 @@ def _square_mean(gray: np.ndarray, quad: np.ndarray) -> float:
 def _solve_pose(obj: np.ndarray, corners: np.ndarray, camera: CameraModel):
     import cv2
 
-    und = cv2.undistortPoints(corners.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K).reshape(-1, 2)
+    und = cv2.undistortPoints(corners.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K,
+                              criteria=UNDISTORT_CRITERIA).reshape(-1, 2)
     ok, rvec, tvec = cv2.solvePnP(obj, und, camera.K, None, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
         raise ExtractionError("solvePnP (IPPE) failed on the detected corners")

@@ -175,7 +175,7 @@ def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_c
     cb = fig.colorbar(sc, cax=cax)
     cb.set_label("distance to board plane (mm)", fontsize=8)
     cb.ax.tick_params(labelsize=7)
-    fig.savefig(path, dpi=dpi)
+    fig.savefig(path, dpi=dpi, pil_kwargs={"compress_level": 1})
 
 
 def _residual_plot(path: Path, bearing_deg: np.ndarray, dist_mm: np.ndarray, title: str) -> None:
@@ -193,8 +193,8 @@ def _residual_plot(path: Path, bearing_deg: np.ndarray, dist_mm: np.ndarray, tit
     ax.set_ylabel("point-to-plane (mm)")
     ax.set_title(title, fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
-    fig.savefig(path)
+    fig.subplots_adjust(left=0.15, right=0.97, bottom=0.16, top=0.9)
+    fig.savefig(path, pil_kwargs={"compress_level": 1})
 
 
 def _fmt_row(v) -> str:
