@@ -22,7 +22,6 @@ from .errors import LidarcamError
 from .observations import BoardObservation, Observations
 from .transforms import make_T, transform_points
 
-
 UNDISTORT_CRITERIA = (3, 50, 1e-10)  # cv2.TERM_CRITERIA_COUNT | EPS: OpenCV's default of 5 iterations is too few
 
 
