@@ -25,6 +25,7 @@ MIN_POSES = 5
 PARALLEL_DEG = 15.0
 CONDITION_MIN = 0.1
 OUTLIER_FACTOR = 3.0
+OVERLAY_CMAP = "turbo"  # saturated everywhere (a diverging map is grey at 0 mm: invisible on the board)
 
 
 @dataclass
@@ -163,7 +164,7 @@ def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_c
         if not ok.any():
             continue
         dist = 1000 * plane_distances(T_cam_lidar, T_cam_board, pts[ok])
-        sc = ax.scatter(uv[ok, 0], uv[ok, 1], c=np.clip(dist, -clim_mm, clim_mm), cmap="coolwarm", norm=norm,
+        sc = ax.scatter(uv[ok, 0], uv[ok, 1], c=np.clip(dist, -clim_mm, clim_mm), cmap=OVERLAY_CMAP, norm=norm,
                         s=size, edgecolors=edge, linewidths=0.4)
     ax.text(4, 4, title, color="white", fontsize=8, va="top", ha="left",
             bbox={"facecolor": "black", "alpha": 0.5, "pad": 2, "edgecolor": "none"})
@@ -171,7 +172,7 @@ def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_c
     if sc is None:
         from matplotlib.cm import ScalarMappable
 
-        sc = ScalarMappable(norm=norm, cmap="coolwarm")
+        sc = ScalarMappable(norm=norm, cmap=OVERLAY_CMAP)
     cb = fig.colorbar(sc, cax=cax)
     cb.set_label("distance to board plane (mm)", fontsize=8)
     cb.ax.tick_params(labelsize=7)
