@@ -234,9 +234,10 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
     for name, T, ch, ow in zip(names, T_cb, chords, owners, strict=True):
         idx = np.flatnonzero(ow)
         gt += [f"  '{name}':", "    T_cam_board:", _mat_yaml(T, "      "),
-               f"    chord_m: [[{ch[0, 0]!r}, {ch[0, 1]!r}], [{ch[1, 0]!r}, {ch[1, 1]!r}]]",
+               "    chord_m: [" + ", ".join("[" + ", ".join(repr(float(v)) for v in e) + "]" for e in ch) + "]",
                f"    board_beams: [{int(idx.min()) if len(idx) else -1}, {int(idx.max()) + 1 if len(idx) else -1}]"]
     gt.append("options:")
-    gt += [f"  {k}: {v!r}" if not isinstance(v, str) else f"  {k}: '{v}'" for k, v in o.to_dict().items()]
+    gt += [f"  {k}: {str(v).lower() if isinstance(v, bool) else repr(v)}" if not isinstance(v, str) else f"  {k}: '{v}'"
+           for k, v in o.to_dict().items()]
     (out / "ground_truth.yaml").write_text("\n".join(gt) + "\n")
     return out

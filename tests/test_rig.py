@@ -227,6 +227,9 @@ def test_extraction_matches_the_simulated_truth(rig):
     assert obs.n_boards == 6, format_diagnostics(diags)
     T_lc = np.asarray(gt["T_lidar_cam"])
     np.testing.assert_allclose(obs.T_lidar_cam_true, T_lc)
+    from simulate import SimOptions
+
+    assert SimOptions.from_dict(gt["options"]).n_boards == 6
     for name, b, d in zip(obs.meta["poses"], obs.boards, diags, strict=True):
         T_true = np.asarray(gt["poses"][name]["T_cam_board"])
         e_R, e_t = pose_errors(b.T_cam_board, T_true)
