@@ -250,8 +250,8 @@ def test_calibration_from_extracted_rig_recovers_the_truth(rig):
     _, obs, _ = rig
     # 6 boards, 10 mm range noise, board poses from 640x480 images (0.2-0.6 deg per board pose). Measured on
     # seeds 11-13: zhang_pless 0.9-1.1 deg, 60-96 mm (0.1-0.25 deg, 5-21 mm with the true board poses);
-    # vasconcelos 0.3-0.6 deg, 21-46 mm.
-    for method in ("zhang_pless", "vasconcelos"):
+    # vasconcelos 0.3-0.6 deg, 21-46 mm; peng2022 0.3-0.6 deg, 21-44 mm.
+    for method in ("zhang_pless", "vasconcelos", "peng2022"):
         res = calibrate(obs, method=method)
         assert res.ok, (method, res.reason)
         e_R, e_t = pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)
