@@ -9,7 +9,6 @@ from .errors import LidarcamError
 
 
 def _cmd_methods(args) -> int:
-    from . import methods  # noqa: F401  (registers the methods)
     from .registry import METHODS as table
 
     w = max(len(n) for n in table)
@@ -78,7 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-_VERB_MODULES: list[str] = ["simulate.cli"]
+_VERB_MODULES: list[str] = ["simulate.cli", "calib_core.cli_rig"]
 
 
 def main(argv=None) -> int:
