@@ -20,12 +20,11 @@ from omegaconf import DictConfig, OmegaConf
 
 from simulate import SimOptions
 
+from .catalog import PAPER_METHODS
+
 SIM_GROUPS = ("scene", "lidar", "camera", "noise")
 _CAMERA_PREFIXES = ("cam_", "focal_", "image_", "render_", "pose_", "pixel_", "min_depth")
 
-# The methods of the paper's comparison, and ours; the optional ones join a run only when registered.
-PAPER_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022")
-OPTIONAL_METHODS = ("lidarcam", "peng2022+ml", "vasconcelos+ml")
 
 
 def sim_group_of(name: str) -> str:
