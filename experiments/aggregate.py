@@ -11,6 +11,7 @@ invalid (it stays in ``n_trials``); error means and medians are over the trials 
 from __future__ import annotations
 
 import argparse
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -95,14 +96,27 @@ def trial_table(df: pd.DataFrame) -> pd.DataFrame:
     return df[cols[:4] + extra + cols[4:]].reset_index(drop=True)
 
 
+def constant_settings(df: pd.DataFrame) -> dict:
+    """The settings that are the same in every row of ``df`` (the sweep's fixed assumptions)."""
+    cols = [c for c in df.columns if c not in NON_SETTING and df[c].nunique(dropna=False) == 1]
+    return {c: (v.item() if hasattr(v, "item") else v) for c, v in df[cols].iloc[0].items()}
+
+
 def write_tables(df: pd.DataFrame, sweep: str, out_dir: str | Path) -> tuple[Path, Path]:
-    """Write ``summary_<sweep>.csv`` and ``trials_<sweep>.csv`` of the trial rows ``df`` into ``out_dir``."""
+    """Write ``summary_<sweep>.csv``, ``trials_<sweep>.csv`` and ``settings_<sweep>.json`` (the fixed
+    settings) of the trial rows ``df`` into ``out_dir``; returns the two tables' paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary_path, trials_path = out / f"summary_{sweep}.csv", out / f"trials_{sweep}.csv"
     summarise(df).to_csv(summary_path, index=False, float_format="%.6g")
     trial_table(df).to_csv(trials_path, index=False, float_format="%.6g")
+    (out / f"settings_{sweep}.json").write_text(json.dumps(constant_settings(df), indent=1, sort_keys=True) + "\n")
     return summary_path, trials_path
+
+
+def load_settings(out_dir: str | Path, sweep: str) -> dict:
+    path = Path(out_dir) / f"settings_{sweep}.json"
+    return json.loads(path.read_text()) if path.exists() else {}
 
 
 def load_summary(out_dir: str | Path, sweep: str) -> pd.DataFrame:
