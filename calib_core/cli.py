@@ -74,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-_VERB_MODULES: list[str] = []
+_VERB_MODULES: list[str] = ["simulate.cli"]
 
 
 def main(argv=None) -> int:

@@ -1,0 +1,85 @@
+"""The benchmark's problem generator: simulated 2D-lidar + camera board views with their ground truth.
+
+``generate(options, seed, trial)`` draws one problem (``calib_core.Observations``) following METHOD.md's
+simulation protocol; every assumption is a field of ``SimOptions``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from calib_core.observations import BoardObservation, Observations
+from calib_core.transforms import invert_T
+
+from .camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners, observe_board_pose, render_board_image
+from .lidar import beam_bearings, cast_scan
+from .options import SimConfig, SimOptions, settings_hash
+from .scene import Scene, SceneError, sample_scene
+
+GENERATOR = "lidarcam.simulate/1"
+
+
+def trial_rngs(options: SimOptions, seed: int, trial: int) -> tuple[np.random.Generator, ...]:
+    """Independent generators (geometry, lidar noise, camera noise) of one trial.
+
+    Derived from ``SeedSequence(entropy=seed, spawn_key=(settings_hash(options), trial))``: the stream of a
+    trial depends only on the base seed, the settings and the trial index, never on process order.
+    """
+    ss = np.random.SeedSequence(entropy=int(seed), spawn_key=(settings_hash(options), int(trial)))
+    return tuple(np.random.default_rng(s) for s in ss.spawn(3))
+
+
+def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0
+                   ) -> tuple[Scene, list[np.ndarray], list[np.ndarray]]:
+    """One trial's truth and measurements: (scene, scans (per board (K_i,2) in the lidar frame, metres,
+    ordered by bearing), camera-estimated ``T_cam_board`` per board (4x4)).
+
+    Boards are separate captures unless ``shared_scan`` (then one scan, nearest hit wins). In ``image``
+    mode a board whose checkerboard is not detected is re-drawn (it counts as a failed attempt).
+    """
+    o = options
+    rng_geo, rng_lidar, rng_cam = trial_rngs(o, seed, trial)
+    K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
+    spec = BoardSpec.of(o)
+    cam_poses: list[np.ndarray] = []
+
+    def observe(T_lidar_cam, T_lidar_board) -> bool:
+        try:
+            T = observe_board_pose(K, invert_T(T_lidar_cam) @ T_lidar_board, spec, o.pose_mode, o.cam_width,
+                                   o.cam_height, rng_cam, o.pixel_noise_px, o.image_noise_std,
+                                   o.render_supersample)
+        except CameraError:
+            return False
+        cam_poses.append(T)
+        return True
+
+    scene = sample_scene(o, rng_geo, accept=observe)
+    bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
+    sigma = o.noise_mm / 1000.0
+    if o.shared_scan:
+        scans = cast_scan(bearings, scene.T_lidar_board, scene.outline, o.lidar_max_range_m, sigma, rng_lidar)
+    else:
+        scans = [cast_scan(bearings, T[None], scene.outline, o.lidar_max_range_m, sigma, rng_lidar)[0]
+                 for T in scene.T_lidar_board]
+    return scene, scans, cam_poses
+
+
+def generate(options: SimOptions, seed: int = 0, trial: int = 0) -> Observations:
+    """One simulated calibration problem with its ground truth ``T_lidar_cam``.
+
+    ``meta``: generator name, the options as a dict, seed, trial, settings hash, and (when the camera poses
+    are estimated, ``pose_mode`` pixel or image) the true ``T_cam_board`` per board.
+    """
+    scene, scans, cam_poses = simulate_trial(options, seed, trial)
+    boards = tuple(BoardObservation(T, scene.outline, s) for T, s in zip(cam_poses, scans, strict=True))
+    meta = {"generator": GENERATOR, "options": options.to_dict(), "seed": int(seed), "trial": int(trial),
+            "settings_hash": settings_hash(options)}
+    if options.pose_mode != "exact":
+        meta["T_cam_board_true"] = scene.T_cam_board.tolist()
+    return Observations(boards, scene.T_lidar_cam, meta)
+
+
+__all__ = [
+    "BoardSpec", "CameraError", "GENERATOR", "Scene", "SceneError", "SimConfig", "SimOptions", "camera_matrix",
+    "checkerboard_corners", "generate", "render_board_image", "settings_hash", "simulate_trial", "trial_rngs",
+]

@@ -1,0 +1,493 @@
+"""Vasconcelos 2012 minimal solver: every extrinsic T_lidar_cam from three plane-line pairs, vectorised.
+
+Equation solved (a P3P problem whose centre is the planes' common point ``O`` and whose "rays" are lines)::
+
+    find lambda_a (a = 12, 13, 23) with  |lambda_a v_a - lambda_b v_b|^2 = |q_a - q_b|^2  for all pairs a, b,
+
+where ``v_ij = n_i x n_j / |n_i x n_j|`` is the direction of the line ``Pi_i ∩ Pi_j`` through ``O`` (camera frame)
+and ``q_ij`` is the meeting point of scan lines i and j (lidar scan plane).  Each solution places the scan
+triangle at ``P_ij = O + lambda_ij v_ij`` and gives ``T_lidar_cam`` from the three pairs ``q_ij <-> P_ij``.
+
+Paper: F. Vasconcelos, J. P. Barreto, U. Nunes, "A Minimal Solution for the Extrinsic Calibration of a
+Camera and a Laser-Rangefinder", IEEE TPAMI 34(11), 2012.
+
+Input assumptions: board plane i is ``{p_C : n_i . p_C = d_i}`` in the CAMERA frame (metres; ``n_i`` is
+normalised here, ``d_i`` with it); the scan line of board i is ``{p_i + s u_i}`` in the lidar scan plane
+(2D lidar coordinates x, y in metres; the plane is z = 0 of the lidar frame).  The result ``T_lidar_cam``
+maps camera points into the lidar frame (``p_L = R p_C + t``).
+
+Method, per triple, all vectorised over triples (no Python loop over triples or candidates):
+
+1. Degeneracy tests (thresholds are keyword options): planes with no single common point (smallest
+   singular value of the normal matrix ``N``), nearly parallel scan lines (sine of their angle), a
+   collinear scan triangle (twice its area over its longest side squared).
+2. Grunert's reduction (as reviewed by Haralick et al., IJCV 1994) to one quartic in a ratio of two
+   lambdas.  The points are relabelled so that the side divided by (``b`` of Grunert, between points 1
+   and 3) is the longest one, coefficients are scaled to unit max-norm, and the quartic is reversed
+   (unknown ``lambda_1/lambda_3`` instead of ``lambda_3/lambda_1``) when that makes the leading
+   coefficient the larger end, so roots near infinity never occur.
+3. Roots in closed form (Ferrari, complex arithmetic) or, with ``quartic="eig"``, as eigenvalues of the
+   batched companion matrix; then two complex Newton steps on every root (which collapses the rounding
+   imaginary part of real roots to ~1e-16) before the real/complex test.
+4. The lambdas follow from the root without Grunert's unstable division (``lambda_2`` is the common root of
+   two quadratics); a few Newton (Gauss-Newton on the square system) steps on the three distance
+   equations polish them.  Lines, not rays: every root gives the solution and its mirror ``-lambda``.
+5. Absolute orientation of the three point pairs in closed form (plane-to-plane alignment plus the optimal
+   in-plane angle; for three points this is the Kabsch/SVD solution with det +1 when the two triangles
+   have the same handedness, which they always do up to noise).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import LidarcamError
+
+# Reasons (the ``reasons`` entries; ``None`` means solved).
+REASON_NONFINITE = "non-finite input"
+REASON_PLANES = "planes do not meet in one point (sigma_min(N) < min_plane_sv)"
+REASON_SCAN_LINES = "scan lines nearly parallel (|sin angle| < min_line_sin)"
+REASON_TRIANGLE = "scan triangle degenerate (2 area / longest side^2 < min_triangle, or longest side < min_side)"
+REASON_QUARTIC = "degenerate quartic (roots at both 0 and infinity)"
+REASON_NO_REAL = "no real solution"
+
+MAX_SOLUTIONS = 8
+
+# Registry entry (name, minimum boards, maximum solutions per triple, citation).
+SOLVER_INFO = {"name": "vasconcelos2012", "min_boards": 3, "max_solutions": MAX_SOLUTIONS,
+               "citation": "F. Vasconcelos, J. P. Barreto, U. Nunes, A Minimal Solution for the Extrinsic Calibration "
+                           "of a Camera and a Laser-Rangefinder, IEEE TPAMI 34(11), 2012"}
+
+# Grunert point k (k = 1, 2, 3) -> original line index (0: v_12, 1: v_13, 2: v_23), chosen by the longest side.
+# Sides: 0 = |q12 q13|, 1 = |q12 q23|, 2 = |q13 q23|; Grunert's b is the side between points 1 and 3.
+_PERM_BY_LONGEST = np.array([[0, 2, 1], [0, 1, 2], [1, 0, 2]])
+# Which scan lines meet at q_a, a = 12, 13, 23.
+_PAIRS = np.array([[0, 1], [0, 2], [1, 2]])
+
+
+class MinimalSolverError(LidarcamError, ValueError):
+    """Bad input shapes or options for the minimal solver."""
+
+
+@dataclass(frozen=True)
+class MinimalSolutions:
+    """Every real solution of a batch of B plane-line triples.
+
+    ``T_lidar_cam`` (M,4,4): the candidates, grouped by triple (ascending) and, within one, in root order
+    with each solution followed by its mirror.  ``triple`` (M,): index of the input triple of each one.
+    ``near_real`` (M,): True where the candidate comes from a complex root pair kept by ``near_real_tol``.
+    ``reasons`` (B,) object: ``None`` when the triple was solved, else a ``REASON_*`` string (degenerate,
+    or ``REASON_NO_REAL`` when the quartic had no kept root).
+    """
+
+    T_lidar_cam: np.ndarray
+    triple: np.ndarray
+    near_real: np.ndarray
+    reasons: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.triple.shape[0])
+
+    def of_triple(self, b: int) -> np.ndarray:
+        """The candidates (K,4,4) of input triple ``b``."""
+        return self.T_lidar_cam[self.triple == b]
+
+
+def board_triples(n_boards: int) -> np.ndarray:
+    """All ``C(n_boards, 3)`` triples of board indices, (C,3) int, lexicographic order."""
+    if n_boards < 3:
+        return np.zeros((0, 3), dtype=int)
+    return np.array(list(itertools.combinations(range(int(n_boards)), 3)), dtype=int)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Small vectorised helpers
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("...i,...i->...", a, b)
+
+
+def _cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _sym3_min_eig(A: np.ndarray) -> np.ndarray:
+    """Smallest eigenvalue of symmetric 3x3 matrices (...,3,3), closed form (trigonometric)."""
+    a11, a22, a33 = A[..., 0, 0], A[..., 1, 1], A[..., 2, 2]
+    a12, a13, a23 = A[..., 0, 1], A[..., 0, 2], A[..., 1, 2]
+    q = (a11 + a22 + a33) / 3.0
+    p1 = a12**2 + a13**2 + a23**2
+    p2 = (a11 - q) ** 2 + (a22 - q) ** 2 + (a33 - q) ** 2 + 2.0 * p1
+    p = np.sqrt(p2 / 6.0)
+    safe = p > 1e-300
+    ps = np.where(safe, p, 1.0)
+    b11, b22, b33 = (a11 - q) / ps, (a22 - q) / ps, (a33 - q) / ps
+    b12, b13, b23 = a12 / ps, a13 / ps, a23 / ps
+    detB = b11 * (b22 * b33 - b23**2) - b12 * (b12 * b33 - b23 * b13) + b13 * (b12 * b23 - b22 * b13)
+    phi = np.arccos(np.clip(detB / 2.0, -1.0, 1.0)) / 3.0
+    lam_min = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    return np.where(safe, lam_min, q)
+
+
+def _poly_eval(A: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Quartic (coefficients A (...,5), highest first) and its derivative at x (..., broadcast), Horner."""
+    a0, a1, a2, a3, a4 = (A[..., k, None] for k in range(5))
+    p = (((a0 * x + a1) * x + a2) * x + a3) * x + a4
+    dp = ((4.0 * a0 * x + 3.0 * a1) * x + 2.0 * a2) * x + a3
+    return p, dp
+
+
+def _cubic_root_largest(B: np.ndarray, C: np.ndarray, D: np.ndarray) -> np.ndarray:
+    """The largest-modulus root of the monic cubic m^3 + B m^2 + C m + D (complex arrays), Cardano."""
+    P = C - B * B / 3.0
+    Q = 2.0 * B**3 / 27.0 - B * C / 3.0 + D
+    S = np.sqrt(Q * Q / 4.0 + P**3 / 27.0)
+    w1, w2 = -Q / 2.0 + S, -Q / 2.0 - S
+    W = np.where(np.abs(w1) >= np.abs(w2), w1, w2)
+    U = W ** (1.0 / 3.0)
+    nz = np.abs(U) > 0
+    Us = np.where(nz, U, 1.0)
+    omega = np.exp(2j * np.pi / 3.0)
+    best = np.zeros_like(U)
+    best_abs = np.full(U.shape, -1.0)
+    for k in range(3):
+        Uk = Us * omega**k
+        t = np.where(nz, Uk - P / (3.0 * Uk), 0.0)
+        m = t - B / 3.0
+        am = np.abs(m)
+        better = am > best_abs
+        best = np.where(better, m, best)
+        best_abs = np.where(better, am, best_abs)
+    return best
+
+
+def _quartic_roots_closed(A: np.ndarray) -> np.ndarray:
+    """All 4 complex roots (K,4) of quartics A (K,5) (highest first, A[:,0] != 0), Ferrari in complex arithmetic."""
+    a = (A[:, 1] / A[:, 0]).astype(complex)
+    b = (A[:, 2] / A[:, 0]).astype(complex)
+    c = (A[:, 3] / A[:, 0]).astype(complex)
+    e = (A[:, 4] / A[:, 0]).astype(complex)
+    a2 = a * a
+    p = b - 3.0 * a2 / 8.0
+    q = c - a * b / 2.0 + a2 * a / 8.0
+    r = e - a * c / 4.0 + a2 * b / 16.0 - 3.0 * a2 * a2 / 256.0
+    # Resolvent: m^3 + p m^2 + (p^2/4 - r) m - q^2/8 = 0; the largest root keeps sqrt(2m) away from 0.
+    m = _cubic_root_largest(p, p * p / 4.0 - r, -q * q / 8.0)
+    w = np.sqrt(2.0 * m)
+    nz = np.abs(w) > 0
+    qw = np.where(nz, 2.0 * q / np.where(nz, w, 1.0), 0.0)
+    roots = np.empty(A.shape[:1] + (4,), dtype=complex)
+    k = 0
+    for s1 in (1.0, -1.0):
+        disc = np.sqrt(-(2.0 * p + 2.0 * m + s1 * qw))
+        for s2 in (1.0, -1.0):
+            roots[:, k] = (s1 * w + s2 * disc) / 2.0 - a / 4.0
+            k += 1
+    return roots
+
+
+def _quartic_roots_eig(A: np.ndarray) -> np.ndarray:
+    """All 4 complex roots (K,4) of quartics A (K,5) as eigenvalues of batched companion matrices."""
+    K = A.shape[0]
+    Cm = np.zeros((K, 4, 4))
+    Cm[:, 0, :] = -A[:, 1:] / A[:, :1]
+    Cm[:, 1, 0] = Cm[:, 2, 1] = Cm[:, 3, 2] = 1.0
+    return np.linalg.eigvals(Cm).astype(complex)
+
+
+def _newton_roots(A: np.ndarray, x: np.ndarray, iters: int) -> np.ndarray:
+    """``iters`` Newton steps on quartics A (K,5) at roots x (K,R) (real or complex); a step is skipped at p' = 0."""
+    for _ in range(iters):
+        p, dp = _poly_eval(A, x)
+        ok = np.abs(dp) > 0
+        x = x - np.where(ok, p / np.where(ok, dp, 1.0), 0.0)
+    return x
+
+
+def _grunert_quartic(aa, bb, cc, ca, cb, cg) -> np.ndarray:
+    """Grunert's quartic in v = lambda_3 / lambda_1 (Haralick et al. 1994, eq. 9), coefficients (K,5) highest first.
+
+    ``aa, bb, cc``: squared sides |P2P3|^2, |P1P3|^2, |P1P2|^2; ``ca, cb, cg``: cosines of the angles between
+    lines (2,3), (1,3), (1,2).
+    """
+    q1 = (aa - cc) / bb
+    q2 = (aa + cc) / bb
+    q3 = (bb - cc) / bb
+    q4 = (bb - aa) / bb
+    ca2, cb2, cg2 = ca * ca, cb * cb, cg * cg
+    A4 = (q1 - 1.0) ** 2 - 4.0 * cc / bb * ca2
+    A3 = 4.0 * (q1 * (1.0 - q1) * cb - (1.0 - q2) * ca * cg + 2.0 * cc / bb * ca2 * cb)
+    A2 = 2.0 * (q1 * q1 - 1.0 + 2.0 * q1 * q1 * cb2 + 2.0 * q3 * ca2 - 4.0 * q2 * ca * cb * cg + 2.0 * q4 * cg2)
+    A1 = 4.0 * (-q1 * (1.0 + q1) * cb + 2.0 * aa / bb * cg2 * cb - (1.0 - q2) * ca * cg)
+    A0 = (1.0 + q1) ** 2 - 4.0 * aa / bb * cg2
+    return np.stack([A4, A3, A2, A1, A0], axis=-1)
+
+
+def _polish_lambdas(s, aa, bb, cc, ca, cb, cg, iters: int) -> np.ndarray:
+    """Newton steps (K,3) on the three distance equations; a step is kept only where it lowers the residual."""
+
+    def resid(s):
+        s1, s2, s3 = s[:, 0], s[:, 1], s[:, 2]
+        return np.stack([s1 * s1 + s2 * s2 - 2.0 * cg * s1 * s2 - cc,
+                         s1 * s1 + s3 * s3 - 2.0 * cb * s1 * s3 - bb,
+                         s2 * s2 + s3 * s3 - 2.0 * ca * s2 * s3 - aa], axis=-1)
+
+    f = resid(s)
+    fn = np.einsum("ki,ki->k", f, f)
+    for _ in range(iters):
+        s1, s2, s3 = s[:, 0], s[:, 1], s[:, 2]
+        z = np.zeros_like(s1)
+        J = np.stack([np.stack([2 * (s1 - cg * s2), 2 * (s2 - cg * s1), z], -1),
+                      np.stack([2 * (s1 - cb * s3), z, 2 * (s3 - cb * s1)], -1),
+                      np.stack([z, 2 * (s2 - ca * s3), 2 * (s3 - ca * s2)], -1)], axis=1)
+        # Cramer: J^-1 = adj(J) / det(J), adj rows from cross products of J's columns.
+        c0, c1, c2 = J[:, :, 0], J[:, :, 1], J[:, :, 2]
+        adj = np.stack([_cross(c1, c2), _cross(c2, c0), _cross(c0, c1)], axis=1)
+        det = _dot(c0, adj[:, 0])
+        ok = np.abs(det) > 1e-300
+        step = -np.einsum("kij,kj->ki", adj, f) / np.where(ok, det, 1.0)[:, None]
+        s_new = s + np.where(ok[:, None], step, 0.0)
+        f_new = resid(s_new)
+        fn_new = np.einsum("ki,ki->k", f_new, f_new)
+        better = np.isfinite(fn_new) & (fn_new < fn)
+        s = np.where(better[:, None], s_new, s)
+        f = np.where(better[:, None], f_new, f)
+        fn = np.where(better, fn_new, fn)
+    return s
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _abs_orientation_3pt(P: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R (K,3,3), t (K,3) with ``[q, 0] ~ R P + t`` for camera triangles P (K,3,3) and scan-plane triangles q (K,3,2).
+
+    Closed form: align the triangles' oriented planes, then take the least-squares in-plane angle.  Equal to
+    Kabsch/SVD (det +1) for congruent triangles and to first order for nearly congruent ones.  The scan
+    triangle lies in z = 0, so its frame is the identity up to the sign of its orientation.
+    """
+    cP = P.mean(axis=1)
+    Y = P - cP[:, None, :]
+    a = P[:, 1] - P[:, 0]
+    e1 = a / np.sqrt(np.einsum("ki,ki->k", a, a))[:, None]
+    nrm = _cross(a, P[:, 2] - P[:, 0])
+    nrm /= np.sqrt(np.einsum("ki,ki->k", nrm, nrm))[:, None]
+    e2 = _cross(nrm, e1)
+    xp = np.einsum("kni,ki->kn", Y, e1)
+    yp = np.einsum("kni,ki->kn", Y, e2)
+    cq = q.mean(axis=1)
+    xq, yq = q[:, :, 0] - cq[:, :1], q[:, :, 1] - cq[:, 1:]
+    sgn = np.where(_cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]) >= 0, 1.0, -1.0)
+    yq = yq * sgn[:, None]  # coordinates in the frame (x, sgn y, sgn z), whose third axis is the normal
+    sn = np.einsum("kn,kn->k", xp, yq) - np.einsum("kn,kn->k", yp, xq)
+    cs = np.einsum("kn,kn->k", xp, xq) + np.einsum("kn,kn->k", yp, yq)
+    h = np.hypot(sn, cs)
+    h = np.where(h > 0, h, 1.0)
+    co, si = (cs / h)[:, None], (sn / h)[:, None]
+    R = np.empty(P.shape[:1] + (3, 3))
+    R[:, 0] = co * e1 - si * e2
+    R[:, 1] = sgn[:, None] * (si * e1 + co * e2)
+    R[:, 2] = sgn[:, None] * nrm
+    t = -np.einsum("kij,kj->ki", R, cP)
+    t[:, :2] += cq
+    return R, t
+
+
+def kabsch(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Reference absolute orientation by SVD (det fixed +1): R (K,3,3), t (K,3) minimising sum |Q - (R P + t)|^2.
+
+    ``P, Q`` (K,n,3) corresponding point sets.  The solver uses the faster closed form for three points.
+    """
+    cP, cQ = P.mean(axis=1), Q.mean(axis=1)
+    H = np.einsum("kni,knj->kij", P - cP[:, None], Q - cQ[:, None])
+    U, _, Vt = np.linalg.svd(H)
+    D = np.ones(U.shape[:-1])
+    D[:, -1] = np.sign(np.linalg.det(Vt.transpose(0, 2, 1) @ U.transpose(0, 2, 1)))
+    R = (Vt.transpose(0, 2, 1) * D[:, None, :]) @ U.transpose(0, 2, 1)
+    return R, cQ - np.einsum("kij,kj->ki", R, cP)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The solver
+
+
+def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
+                  imag_tol: float = 1e-8, near_real_tol: float | None = None,
+                  min_plane_sv: float = 1e-3, min_line_sin: float = 1e-3, min_triangle: float = 1e-3,
+                  min_side: float = 1e-6,
+                  quartic: str = "closed", root_newton_iters: int = 2,
+                  lambda_newton_iters: int = 2) -> MinimalSolutions:
+    """Every real ``T_lidar_cam`` of B plane-line triples (Vasconcelos, Barreto & Nunes, TPAMI 2012).
+
+    Solves ``|lambda_a v_a - lambda_b v_b| = |q_a - q_b|`` (a, b in {12, 13, 23}) for points
+    ``P_a = O + lambda_a v_a`` on the lines where the boards' planes meet, then aligns ``q_a <-> P_a``.
+
+    Args:
+        n: (B,3,3) normals of the three board planes in the camera frame (rows; normalised here).
+        d: (B,3) plane offsets, plane ``{p_C : n . p_C = d}`` in metres (scaled with ``n``).
+        p: (B,3,2) a point of each board's scan line, lidar scan-plane coordinates (x, y) in metres.
+        u: (B,3,2) the direction of each scan line (normalised here).
+        imag_tol: a quartic root ``x`` counts as real when ``|Im x| <= imag_tol * (1 + |x|)`` (after Newton
+            polishing in complex arithmetic, exact real roots have ``|Im x|`` ~ 1e-16); its real part is used.
+        near_real_tol: ``None`` (default) keeps only real roots.  A float keeps also each complex-conjugate
+            pair with ``|Im x| <= near_real_tol * (1 + |x|)`` through its real part (one root per pair; noise
+            can turn two real roots into such a pair); these candidates are marked ``near_real``.
+        min_plane_sv: degenerate when the smallest singular value of the unit-normal matrix ``N`` is below
+            this (the planes' common point ``O`` is at or near infinity).
+        min_line_sin: degenerate when two scan lines meet at an angle whose |sine| is below this.
+        min_triangle: degenerate when the scan triangle's ``2 area / longest side^2`` is below this
+            (equilateral: 0.866).
+        min_side: degenerate when the triangle's longest side is below this (metres): three concurrent
+            scan lines.
+        quartic: ``"closed"`` (Ferrari, fast) or ``"eig"`` (companion-matrix eigenvalues, reference).
+        root_newton_iters: complex Newton steps on each quartic root before the real test.
+        lambda_newton_iters: Newton steps on the three distance equations per candidate.
+
+    Returns:
+        ``MinimalSolutions``; at most 8 candidates per triple (4 roots, each with its mirror through ``O``).
+    """
+    n = np.asarray(n, dtype=float)
+    d = np.asarray(d, dtype=float)
+    p = np.asarray(p, dtype=float)
+    u = np.asarray(u, dtype=float)
+    if n.ndim != 3 or n.shape[1:] != (3, 3):
+        raise MinimalSolverError(f"n must be (B,3,3), got {n.shape}")
+    B = n.shape[0]
+    if d.shape != (B, 3) or p.shape != (B, 3, 2) or u.shape != (B, 3, 2):
+        raise MinimalSolverError(f"expected d (B,3), p and u (B,3,2) with B={B}; got {d.shape}, {p.shape}, {u.shape}")
+    if quartic not in ("closed", "eig"):
+        raise MinimalSolverError(f"quartic must be 'closed' or 'eig', got {quartic!r}")
+
+    reasons = np.full(B, None, dtype=object)
+    finite = (np.isfinite(n).all(axis=(1, 2)) & np.isfinite(d).all(axis=1) & np.isfinite(p).all(axis=(1, 2))
+              & np.isfinite(u).all(axis=(1, 2)))
+    nn = np.linalg.norm(n, axis=2)
+    un = np.linalg.norm(u, axis=2)
+    finite &= (nn > 0).all(axis=1) & (un > 0).all(axis=1)
+    reasons[~finite] = REASON_NONFINITE
+    idx = np.flatnonzero(finite)
+    n, d, p, u = n[idx], d[idx], p[idx], u[idx]
+    d = d / nn[idx]
+    n = n / nn[idx][:, :, None]
+    u = u / un[idx][:, :, None]
+
+    # 1. Degeneracy tests.
+    sv_min = np.sqrt(np.maximum(_sym3_min_eig(np.swapaxes(n, 1, 2) @ n), 0.0))
+    bad_planes = ~(sv_min >= min_plane_sv)
+    ui, uj = u[:, _PAIRS[:, 0]], u[:, _PAIRS[:, 1]]
+    pi, pj = p[:, _PAIRS[:, 0]], p[:, _PAIRS[:, 1]]
+    sin_ij = _cross2(ui, uj)  # (K,3)
+    bad_lines = ~(np.abs(sin_ij).min(axis=1) >= min_line_sin)
+    s_ij = _cross2(pj - pi, uj) / np.where(bad_lines[:, None], 1.0, sin_ij)
+    q = pi + s_ij[..., None] * ui  # (K,3,2): q_12, q_13, q_23
+    sides2 = np.stack([np.sum((q[:, 0] - q[:, 1]) ** 2, -1), np.sum((q[:, 0] - q[:, 2]) ** 2, -1),
+                       np.sum((q[:, 1] - q[:, 2]) ** 2, -1)], axis=-1)
+    longest2 = sides2.max(axis=1)
+    area2 = np.abs(_cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]))
+    bad_tri = ~(area2 >= min_triangle * longest2) | ~(longest2 >= min_side**2)
+    bad_tri &= ~bad_lines
+    reasons[idx[bad_tri]] = REASON_TRIANGLE
+    reasons[idx[bad_lines]] = REASON_SCAN_LINES
+    reasons[idx[bad_planes]] = REASON_PLANES
+    ok = ~(bad_planes | bad_lines | bad_tri)
+    idx, n, d, q, sides2 = idx[ok], n[ok], d[ok], q[ok], sides2[ok]
+
+    # 2. Geometry: O, line directions, Grunert relabelling (side b = |P1 P3| the longest).
+    n1, n2, n3 = n[:, 0], n[:, 1], n[:, 2]
+    c23, c31, c12 = _cross(n2, n3), _cross(n3, n1), _cross(n1, n2)
+    detN = _dot(n1, c23)
+    O = (d[:, 0, None] * c23 + d[:, 1, None] * c31 + d[:, 2, None] * c12) / detN[:, None]
+    V = _unit(np.stack([c12, -c31, c23], axis=1))  # v_12, v_13, v_23
+    perm = _PERM_BY_LONGEST[np.argmax(sides2, axis=1)]  # (K,3)
+    rows = np.arange(idx.size)[:, None]
+    Vg = V[rows, perm]
+    Qg = q[rows, perm]
+    cg = _dot(Vg[:, 0], Vg[:, 1])
+    cb = _dot(Vg[:, 0], Vg[:, 2])
+    ca = _dot(Vg[:, 1], Vg[:, 2])
+    aa = np.sum((Qg[:, 1] - Qg[:, 2]) ** 2, -1)
+    bb = np.sum((Qg[:, 0] - Qg[:, 2]) ** 2, -1)
+    cc = np.sum((Qg[:, 0] - Qg[:, 1]) ** 2, -1)
+
+    # 3. Quartic, normalised; reversed where the constant term dominates.
+    A = _grunert_quartic(aa, bb, cc, ca, cb, cg)
+    A = A / np.abs(A).max(axis=1, keepdims=True)
+    rev = np.abs(A[:, 4]) > np.abs(A[:, 0])
+    A = np.where(rev[:, None], A[:, ::-1], A)
+    bad_q = ~(np.abs(A[:, 0]) > 1e-12)
+    reasons[idx[bad_q]] = REASON_QUARTIC
+    keep = ~bad_q
+    idx, O, Vg, Qg, A, rev = idx[keep], O[keep], Vg[keep], Qg[keep], A[keep], rev[keep]
+    aa, bb, cc, ca, cb, cg = aa[keep], bb[keep], cc[keep], ca[keep], cb[keep], cg[keep]
+    roots = _quartic_roots_closed(A) if quartic == "closed" else _quartic_roots_eig(A)
+    roots = _newton_roots(A, roots, root_newton_iters)
+    im_scale = 1.0 + np.abs(roots)
+    is_real = np.abs(roots.imag) <= imag_tol * im_scale
+    near = np.zeros_like(is_real)
+    if near_real_tol is not None:
+        near = ~is_real & (roots.imag > 0) & (roots.imag <= near_real_tol * im_scale)
+    sel = is_real | near
+    k_tr, k_slot = np.nonzero(sel)  # row-major: grouped by triple
+    x = roots.real[k_tr, k_slot]
+    near_k = near[k_tr, k_slot]
+
+    # 4. Lambdas from each root.  z in [-1, 1] is lambda_3/lambda_1 ("v mode") or lambda_1/lambda_3.
+    big = np.abs(x) > 1.0
+    z = np.where(big, 1.0 / np.where(big, x, 1.0), x)
+    v_mode = rev[k_tr] == big
+    aa, bb, cc, ca, cb, cg = aa[k_tr], bb[k_tr], cc[k_tr], ca[k_tr], cb[k_tr], cg[k_tr]
+    lead = np.sqrt(bb / (1.0 + z * z - 2.0 * z * cb))
+    s1 = np.where(v_mode, lead, z * lead)
+    s3 = np.where(v_mode, z * lead, lead)
+    # lambda_2: common root of  s2^2 - 2 cg s1 s2 + s1^2 - cc = 0  and  s2^2 - 2 ca s3 s2 + s3^2 - aa = 0.
+    r1 = np.sqrt(np.maximum(cc - s1 * s1 * (1.0 - cg * cg), 0.0))
+    r3 = np.sqrt(np.maximum(aa - s3 * s3 * (1.0 - ca * ca), 0.0))
+    cand1 = (s1 * cg)[:, None] + np.stack([r1, -r1], -1)
+    cand3 = (s3 * ca)[:, None] + np.stack([r3, -r3], -1)
+    diff = np.abs(cand1[:, :, None] - cand3[:, None, :]).reshape(-1, 4)
+    best = np.argmin(diff, axis=1)
+    rr = np.arange(best.size)
+    s2 = 0.5 * (cand1[rr, best // 2] + cand3[rr, best % 2])
+    s = np.stack([s1, s2, s3], axis=-1)
+    s = _polish_lambdas(s, aa, bb, cc, ca, cb, cg, lambda_newton_iters)
+
+    # Lines, not rays: each root and its mirror through O.
+    s = np.stack([s, -s], axis=1).reshape(-1, 3)
+    k_tr2 = np.repeat(k_tr, 2)
+    P = O[k_tr2, None, :] + s[:, :, None] * Vg[k_tr2]
+
+    # 5. Absolute orientation: lidar = R camera + t.
+    R, t = _abs_orientation_3pt(P, Qg[k_tr2])
+    T = np.zeros((R.shape[0], 4, 4))
+    T[:, :3, :3] = R
+    T[:, :3, 3] = t
+    T[:, 3, 3] = 1.0
+
+    triple = idx[k_tr2]
+    solved = np.zeros(B, dtype=bool)
+    solved[idx] = True
+    has = np.zeros(B, dtype=bool)
+    has[triple] = True
+    reasons[solved & ~has] = REASON_NO_REAL
+    return MinimalSolutions(T_lidar_cam=T, triple=triple, near_real=np.repeat(near_k, 2), reasons=reasons)
+
+
+def solve_triple(n3: np.ndarray, d3: np.ndarray, p3: np.ndarray, u3: np.ndarray, **options) -> list[np.ndarray]:
+    """Every real ``T_lidar_cam`` (list of 4x4, possibly empty) of one triple: n3 (3,3), d3 (3,), p3, u3 (3,2).
+
+    Same options as ``solve_triples``.
+    """
+    sol = solve_triples(np.asarray(n3, float)[None], np.asarray(d3, float)[None], np.asarray(p3, float)[None],
+                        np.asarray(u3, float)[None], **options)
+    return list(sol.T_lidar_cam)

@@ -1,0 +1,181 @@
+"""The simulated pinhole camera: intrinsics, the checkerboard, rendering, corner detection and board poses.
+
+Frames: ``{C}`` camera (z optical axis, y down); ``{W}`` board (plane z = 0, z pointing away from the camera
+side that sees the pattern). Pixels follow OpenCV: pixel (i, j) has its centre at integer coordinates
+(x = column j, y = row i), so the image centre is ((W-1)/2, (H-1)/2). Units: metres, pixels.
+
+The checkerboard: ``squares_x`` x ``squares_y`` squares of side ``square_m``, centred on the square board of
+side ``size_m`` (its lower-left pattern corner at ``((size_m - squares_x square_m)/2, (size_m - squares_y
+square_m)/2)`` in the board frame). The square touching that pattern corner is white: with an odd x even
+grid, ``cv2.findChessboardCornersSB`` then lists the inner corners in the same order as
+``checkerboard_corners`` (row by row along board y, x fastest, starting next to the board origin); with the
+opposite colouring it lists them reversed (checked for 7x6, 9x6, 6x7, 8x5 squares).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from calib_core.transforms import make_T
+
+WHITE, BLACK, BACKGROUND = 230.0, 25.0, 110.0  # grey levels of the board, its black squares, the world
+
+
+class CameraError(RuntimeError):
+    """The simulated camera could not produce a board pose (no detection, PnP failure)."""
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """A square board of side ``size_m`` with a centred checkerboard of ``squares_x`` x ``squares_y``
+    squares of side ``square_m`` (metres)."""
+
+    size_m: float = 1.0
+    squares_x: int = 7
+    squares_y: int = 6
+    square_m: float = 0.12
+
+    @classmethod
+    def of(cls, spec) -> BoardSpec:
+        """A BoardSpec from a BoardSpec or anything with SimOptions' board fields."""
+        if isinstance(spec, BoardSpec):
+            return spec
+        return cls(spec.board_size_m, spec.board_squares_x, spec.board_squares_y, spec.checker_square_m)
+
+    @property
+    def pattern_origin(self) -> np.ndarray:
+        """Board-frame xy (metres) of the pattern's outer corner next to the board origin."""
+        return np.array([(self.size_m - self.squares_x * self.square_m) / 2.0,
+                         (self.size_m - self.squares_y * self.square_m) / 2.0])
+
+    @property
+    def pattern_size(self) -> tuple[int, int]:
+        """Inner-corner grid as OpenCV wants it: (columns along board x, rows along board y)."""
+        return (self.squares_x - 1, self.squares_y - 1)
+
+    def outline(self) -> np.ndarray:
+        """The board outline (4,2) ``[[0,0],[c,0],[c,c],[0,c]]`` in metres."""
+        c = self.size_m
+        return np.array([[0.0, 0.0], [c, 0.0], [c, c], [0.0, c]])
+
+
+def camera_matrix(focal_px: float, width: int, height: int) -> np.ndarray:
+    """Pinhole K (3x3), square pixels, principal point at the image centre ((W-1)/2, (H-1)/2)."""
+    return np.array([[focal_px, 0.0, (width - 1) / 2.0], [0.0, focal_px, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
+def checkerboard_corners(spec) -> np.ndarray:
+    """Inner corners (N,3) of the checkerboard in the board frame (z = 0), metres, row by row, x fastest.
+
+    ``spec``: a BoardSpec or SimOptions. N = (squares_x - 1)(squares_y - 1).
+    """
+    b = BoardSpec.of(spec)
+    ox, oy = b.pattern_origin
+    i, j = np.meshgrid(np.arange(1, b.squares_x), np.arange(1, b.squares_y))  # j rows (y), i columns (x)
+    return np.column_stack([ox + i.ravel() * b.square_m, oy + j.ravel() * b.square_m, np.zeros(i.size)])
+
+
+def project(K: np.ndarray, T_cam_board: np.ndarray, P_board: np.ndarray) -> np.ndarray:
+    """Pixel coordinates (N,2) of board-frame points (N,3) seen with pose ``T_cam_board``; no distortion."""
+    P = np.asarray(P_board, float) @ T_cam_board[:3, :3].T + T_cam_board[:3, 3]
+    uvw = P @ np.asarray(K, float).T
+    return uvw[:, :2] / uvw[:, 2:3]
+
+
+def board_homography(K: np.ndarray, T_cam_board: np.ndarray) -> np.ndarray:
+    """Homography (3x3) from board-plane xy (metres) to pixels: ``K [r1 r2 t]``."""
+    return np.asarray(K, float) @ np.column_stack([T_cam_board[:3, 0], T_cam_board[:3, 1], T_cam_board[:3, 3]])
+
+
+def board_texture(spec, px_per_m: float) -> tuple[np.ndarray, float]:
+    """The board's appearance as a float32 image: texel (row v, column u) covers board xy
+    ``[u, u+1) x [v, v+1)`` divided by ``px_per_m``; returns (texture, px_per_m actually used)."""
+    b = BoardSpec.of(spec)
+    n = int(np.ceil(b.size_m * px_per_m))
+    ppm = n / b.size_m
+    centres = (np.arange(n) + 0.5) / ppm
+    ox, oy = b.pattern_origin
+    ix = np.floor((centres - ox) / b.square_m).astype(int)
+    iy = np.floor((centres - oy) / b.square_m).astype(int)
+    in_x = (ix >= 0) & (ix < b.squares_x)
+    in_y = (iy >= 0) & (iy < b.squares_y)
+    black = ((iy[:, None] + ix[None, :]) % 2 == 1) & in_y[:, None] & in_x[None, :]
+    return np.where(black, BLACK, WHITE).astype(np.float32), ppm
+
+
+def render_board_image(K: np.ndarray, T_cam_board: np.ndarray, spec, width: int, height: int,
+                       supersample: int = 4, texel_px: float = 0.5) -> np.ndarray:
+    """Grey uint8 image (height, width) of the board seen with pose ``T_cam_board`` on a uniform background.
+
+    ``spec``: a BoardSpec or SimOptions. Rendered with ``cv2.warpPerspective`` of the board texture at
+    ``supersample`` x the resolution, then averaged down (INTER_AREA); texels are at most ``texel_px``
+    supersampled pixels wide. Pixel-centre conventions are matched exactly: texel u has its centre at board
+    x = (u + 0.5)/ppm, and supersampled pixel xs at image x = (xs + 0.5)/s - 0.5, so the rendered corners
+    sit where ``project`` puts them. The board must lie in front of the camera.
+    """
+    b = BoardSpec.of(spec)
+    s = int(supersample)
+    H = board_homography(K, T_cam_board)
+    # the finest texture the board needs: the largest pixel-per-metre scale over its outline (x supersample)
+    corners = np.column_stack([b.outline(), np.ones(4)]) @ H.T
+    if np.any(corners[:, 2] <= 0):
+        raise CameraError("render_board_image: board not in front of the camera")
+    f = max(K[0, 0], K[1, 1])
+    ppm_needed = f * s / np.min(corners[:, 2]) / texel_px
+    tex, ppm = board_texture(b, min(ppm_needed, 20000.0))
+    A = np.array([[1.0 / ppm, 0.0, 0.5 / ppm], [0.0, 1.0 / ppm, 0.5 / ppm], [0.0, 0.0, 1.0]])  # texel -> board
+    S = np.array([[s, 0.0, (s - 1) / 2.0], [0.0, s, (s - 1) / 2.0], [0.0, 0.0, 1.0]])        # image -> supersampled
+    M = S @ H @ A
+    big = cv2.warpPerspective(tex, M, (width * s, height * s), flags=cv2.INTER_LINEAR,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=BACKGROUND)
+    img = cv2.resize(big, (width, height), interpolation=cv2.INTER_AREA) if s > 1 else big
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def detect_corners(image: np.ndarray, spec) -> np.ndarray | None:
+    """Inner corners (N,2) in pixels found by ``cv2.findChessboardCornersSB``, in ``checkerboard_corners``
+    order, or None when the board is not found."""
+    b = BoardSpec.of(spec)
+    found, pts = cv2.findChessboardCornersSB(image, b.pattern_size, flags=cv2.CALIB_CB_ACCURACY)
+    if not found:
+        return None
+    return pts.reshape(-1, 2).astype(float)
+
+
+def pose_from_corners(K: np.ndarray, corners_board: np.ndarray, corners_px: np.ndarray) -> np.ndarray:
+    """``T_cam_board`` (4x4) from board-frame points (N,3) on z = 0 and their pixels (N,2): solvePnP IPPE."""
+    ok, rvec, tvec = cv2.solvePnP(np.asarray(corners_board, np.float64), np.asarray(corners_px, np.float64),
+                                  np.asarray(K, np.float64), None, flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        raise CameraError("solvePnP (IPPE) failed")
+    return make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
+
+
+def observe_board_pose(K: np.ndarray, T_cam_board: np.ndarray, spec, mode: str, width: int, height: int,
+                       rng: np.random.Generator, pixel_noise_px: float = 0.0, image_noise_std: float = 0.0,
+                       supersample: int = 4) -> np.ndarray:
+    """The camera's estimate of ``T_cam_board`` (4x4) under ``mode``:
+
+    ``exact``: the true pose; ``pixel``: true inner corners + N(0, ``pixel_noise_px``) per coordinate, then
+    IPPE; ``image``: render, add N(0, ``image_noise_std``) grey-level noise, detect, IPPE.
+    Raises CameraError when the checkerboard is not detected.
+    """
+    T_cam_board = np.asarray(T_cam_board, float)
+    if mode == "exact":
+        return T_cam_board.copy()
+    P = checkerboard_corners(spec)
+    if mode == "pixel":
+        uv = project(K, T_cam_board, P) + rng.normal(0.0, pixel_noise_px, (len(P), 2))
+    elif mode == "image":
+        img = render_board_image(K, T_cam_board, spec, width, height, supersample)
+        if image_noise_std > 0:
+            img = np.clip(np.rint(img + rng.normal(0.0, image_noise_std, img.shape)), 0, 255).astype(np.uint8)
+        uv = detect_corners(img, spec)
+        if uv is None:
+            raise CameraError("checkerboard not detected in the rendered image")
+    else:
+        raise ValueError(f"unknown pose mode {mode!r} (exact|pixel|image)")
+    return pose_from_corners(K, P, uv)

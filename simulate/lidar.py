@@ -1,0 +1,126 @@
+"""A vectorised 2D lidar: beam bearings, beam-board ray casting (nearest hit wins), range noise, chords.
+
+Frame: ``{L}``, x forward, z up, scan plane z = 0, beams from the origin. Boards are given by their poses
+``T_lidar_board`` (M,4,4) and a shared outline (V,2) in the board plane z = 0. Units: metres, radians.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def beam_bearings(fov_deg: float, res_deg: float) -> np.ndarray:
+    """Bearings (K,) in radians, every ``res_deg`` from ``-fov/2`` to ``+fov/2`` (both ends kept when they fall
+    on the grid), centred on the lidar x axis, increasing (counter-clockwise seen from +z)."""
+    n = int(np.floor(fov_deg / res_deg + 1e-9))
+    k = np.arange(n + 1) - n / 2.0
+    if n * res_deg >= 360.0 - 1e-9:
+        k = k[:-1]  # a full turn: -180 and +180 deg are the same beam
+    return np.radians(k * res_deg)
+
+
+def beam_directions(bearings: np.ndarray) -> np.ndarray:
+    """Unit beam directions (K,3) in ``{L}`` for bearings (K,) in radians."""
+    b = np.asarray(bearings, float)
+    return np.column_stack([np.cos(b), np.sin(b), np.zeros_like(b)])
+
+
+def points_in_polygon(xy: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """Even-odd test: True where points ``xy`` (...,2) lie inside the simple polygon ``outline`` (V,2).
+
+    Loops over the V edges only; points exactly on an edge may go either way.
+    """
+    x, y = xy[..., 0], xy[..., 1]
+    inside = np.zeros(x.shape, bool)
+    V = len(outline)
+    for i in range(V):
+        (x1, y1), (x2, y2) = outline[i], outline[(i + 1) % V]
+        if y1 == y2:
+            continue
+        crosses = (y1 > y) != (y2 > y)
+        x_at = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+        inside ^= crosses & (x < x_at)
+    return inside
+
+
+def board_ranges(bearings: np.ndarray, T_lidar_board: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """Range (M,K) in metres along each beam k to each board m, ``inf`` where the beam misses the board.
+
+    A beam ``r u_k`` (r > 0) hits board m when it crosses the board plane inside ``outline``; boards are
+    treated independently here (see ``nearest_hits`` for occlusion).
+    """
+    T = np.asarray(T_lidar_board, float).reshape(-1, 4, 4)
+    u = beam_directions(bearings)                              # (K,3)
+    R, o = T[:, :3, :3], T[:, :3, 3]                           # (M,3,3), (M,3)
+    n = R[:, :, 2]                                             # board normals in {L}
+    denom = n @ u.T                                            # (M,K)
+    num = np.einsum("mi,mi->m", n, o)[:, None]                 # (M,1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(np.abs(denom) > 1e-12, num / denom, np.inf)
+    r = np.where(r > 0, r, np.inf)
+    finite = np.isfinite(r)
+    p = np.where(finite[..., None], r[..., None], 0.0) * u[None]            # (M,K,3) hit points in {L}
+    xy = np.einsum("mji,mkj->mki", R, p - o[:, None, :])[..., :2]           # board-frame coordinates
+    inside = points_in_polygon(xy, np.asarray(outline, float)) & finite
+    return np.where(inside, r, np.inf)
+
+
+def nearest_hits(ranges: np.ndarray, max_range_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest hit per beam over boards: (owner (K,) board index or -1, range (K,) in metres or inf).
+
+    ``ranges`` (M,K) from ``board_ranges``; hits beyond ``max_range_m`` are dropped.
+    """
+    ranges = np.asarray(ranges, float)
+    if ranges.shape[0] == 0:
+        K = ranges.shape[1]
+        return np.full(K, -1), np.full(K, np.inf)
+    owner = np.argmin(ranges, axis=0)
+    r = np.take_along_axis(ranges, owner[None], axis=0)[0]
+    hit = np.isfinite(r) & (r <= max_range_m)
+    return np.where(hit, owner, -1), np.where(hit, r, np.inf)
+
+
+def cast_scan(bearings: np.ndarray, T_lidar_board: np.ndarray, outline: np.ndarray, max_range_m: float,
+              noise_std_m: float = 0.0, rng: np.random.Generator | None = None) -> list[np.ndarray]:
+    """One scan over all boards at once: per board the (K_m,2) points in ``{L}`` (z = 0), ordered by bearing.
+
+    Nearest hit wins where boards overlap; each hit range gets zero-mean Gaussian noise of standard
+    deviation ``noise_std_m`` along its beam (drawn from ``rng``, in bearing order, only for hits).
+    """
+    bearings = np.asarray(bearings, float)
+    M = np.asarray(T_lidar_board).reshape(-1, 4, 4).shape[0]
+    owner, r = nearest_hits(board_ranges(bearings, T_lidar_board, outline), max_range_m)
+    hit = owner >= 0
+    if noise_std_m > 0:
+        if rng is None:
+            raise ValueError("cast_scan: noise_std_m > 0 needs an rng")
+        r = r.copy()
+        r[hit] += rng.normal(0.0, noise_std_m, int(hit.sum()))
+    pts = np.where(hit, r, 0.0)[:, None] * beam_directions(bearings)[:, :2]
+    return [pts[owner == m] for m in range(M)]
+
+
+def scan_chords(T_lidar_board: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """Where the scan plane z = 0 cuts each board: chord ends (M,2,2) in ``{L}`` xy, NaN where it misses.
+
+    Assumes a convex outline (the plane then crosses exactly two edges); the ends are ordered by bearing.
+    """
+    T = np.asarray(T_lidar_board, float).reshape(-1, 4, 4)
+    outline = np.asarray(outline, float)
+    V = len(outline)
+    P = np.einsum("mij,vj->mvi", T[:, :3, :3], np.column_stack([outline, np.zeros(V)])) + T[:, None, :3, 3]
+    Q = np.roll(P, -1, axis=1)                                  # edge v: P[v] -> P[v+1]
+    z0, z1 = P[..., 2], Q[..., 2]
+    crosses = (z0 > 0) != (z1 > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(crosses, z0 / (z0 - z1), np.nan)
+    X = P[..., :2] + s[..., None] * (Q[..., :2] - P[..., :2])  # (M,V,2), NaN where no crossing
+    out = np.full((len(T), 2, 2), np.nan)
+    ok = crosses.sum(axis=1) == 2
+    idx = np.argsort(~crosses, axis=1, kind="stable")[:, :2]    # the two crossed edges
+    ends = np.take_along_axis(X, idx[..., None], axis=1)
+    ang = np.arctan2(ends[..., 1], ends[..., 0])
+    order = np.argsort(ang, axis=1)
+    ends = np.take_along_axis(ends, order[..., None], axis=1)
+    out[ok] = ends[ok]
+    return out
