@@ -54,6 +54,15 @@ def _nanmean(s: pd.Series) -> float:
     return float(s.mean()) if s.notna().any() else np.nan
 
 
+def _top_reason(reasons: pd.Series) -> str:
+    """The commonest failure reason, board and triple counts folded ("board 3:" -> "board k:")."""
+    if reasons.empty:
+        return ""
+    folded = reasons.astype(str).str.replace(r"\bboard \d+", "board k", regex=True)
+    folded = folded.str.replace(r"^\d+ triples", "k triples", regex=True).str.replace(r"\d+x ", "kx ", regex=True)
+    return str(folded.value_counts().index[0])
+
+
 def summarise(df: pd.DataFrame) -> pd.DataFrame:
     """One row per setting x method of the trial rows ``df`` (see the module docstring for the columns)."""
     if df.empty:
@@ -82,7 +91,7 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
                      "mean_crlb_trans_mm": _nanmean(g["crlb_trans_mm"]),
                      "median_conditioning": float(g["conditioning"].median()) if g["conditioning"].notna().any()
                      else np.nan,
-                     "top_failure": g.loc[~ok, "reason"].value_counts().index[0] if (~ok).any() else ""})
+                     "top_failure": _top_reason(g.loc[~ok, "reason"])})
     out = pd.DataFrame(rows)
     order = {m: i for i, m in enumerate(method_order(out["method"].unique()))}
     out = out.assign(_m=out["method"].map(order)).sort_values([*settings, "_m"]).drop(columns="_m")
