@@ -129,11 +129,11 @@ def load_settings(out_dir: str | Path, sweep: str) -> dict:
 
 
 def load_summary(out_dir: str | Path, sweep: str) -> pd.DataFrame:
-    return pd.read_csv(Path(out_dir) / f"summary_{sweep}.csv", keep_default_na=True).fillna({"top_failure": ""})
+    return pd.read_csv(Path(out_dir) / f"summary_{sweep}.csv", converters={"top_failure": str})
 
 
 def load_trials(out_dir: str | Path, sweep: str) -> pd.DataFrame:
-    return pd.read_csv(Path(out_dir) / f"trials_{sweep}.csv").fillna({"reason": ""})
+    return pd.read_csv(Path(out_dir) / f"trials_{sweep}.csv", converters={"reason": str})
 
 
 def main(argv: Sequence[str] | None = None) -> None:

@@ -194,10 +194,7 @@ def _run_chunk(trial_fn: TrialFn, cell: Cell, trials: Sequence[int], methods: Se
 # ------------------------------------------------------------------------------------------------ files
 
 def _read_chunk(path: Path) -> pd.DataFrame:
-    df = pd.read_csv(path)
-    if "reason" in df:
-        df["reason"] = df["reason"].fillna("").astype(str)
-    return df
+    return pd.read_csv(path, converters={"reason": str})  # an empty reason stays "", not NaN
 
 
 def load_cell_dir(path: Path) -> pd.DataFrame:
