@@ -9,7 +9,6 @@ from .errors import LidarcamError
 
 
 def _cmd_methods(args) -> int:
-    from .methods import METHODS  # noqa: F401  (registers the methods)
     from .registry import METHODS as table
 
     w = max(len(n) for n in table)

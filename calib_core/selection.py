@@ -37,7 +37,7 @@ def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     ends = np.array([[b.scan_3d[0], b.scan_3d[-1]] for b in obs.boards])   # (N,2,3) lidar frame
     T_cb = np.array([b.T_cam_board for b in obs.boards])                    # (N,4,4)
     R, t = candidates[:, :3, :3], candidates[:, :3, 3]
-    p_C = np.einsum("mba,nkb->mnka", R, ends[None] - t[:, None, None, :])  # R^T (p - t)
+    p_C = np.einsum("mba,mnkb->mnka", R, ends[None] - t[:, None, None, :])  # R^T (p - t)
     return np.einsum("nba,mnkb->mnka", T_cb[:, :3, :3], p_C - T_cb[None, :, None, :3, 3])
 
 
