@@ -73,7 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-_VERB_MODULES: list[str] = ["simulate.cli"]
+_VERB_MODULES: list[str] = ["simulate.cli", "calib_core.cli_rig"]
 
 
 def main(argv=None) -> int:

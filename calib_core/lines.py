@@ -31,7 +31,7 @@ class ScanLine:
     n_points: int
 
 
-def fit_line(points: np.ndarray, *, min_points: int = MIN_LINE_POINTS, min_aspect: float = 10.0) -> ScanLine:
+def fit_line(points: np.ndarray, *, min_points: int = MIN_LINE_POINTS, min_aspect: float = 3.0) -> ScanLine:
     """Fit a line to (K,2) ordered points by SVD; refuses fewer than ``min_points`` points or a point cloud
     that is not line-like (spread along the line less than ``min_aspect`` times the spread across it).
 

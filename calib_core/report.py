@@ -1,0 +1,317 @@
+"""Calibration report of a real rig: scan-on-image overlays, residual plots per board and ``report.md``.
+
+Plots use matplotlib's Agg canvas directly (no pyplot, no global backend change). The overlay PNG maps image
+pixel (u, v) to PNG pixel (u, v): the image fills the left part of the figure at one PNG pixel per image pixel,
+the colorbar sits to its right.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .dataset import CameraModel, Dataset
+from .errors import LidarcamError
+from .io import extrinsic_yaml
+from .metrics import pose_errors
+from .observations import Observations
+from .result import CalibrationResult
+from .transforms import invert_T, quaternion_xyzw, transform_points
+
+MIN_POSES = 5
+PARALLEL_DEG = 15.0
+CONDITION_MIN = 0.1
+OUTLIER_FACTOR = 3.0
+OVERLAY_CMAP = "turbo"  # saturated everywhere (a diverging map is grey at 0 mm: invisible on the board)
+
+
+@dataclass
+class ReportSummary:
+    """What ``write_report`` wrote and found: file paths, per-board residual RMS (mm), warnings."""
+
+    markdown: Path
+    overlays: list[Path] = field(default_factory=list)
+    residual_plots: list[Path] = field(default_factory=list)
+    board_rms_mm: list[float] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+def _as_result(result) -> dict:
+    """A CalibrationResult, a ``load_result`` dict or a path -> dict with method, ok, reason, T, covariance."""
+    if isinstance(result, (str, Path)):
+        from .result import load_result
+
+        result = load_result(result)
+    if isinstance(result, CalibrationResult):
+        return {"method": result.method, "ok": result.ok, "reason": result.reason,
+                "T_lidar_cam": result.T_lidar_cam, "covariance": result.covariance}
+    return {"method": result.get("method", "?"), "ok": bool(result.get("ok")), "reason": result.get("reason"),
+            "T_lidar_cam": result.get("T_lidar_cam"), "covariance": result.get("covariance")}
+
+
+def plane_distances(T_cam_lidar: np.ndarray, T_cam_board: np.ndarray, scan: np.ndarray) -> np.ndarray:
+    """Signed distances (m) of lidar points ``scan`` (K,2) to the board plane, along the board's +z."""
+    P = transform_points(T_cam_lidar, np.column_stack([scan, np.zeros(len(scan))]))
+    n = T_cam_board[:3, 2]
+    return P @ n - float(n @ T_cam_board[:3, 3])
+
+
+def project_scan(camera: CameraModel, T_cam_lidar: np.ndarray, scan: np.ndarray, min_depth_m: float = 0.05
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (K,2) of lidar points ``scan`` (K,2) through the distorted camera, and a mask of the points that
+    are in front of the camera (depth > ``min_depth_m``), inside the image and within the field of view where
+    the distortion model holds (undistorted image bounds + 20 %)."""
+    import cv2
+
+    P = transform_points(T_cam_lidar, np.column_stack([scan, np.zeros(len(scan))]))
+    ok = P[:, 2] > min_depth_m
+    uv = np.full((len(P), 2), np.nan)
+    if ok.any():
+        w, h = camera.width, camera.height
+        edge = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1], [w / 2, 0], [w / 2, h - 1], [0, h / 2],
+                         [w - 1, h / 2]], float)
+        nb = cv2.undistortPoints(edge.reshape(-1, 1, 2), camera.K, camera.dist).reshape(-1, 2)
+        lim = 1.2 * np.abs(nb).max(axis=0)
+        xn = P[ok, :2] / P[ok, 2:3]
+        ok[np.flatnonzero(ok)] = np.all(np.abs(xn) <= lim, axis=1)
+    if ok.any():
+        proj, _ = cv2.projectPoints(P[ok], np.zeros(3), np.zeros(3), camera.K, camera.dist)
+        uv[ok] = proj.reshape(-1, 2)
+        inside = (uv[:, 0] >= -0.5) & (uv[:, 0] <= camera.width - 0.5) & (uv[:, 1] >= -0.5) & \
+                 (uv[:, 1] <= camera.height - 0.5)
+        ok &= inside
+    return uv, ok
+
+
+def normal_conditioning(observations: Observations) -> tuple[float, float]:
+    """(largest pairwise angle between board normals in degrees, sigma_3 / sigma_1 of the stacked normals).
+
+    Small values of either flag a degenerate board set: near-parallel boards, or normals close to one plane.
+    """
+    n, _ = observations.planes_cam()
+    if len(n) < 2:
+        return 0.0, 0.0
+    c = np.abs(np.clip(n @ n.T, -1, 1))
+    max_angle = float(np.degrees(np.arccos(c.min())))
+    s = np.linalg.svd(n, compute_uv=False)
+    return max_angle, float(s[-1] / s[0]) if len(s) == 3 else 0.0
+
+
+def report_warnings(observations: Observations, rms_mm: list[float]) -> list[str]:
+    """Warnings on a board set and its residuals: few poses, near-parallel normals, outlier boards."""
+    out = []
+    N = observations.n_boards
+    if N < MIN_POSES:
+        out.append(f"only {N} board poses (fewer than {MIN_POSES}): the extrinsic is poorly constrained; "
+                   "add poses with varied board orientations")
+    if N >= 2:
+        max_angle, cond = normal_conditioning(observations)
+        if max_angle < PARALLEL_DEG:
+            out.append(f"board normals are near-parallel (largest angle between two boards {max_angle:.1f} deg "
+                       f"< {PARALLEL_DEG:g} deg): tilt and turn the board more between poses")
+        elif N >= 3 and cond < CONDITION_MIN:
+            out.append(f"board normals lie close to one plane (sigma3/sigma1 = {cond:.3f} < {CONDITION_MIN:g}): "
+                       "tilt the board forwards/backwards as well as sideways")
+    finite = [r for r in rms_mm if math.isfinite(r)]
+    if finite:
+        med = float(np.median(finite))
+        for i, r in enumerate(rms_mm):
+            if math.isfinite(r) and med > 0 and r > OUTLIER_FACTOR * med:
+                out.append(f"board {i}: residual RMS {r:.1f} mm > {OUTLIER_FACTOR:g} x the median ({med:.1f} mm); "
+                           "check its scan segment and board detection")
+    return out
+
+
+def _pose_name(observations: Observations, i: int) -> str:
+    names = observations.meta.get("poses") if observations.meta else None
+    return str(names[i]) if names and i < len(names) else f"{i:03d}"
+
+
+def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_cam_board, outline, full_scan,
+             board_scan, clim_mm: float, title: str) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    h, w = gray.shape[:2]
+    dpi = 100.0
+    extra = 120
+    W = w + extra
+    fig = Figure(figsize=(W / dpi, h / dpi), dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0, 0, w / W, 1))
+    ax.imshow(gray, cmap="gray", vmin=0, vmax=255, extent=(-0.5, w - 0.5, h - 0.5, -0.5), interpolation="nearest")
+    ax.set_xlim(-0.5, w - 0.5)
+    ax.set_ylim(h - 0.5, -0.5)
+    ax.set_axis_off()
+    import cv2
+
+    ring = np.column_stack([outline, np.zeros(len(outline))])
+    ring = transform_points(T_cam_board, np.vstack([ring, ring[:1]]))
+    if np.all(ring[:, 2] > 0):
+        uvb, _ = cv2.projectPoints(ring, np.zeros(3), np.zeros(3), camera.K, camera.dist)
+        uvb = uvb.reshape(-1, 2)
+        ax.plot(uvb[:, 0], uvb[:, 1], "-", color="yellow", lw=1.0, alpha=0.8)
+    norm = Normalize(-clim_mm, clim_mm)
+    sc = None
+    for pts, size, edge in ((full_scan, 6, "none"), (board_scan, 18, "black")):
+        if pts is None or len(pts) == 0:
+            continue
+        uv, ok = project_scan(camera, T_cam_lidar, pts)
+        if not ok.any():
+            continue
+        dist = 1000 * plane_distances(T_cam_lidar, T_cam_board, pts[ok])
+        sc = ax.scatter(uv[ok, 0], uv[ok, 1], c=np.clip(dist, -clim_mm, clim_mm), cmap=OVERLAY_CMAP, norm=norm,
+                        s=size, edgecolors=edge, linewidths=0.4)
+    ax.text(4, 4, title, color="white", fontsize=8, va="top", ha="left",
+            bbox={"facecolor": "black", "alpha": 0.5, "pad": 2, "edgecolor": "none"})
+    cax = fig.add_axes(((w + 15) / W, 0.08, 14 / W, 0.84))
+    if sc is None:
+        from matplotlib.cm import ScalarMappable
+
+        sc = ScalarMappable(norm=norm, cmap=OVERLAY_CMAP)
+    cb = fig.colorbar(sc, cax=cax)
+    cb.set_label("distance to board plane (mm)", fontsize=8)
+    cb.ax.tick_params(labelsize=7)
+    fig.savefig(path, dpi=dpi, pil_kwargs={"compress_level": 1})
+
+
+def _residual_plot(path: Path, bearing_deg: np.ndarray, dist_mm: np.ndarray, title: str) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(5.0, 3.0), dpi=100)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(111)
+    rms = float(np.sqrt(np.mean(dist_mm ** 2)))
+    ax.axhspan(-rms, rms, color="0.9", label=f"+-RMS {rms:.1f} mm")
+    ax.axhline(0, color="0.4", lw=0.8)
+    ax.plot(bearing_deg, dist_mm, ".", ms=4, color="C0", label="scan point")
+    ax.set_xlabel("bearing (deg)")
+    ax.set_ylabel("point-to-plane (mm)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, loc="upper right")
+    fig.subplots_adjust(left=0.15, right=0.97, bottom=0.16, top=0.9)
+    fig.savefig(path, pil_kwargs={"compress_level": 1})
+
+
+def _fmt_row(v) -> str:
+    return ", ".join(f"{x: .6f}" for x in v)
+
+
+def write_report(dataset: Dataset | None, observations: Observations, result, out_dir) -> ReportSummary:
+    """Write the report of ``result`` on ``observations`` (extracted from ``dataset``) into ``out_dir``.
+
+    Files: ``overlay_<pose>.png`` (the image with the whole scan projected through ``T_cam_lidar``, coloured by
+    the signed distance to that board's plane in mm; the board's own points larger, the board outline from the
+    camera pose in yellow), ``residual_<pose>.png`` (point-to-plane distance of the board's points against
+    bearing), ``extrinsic.yaml`` and ``report.md`` (the extrinsic both ways with quaternion (x, y, z, w) and
+    translation, 1-sigma where the result has a covariance, per-board residual RMS, skipped poses, warnings).
+    ``dataset`` may be None (no overlays). ``result``: a CalibrationResult, a ``load_result`` dict or a path.
+    """
+    res = _as_result(result)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    md = [f"# lidarcam calibration report ({res['method']})", ""]
+    if dataset is not None:
+        md += [f"Dataset: `{dataset.root}`, {len(dataset.poses)} poses, {observations.n_boards} used.", ""]
+    skipped = (observations.meta or {}).get("skipped") or {}
+    summary = ReportSummary(out / "report.md")
+    if not res["ok"] or res["T_lidar_cam"] is None:
+        md += ["**The calibration failed**: " + str(res.get("reason")), ""]
+        summary.warnings.append(f"calibration failed: {res.get('reason')}")
+        if skipped:
+            md += ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""]
+        summary.markdown.write_text("\n".join(md) + "\n")
+        return summary
+
+    T = np.asarray(res["T_lidar_cam"], float)
+    Ti = invert_T(T)
+    cov = res.get("covariance")
+    extra = {"method": res["method"]}
+    if cov is not None:
+        cov = np.asarray(cov, float)
+        extra["sigma_rot_deg"] = float(np.degrees(np.sqrt(np.trace(cov[:3, :3]))))
+        extra["sigma_trans_mm"] = float(1000 * np.sqrt(np.trace(cov[3:, 3:])))
+    (out / "extrinsic.yaml").write_text(extrinsic_yaml(T, extra))
+
+    md += ["## Extrinsic", "", "`T_a_b` maps points of frame b into frame a; metres. Lidar: scan plane z = 0, "
+           "x forward. Camera: z optical axis, y down.", ""]
+    for name, M, what in (("T_lidar_cam", T, "camera points into the lidar frame (p_L = R p_C + t)"),
+                          ("T_cam_lidar", Ti, "lidar points into the camera frame (used for the overlays)")):
+        q = quaternion_xyzw(M[:3, :3])
+        md += [f"### {name}: maps {what}", "", "```"] + [_fmt_row(r) for r in M] + ["```", "",
+               f"- quaternion (x, y, z, w): [{_fmt_row(q)}]",
+               f"- translation (m): [{_fmt_row(M[:3, 3])}]",
+               f"- rotation angle: {math.degrees(math.acos(np.clip((np.trace(M[:3, :3]) - 1) / 2, -1, 1))):.3f} deg,"
+               f" |t| = {np.linalg.norm(M[:3, 3]):.4f} m", ""]
+    if cov is not None:
+        sr = np.degrees(np.sqrt(np.diag(cov)[:3]))
+        st = 1000 * np.sqrt(np.diag(cov)[3:])
+        md += ["### Uncertainty (1 sigma)", "",
+               f"- rotation: {extra['sigma_rot_deg']:.3f} deg overall; per axis (lidar frame, x y z): "
+               f"{', '.join(f'{v:.3f}' for v in sr)} deg",
+               f"- translation of T_lidar_cam: {extra['sigma_trans_mm']:.1f} mm overall; per axis (x y z): "
+               f"{', '.join(f'{v:.1f}' for v in st)} mm", ""]
+    else:
+        md += ["No covariance in the result: no 1-sigma figures.", ""]
+    if observations.T_lidar_cam_true is not None:
+        e_R, e_t = pose_errors(T, observations.T_lidar_cam_true)
+        md += [f"Against the ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm.", ""]
+
+    rms_mm, mean_mm = [], []
+    for b in observations.boards:
+        d = 1000 * plane_distances(Ti, b.T_cam_board, b.scan)
+        rms_mm.append(float(np.sqrt(np.mean(d ** 2))))
+        mean_mm.append(float(np.mean(d)))
+    summary.board_rms_mm = rms_mm
+    finite = [r for r in rms_mm if math.isfinite(r)]
+    clim = float(max(20.0, 3.0 * float(np.median(finite)) if finite else 20.0))
+    clim = float(math.ceil(clim / 10.0) * 10.0)
+
+    rows = []
+    reproj = (observations.meta or {}).get("reproj_rms_px") or []
+    for i, b in enumerate(observations.boards):
+        name = _pose_name(observations, i)
+        bearing = np.degrees(np.arctan2(b.scan[:, 1], b.scan[:, 0]))
+        d = 1000 * plane_distances(Ti, b.T_cam_board, b.scan)
+        rp = out / f"residual_{name}.png"
+        _residual_plot(rp, bearing, d, f"pose {name} (board {i}): {len(d)} points")
+        summary.residual_plots.append(rp)
+        links = f"[residuals](residual_{name}.png)"
+        if dataset is not None:
+            try:
+                pose = dataset.pose(name)
+                gray = pose.read_image()
+                full = pose.scan.points if pose.scan is not None else None
+                op = out / f"overlay_{name}.png"
+                _overlay(op, gray, dataset.camera, Ti, b.T_cam_board, b.outline, full, b.scan, clim,
+                         f"pose {name}: {len(b.scan)} board points, RMS {rms_mm[i]:.1f} mm")
+                summary.overlays.append(op)
+                links = f"[overlay](overlay_{name}.png), " + links
+            except (KeyError, LidarcamError) as err:
+                summary.warnings.append(f"pose {name}: no overlay ({err})")
+        rp_px = reproj[i] if i < len(reproj) and reproj[i] is not None else math.nan
+        rows.append(f"| {i} | `{name}` | {len(b.scan)} | {rms_mm[i]:.1f} | {mean_mm[i]:+.1f} | "
+                    f"{'-' if not math.isfinite(rp_px) else f'{rp_px:.3f}'} | {links} |")
+    md += ["## Boards", "", "Residual: signed distance of the board's scan points to its plane (camera's pose of "
+           "the board), through the extrinsic.", "",
+           "| board | pose | points | residual RMS (mm) | mean (mm) | corner reproj. RMS (px) | plots |",
+           "|---:|---|---:|---:|---:|---:|---|"] + rows + [""]
+    if finite:
+        md += [f"Median board RMS: {float(np.median(finite)):.1f} mm; all points: "
+               f"{math.sqrt(np.mean(np.concatenate([(1000 * plane_distances(Ti, b.T_cam_board, b.scan)) ** 2 for b in observations.boards]))):.1f} mm.", ""]  # noqa: E501
+    if observations.n_boards >= 2:
+        ang, cond = normal_conditioning(observations)
+        md += [f"Board set: largest angle between two board normals {ang:.1f} deg; normal spread "
+               f"sigma3/sigma1 = {cond:.3f}.", ""]
+    if skipped:
+        md += ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""]
+    summary.warnings = report_warnings(observations, rms_mm) + summary.warnings
+    md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
+    md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
+    summary.markdown.write_text("\n".join(md) + "\n")
+    return summary
