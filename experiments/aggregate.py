@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from .catalog import method_order
-from .runner import RESULT_COLUMNS, load_sweep
+from .runner import RESULT_COLUMNS, load_sweep, read_table
 
 Z95 = 1.959963984540054
 # Settings that always label a row (the two the paper sweeps), and those never used to group.
@@ -129,11 +129,11 @@ def load_settings(out_dir: str | Path, sweep: str) -> dict:
 
 
 def load_summary(out_dir: str | Path, sweep: str) -> pd.DataFrame:
-    return pd.read_csv(Path(out_dir) / f"summary_{sweep}.csv", converters={"top_failure": str})
+    return read_table(Path(out_dir) / f"summary_{sweep}.csv", ("top_failure",))
 
 
 def load_trials(out_dir: str | Path, sweep: str) -> pd.DataFrame:
-    return pd.read_csv(Path(out_dir) / f"trials_{sweep}.csv", converters={"reason": str})
+    return read_table(Path(out_dir) / f"trials_{sweep}.csv")
 
 
 def main(argv: Sequence[str] | None = None) -> None:

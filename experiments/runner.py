@@ -193,8 +193,17 @@ def _run_chunk(trial_fn: TrialFn, cell: Cell, trials: Sequence[int], methods: Se
 
 # ------------------------------------------------------------------------------------------------ files
 
+def read_table(path: Path, text_columns: Sequence[str] = ("reason",)) -> pd.DataFrame:
+    """A CSV table whose ``text_columns`` read back as strings ("" where empty, even when all are empty)."""
+    df = pd.read_csv(path)
+    for col in text_columns:
+        if col in df:
+            df[col] = df[col].astype(object).where(df[col].notna(), "").astype(str)
+    return df
+
+
 def _read_chunk(path: Path) -> pd.DataFrame:
-    return pd.read_csv(path, converters={"reason": str})  # an empty reason stays "", not NaN
+    return read_table(path)
 
 
 def load_cell_dir(path: Path) -> pd.DataFrame:

@@ -183,6 +183,7 @@ def test_aggregation_of_a_known_table():
     assert b.mean_e_R_deg == pytest.approx(2.0)  # over the 7 returned results
     assert a.truth_among_rate == pytest.approx(0.5) and a.some_candidate_valid_rate == pytest.approx(0.8)
     assert b.top_failure == "board k: too few points"
+    assert a.top_failure == ""
     lo, hi = aggregate.wilson_interval([0, 20], [20, 20])
     assert lo[0] == 0 and hi[0] == pytest.approx(0.161125, abs=1e-6) and hi[1] == 1 and lo[1] == pytest.approx(
         0.838875, abs=1e-6)
@@ -211,6 +212,14 @@ def _fake_paper_tables(tmp_path) -> Path:
     for sweep, cs in cells.items():
         aggregate.write_tables(run_cells(cs, n_jobs=1, trial_fn=fake_trial, progress=False), sweep, out)
     return out
+
+
+def test_tables_round_trip_with_no_failures(tmp_path):
+    df = _hand_table()
+    df = df[df["ok"]]
+    aggregate.write_tables(df, "h", tmp_path)
+    s = aggregate.load_summary(tmp_path, "h")
+    assert s["top_failure"].tolist() == ["", ""] and (aggregate.load_trials(tmp_path, "h")["reason"] == "").all()
 
 
 def test_tables_figures_report_from_a_small_sweep(tmp_path):
