@@ -1,0 +1,104 @@
+"""``make bench``: the time of one ``calibrate`` per registered method on 8 boards (median over many
+repetitions), and the minimal solver's throughput on one core (``calib_core.minimal.solve_triples``).
+
+    python -m experiments.bench [--boards 8] [--problems 10] [--repeats 20] [--triples 10000]
+
+Single process, run it with ``OMP_NUM_THREADS=1`` (the Makefile exports it) for one-core numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from calib_core import METHODS, calibrate
+from calib_core.lines import fit_lines
+from calib_core.metrics import is_valid, pose_errors
+from simulate import SimOptions, generate
+
+from .catalog import method_order
+
+
+def problems(n_boards: int, count: int, seed: int = 12345) -> list:
+    """``count`` simulated problems of ``n_boards`` boards with the simulator's default (paper) settings."""
+    opts = SimOptions(n_boards=n_boards)
+    return [generate(opts, seed=seed, trial=i) for i in range(count)]
+
+
+def time_methods(obs_list: list, repeats: int) -> list[dict]:
+    """Median wall time of one ``calibrate`` per method over ``repeats`` runs on each problem."""
+    rows = []
+    for m in method_order(METHODS):
+        times, valid, error = [], [], ""
+        for obs in obs_list:
+            try:
+                for _ in range(repeats):
+                    t0 = time.perf_counter()
+                    res = calibrate(obs, m)
+                    times.append(time.perf_counter() - t0)
+            except Exception as exc:  # noqa: BLE001 -- one broken method must not hide the others' timings
+                error = f"{type(exc).__name__}: {exc}"[:60]
+                break
+            if res.ok:
+                valid.append(bool(is_valid(*pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true))))
+            else:
+                valid.append(False)
+        rows.append({"method": m, "median_ms": 1e3 * float(np.median(times)) if times else float("nan"),
+                     "p90_ms": 1e3 * float(np.percentile(times, 90)) if times else float("nan"),
+                     "runs": len(times), "valid": f"{sum(valid)}/{len(valid)}" + (f" error {error}" if error else "")})
+    return rows
+
+
+def triple_arrays(obs_list: list, n_triples: int):
+    """Stacked plane/line arrays of at least ``n_triples`` board triples drawn from ``obs_list``."""
+    from calib_core.minimal import board_triples
+
+    ns, ds, ps, us = [], [], [], []
+    while sum(len(x) for x in ns) < n_triples:
+        for obs in obs_list:
+            lines = fit_lines(obs)
+            n, d = obs.planes_cam()
+            p = np.array([ln.point for ln in lines])
+            u = np.array([ln.direction for ln in lines])
+            tri = board_triples(obs.n_boards)
+            ns.append(n[tri]), ds.append(d[tri]), ps.append(p[tri]), us.append(u[tri])
+    return tuple(np.concatenate(a)[:n_triples] for a in (ns, ds, ps, us))
+
+
+def time_minimal(obs_list: list, n_triples: int, repeats: int = 3) -> dict:
+    """Triples per second of one vectorised ``solve_triples`` call on ``n_triples`` triples (best of repeats)."""
+    from calib_core.minimal import solve_triples
+
+    n, d, p, u = triple_arrays(obs_list, n_triples)
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        sol = solve_triples(n, d, p, u)
+        best = min(best, time.perf_counter() - t0)
+    return {"triples": len(n), "seconds": best, "triples_per_s": len(n) / best,
+            "solutions": int(len(sol.T_lidar_cam))}
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--boards", type=int, default=8)
+    ap.add_argument("--problems", type=int, default=10)
+    ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--triples", type=int, default=10_000)
+    args = ap.parse_args(argv)
+    obs_list = problems(args.boards, args.problems)
+    rows = time_methods(obs_list, args.repeats)
+    print(f"calibrate() on {args.boards} boards, {args.problems} problems x {args.repeats} repetitions:")
+    print(f"  {'method':<22}{'median ms':>11}{'p90 ms':>10}{'runs':>7}  valid")
+    for r in rows:
+        print(f"  {r['method']:<22}{r['median_ms']:>11.2f}{r['p90_ms']:>10.2f}{r['runs']:>7}  {r['valid']}")
+    mt = time_minimal(obs_list, args.triples)
+    print(f"minimal solver (solve_triples, one call, one core): {mt['triples']} triples in {mt['seconds']:.3f} s = "
+          f"{mt['triples_per_s']:,.0f} triples/s ({mt['solutions']} real solutions)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,348 @@
+"""The Monte-Carlo runner: one simulated problem per trial, every configured method run on that same data,
+one long-format row per trial x method, written per chunk of trials as the chunks finish.
+
+Results of one setting ("cell") live in ``<results_dir>/<sweep>/trials/<setting-key>/``: ``settings.json``
+and ``chunk-<first>-<last>-<methods>.csv`` files, each written whole (temporary file, then rename). The
+setting key hashes everything that changes a row except the trial count and the method list, so re-running
+an interrupted sweep with the same settings computes only the (trial, method) pairs no file holds yet, more
+trials extend a cell, and an added method runs on the old trials. Data are seeded by ``(seed, trial,
+settings)`` inside the simulator, so the table does not depend on chunking, worker count or order.
+
+A bad draw never kills a cell: an exception from the simulator or a method becomes rows with ``ok=False``
+and the reason (a ``CalibrationError`` -- unknown method or option -- is a configuration error and raised).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from calib_core import METHODS, CalibrationError, calibrate, get_method
+from calib_core.metrics import is_valid, pose_errors
+
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+# Columns of a trial row after the settings columns (sweep, setting_key, seed, every SimOptions field).
+RESULT_COLUMNS = (
+    "trial", "method", "ok", "reason", "e_R_deg", "e_t_m", "valid", "n_candidates", "true_among_candidates",
+    "some_candidate_valid", "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds",
+    "crlb_rot_deg", "crlb_trans_mm", "conditioning",
+)
+# Columns that legitimately differ between two runs of the same settings (wall time).
+TIMING_COLUMNS = ("seconds",)
+
+
+class RunnerError(RuntimeError):
+    """A sweep cannot run (bad settings, unreadable results folder)."""
+
+
+def _default_metrics() -> dict[str, Any]:
+    return {"max_rot_deg": 8.0, "max_trans_m": 0.8, "truth_rot_deg": 1.0, "truth_trans_m": 0.05,
+            "uncertainty": True, "crlb_sigma_mm": None}
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One setting of a sweep: simulator options, seed, trial count, methods and metric thresholds.
+
+    ``sim`` holds ``simulate.SimOptions`` fields as plain values; ``method_options`` maps a method name to
+    its ``calibrate`` keyword options.
+    """
+
+    sweep: str
+    sim: dict[str, Any]
+    seed: int = 0
+    n_trials: int = 100
+    methods: tuple[str, ...] = ()
+    method_options: dict[str, dict[str, Any]] = field(default_factory=dict)
+    metrics: dict[str, Any] = field(default_factory=_default_metrics)
+    results_dir: str = "results"
+
+    @property
+    def key(self) -> str:
+        """Readable, stable folder name: board count, noise, and a hash of every setting that shapes a row."""
+        payload = json.dumps({"sim": self.sim, "seed": self.seed, "metrics": self.metrics,
+                              "method_options": {m: self.method_options[m] for m in sorted(self.method_options)}},
+                             sort_keys=True, default=str)
+        digest = hashlib.sha1(payload.encode()).hexdigest()[:10]
+        parts = [f"nb{self.sim['n_boards']}" if "n_boards" in self.sim else "",
+                 f"noise{self.sim['noise_mm']:g}mm" if "noise_mm" in self.sim else ""]
+        return "-".join([p for p in parts if p] + [digest])
+
+    @property
+    def dir(self) -> Path:
+        return Path(self.results_dir) / self.sweep / "trials" / self.key
+
+    def columns(self) -> dict[str, Any]:
+        """The settings columns every row of this cell carries."""
+        return {"sweep": self.sweep, "setting_key": self.key, "seed": self.seed, **self.sim}
+
+    def options_for(self, method: str) -> dict[str, Any]:
+        return dict(self.method_options.get(method, {}))
+
+
+def resolve_methods(names: Iterable[str], optional: Iterable[str] = ()) -> tuple[str, ...]:
+    """``names`` (each must be registered: CalibrationError otherwise) plus the registered ``optional`` ones."""
+    out = [get_method(n).name for n in names]
+    out += [n for n in optional if n in METHODS and n not in out]
+    if not out:
+        raise RunnerError("no method to run")
+    return tuple(out)
+
+
+# ----------------------------------------------------------------------------------------------- trials
+
+def _failure_row(base: dict, method: str, reason: str) -> dict:
+    return {**base, "method": method, "ok": False, "reason": reason, "e_R_deg": np.nan, "e_t_m": np.nan,
+            "valid": False, "n_candidates": 0, "true_among_candidates": False, "some_candidate_valid": False,
+            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan}
+
+
+def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, Any]:
+    """The metric columns of one ``CalibrationResult`` against the true ``T_lidar_cam``."""
+    row: dict[str, Any] = {"ok": bool(result.ok), "reason": result.reason or "", "seconds": float(result.seconds),
+                           "n_candidates": result.n_candidates, "e_R_deg": np.nan, "e_t_m": np.nan,
+                           "valid": False, "true_among_candidates": False, "some_candidate_valid": False,
+                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan}
+    if result.ok:
+        e_R, e_t = pose_errors(result.T_lidar_cam, T_true)
+        row.update(e_R_deg=float(e_R), e_t_m=float(e_t),
+                   valid=bool(is_valid(e_R, e_t, metrics["max_rot_deg"], metrics["max_trans_m"])))
+    if result.n_candidates:
+        cR, ct = pose_errors(result.candidates, T_true)
+        best = int(np.nanargmin(cR)) if np.isfinite(cR).any() else 0
+        row.update(best_candidate_e_R_deg=float(cR[best]), best_candidate_e_t_m=float(ct[best]),
+                   true_among_candidates=bool(np.any((cR < metrics["truth_rot_deg"])
+                                                     & (ct < metrics["truth_trans_m"]))),
+                   some_candidate_valid=bool(np.any(is_valid(cR, ct, metrics["max_rot_deg"],
+                                                             metrics["max_trans_m"]))))
+    return row
+
+
+def have_uncertainty() -> bool:
+    """True when the issue-5 module ``calib_core.uncertainty`` (CRLB, conditioning) is installed."""
+    return importlib.util.find_spec("calib_core.uncertainty") is not None
+
+
+def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
+    """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number."""
+    out = {"crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan, "conditioning": np.nan}
+    if not (cell.metrics.get("uncertainty", True) and have_uncertainty()):
+        return out
+    from calib_core import uncertainty
+
+    sigma_mm = cell.metrics.get("crlb_sigma_mm")
+    sigma_mm = cell.sim.get("noise_mm", 0.0) if sigma_mm is None else sigma_mm
+    try:
+        bound = uncertainty.crlb(obs, sigma_m=float(sigma_mm) / 1000.0)
+        out.update(crlb_rot_deg=float(bound.rot_rms_deg), crlb_trans_mm=1000.0 * float(bound.trans_rms_m))
+    except Exception:  # noqa: BLE001 -- a degenerate board set has no bound: NaN, not a dead cell
+        pass
+    try:
+        out["conditioning"] = float(uncertainty.conditioning(obs))
+    except Exception:  # noqa: BLE001
+        pass
+    return out
+
+
+def simulate_trial(cell: Cell, trial: int, methods: Sequence[str]) -> list[dict[str, Any]]:
+    """Simulate trial ``trial`` of ``cell`` once and run every method in ``methods`` on it: one row each."""
+    from simulate import SimOptions, generate
+
+    base = {**cell.columns(), "trial": int(trial), "crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan,
+            "conditioning": np.nan}
+    try:
+        obs = generate(SimOptions(**cell.sim), seed=cell.seed, trial=int(trial))
+    except Exception as exc:  # noqa: BLE001 -- a bad draw is a status, not a crash
+        return [_failure_row(base, m, f"simulate: {type(exc).__name__}: {exc}") for m in methods]
+    base.update(uncertainty_columns(obs, cell))
+    rows = []
+    for m in methods:
+        try:
+            res = calibrate(obs, m, **cell.options_for(m))
+        except CalibrationError:
+            raise  # unknown method or option: the configuration is wrong, every trial would fail
+        except Exception as exc:  # noqa: BLE001
+            rows.append(_failure_row(base, m, f"error: {type(exc).__name__}: {exc}"))
+            continue
+        rows.append({**base, "method": m, **evaluate(res, obs.T_lidar_cam_true, cell.metrics)})
+    return rows
+
+
+TrialFn = Callable[[Cell, int, Sequence[str]], list[dict[str, Any]]]
+
+
+def _run_chunk(trial_fn: TrialFn, cell: Cell, trials: Sequence[int], methods: Sequence[str]):
+    rows = []
+    for t in trials:
+        rows.extend(trial_fn(cell, t, methods))
+    return cell, tuple(trials), tuple(methods), rows
+
+
+# ------------------------------------------------------------------------------------------------ files
+
+def read_table(path: Path, text_columns: Sequence[str] = ("reason",)) -> pd.DataFrame:
+    """A CSV table whose ``text_columns`` read back as strings ("" where empty, even when all are empty)."""
+    df = pd.read_csv(path)
+    for col in text_columns:
+        if col in df:
+            df[col] = df[col].astype(object).where(df[col].notna(), "").astype(str)
+    return df
+
+
+def _read_chunk(path: Path) -> pd.DataFrame:
+    return read_table(path)
+
+
+def load_cell_dir(path: Path) -> pd.DataFrame:
+    """Every row stored under one cell folder (duplicates of a (trial, method) pair dropped)."""
+    files = sorted(Path(path).glob("chunk-*.csv"))
+    if not files:
+        return pd.DataFrame()
+    df = pd.concat([_read_chunk(f) for f in files], ignore_index=True)
+    return df.drop_duplicates(["trial", "method"], keep="first")
+
+
+def load_cell(cell: Cell) -> pd.DataFrame:
+    """The rows of ``cell``: its trials ``0..n_trials-1`` and its methods, sorted by trial then method order."""
+    df = load_cell_dir(cell.dir)
+    if df.empty:
+        return df
+    df = df[(df["trial"] < cell.n_trials) & df["method"].isin(cell.methods)].copy()
+    order = {m: i for i, m in enumerate(cell.methods)}
+    df["_m"] = df["method"].map(order)
+    return df.sort_values(["trial", "_m"]).drop(columns="_m").reset_index(drop=True)
+
+
+def load_sweep(results_dir: str | Path, sweep: str) -> pd.DataFrame:
+    """Every row stored for ``sweep`` under ``results_dir`` (all its cells)."""
+    cells = sorted((Path(results_dir) / sweep / "trials").glob("*/"))
+    frames = [load_cell_dir(c) for c in cells]
+    frames = [f for f in frames if not f.empty]
+    if not frames:
+        raise RunnerError(f"no trials stored under {Path(results_dir) / sweep / 'trials'}")
+    return pd.concat(frames, ignore_index=True)
+
+
+def _write_atomic(df: pd.DataFrame, path: Path) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    df.to_csv(tmp, index=False, float_format="%.10g")
+    os.replace(tmp, path)
+
+
+def _write_chunk(cell: Cell, trials: Sequence[int], methods: Sequence[str], rows: list[dict]) -> None:
+    cols = list(cell.columns()) + list(RESULT_COLUMNS)
+    df = pd.DataFrame(rows)
+    df = df[cols + [c for c in df.columns if c not in cols]]
+    tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
+    _write_atomic(df, cell.dir / f"chunk-{min(trials):05d}-{max(trials):05d}-{tag}.csv")
+
+
+def _prepare(cell: Cell) -> None:
+    cell.dir.mkdir(parents=True, exist_ok=True)
+    settings = cell.dir / "settings.json"
+    if not settings.exists():
+        d = asdict(cell)
+        d.pop("n_trials"), d.pop("methods"), d.pop("results_dir")
+        settings.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
+
+
+def pending(cell: Cell, chunk_size: int) -> list[tuple[int, ...] | tuple]:
+    """(trials, methods) tasks still to run for ``cell``: consecutive trials missing the same methods."""
+    df = load_cell_dir(cell.dir)
+    done = set(zip(df["trial"], df["method"], strict=True)) if not df.empty else set()
+    tasks: list[tuple[list[int], tuple[str, ...]]] = []
+    for t in range(cell.n_trials):
+        missing = tuple(m for m in cell.methods if (t, m) not in done)
+        if not missing:
+            continue
+        if tasks and tasks[-1][1] == missing and len(tasks[-1][0]) < chunk_size and tasks[-1][0][-1] == t - 1:
+            tasks[-1][0].append(t)
+        else:
+            tasks.append(([t], missing))
+    return [(tuple(ts), ms) for ts, ms in tasks]
+
+
+def auto_chunk_size(n_trials: int, n_workers: int) -> int:
+    """Trials per task: about 8 tasks per worker, 5..25 trials (a trial takes milliseconds)."""
+    return max(5, min(25, math.ceil(n_trials / max(1, 8 * n_workers))))
+
+
+# ------------------------------------------------------------------------------------------------ runner
+
+class _Progress:
+    def __init__(self, total: int, label: str, enabled: bool) -> None:
+        self.total, self.label, self.enabled = total, label, enabled and total > 0
+        self.done, self.t0, self.shown = 0, time.perf_counter(), -1.0
+
+    def update(self, n: int) -> None:
+        self.done += n
+        el = time.perf_counter() - self.t0
+        if not self.enabled or (el - self.shown < 0.5 and self.done < self.total):
+            return
+        self.shown = el
+        eta = el / self.done * (self.total - self.done) if self.done else float("nan")
+        sys.stderr.write(f"\r{self.label}: {self.done}/{self.total} trials ({100 * self.done / self.total:3.0f}%)"
+                         f"  {el:6.1f} s elapsed, ~{eta:5.1f} s left ")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+
+
+def n_workers(n_jobs: int) -> int:
+    cpus = os.cpu_count() or 1
+    return max(1, cpus + 1 + n_jobs if n_jobs < 0 else n_jobs)
+
+
+def run_cells(cells: Sequence[Cell], *, n_jobs: int = -1, chunk_size: int = 0, progress: bool = True,
+              trial_fn: TrialFn = simulate_trial, label: str | None = None) -> pd.DataFrame:
+    """Run every missing (trial, method) pair of ``cells`` in one pool; return their rows, cells in order.
+
+    Workers are joblib (loky) processes with one BLAS/OpenMP thread each; chunks of ``chunk_size`` trials
+    (0: automatic) are the unit of work and of writing. ``n_jobs=1`` runs in this process.
+    """
+    workers = n_workers(n_jobs)
+    for cell in cells:
+        _prepare(cell)
+    total_trials = sum(c.n_trials for c in cells)
+    size = chunk_size if chunk_size > 0 else auto_chunk_size(total_trials, workers)
+    tasks = [(cell, ts, ms) for cell in cells for ts, ms in pending(cell, size)]
+    bar = _Progress(sum(len(ts) for _, ts, _ in tasks), label or ", ".join(sorted({c.sweep for c in cells})),
+                    progress)
+    try:
+        if workers == 1 or len(tasks) <= 1:
+            results: Iterable = (_run_chunk(trial_fn, *task) for task in tasks)
+            _consume(results, bar)
+        else:
+            from joblib import Parallel, delayed, parallel_config
+
+            for var in THREAD_VARS:  # the loky workers inherit these at start
+                os.environ.setdefault(var, "1")
+            with parallel_config(backend="loky", inner_max_num_threads=1):
+                par = Parallel(n_jobs=workers, return_as="generator_unordered", batch_size=1)
+                _consume(par(delayed(_run_chunk)(trial_fn, *task) for task in tasks), bar)
+    finally:
+        bar.close()
+    frames = [load_cell(c) for c in cells]
+    frames = [f for f in frames if not f.empty]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def _consume(results: Iterable, bar: _Progress) -> None:
+    for cell, trials, methods, rows in results:
+        _write_chunk(cell, trials, methods, rows)
+        bar.update(len(trials))
