@@ -58,17 +58,19 @@ def point_line_errors(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     counts = np.array([len(b.outline) for b in obs.boards])
     for V in np.unique(counts):
         idx = np.flatnonzero(counts == V)
-        q = np.array([obs.boards[i].outline for i in idx])                  # (n,V,2)
-        q = np.concatenate([q, np.zeros(q.shape[:2] + (1,))], axis=2)        # z = 0
-        a, b = q, np.roll(q, -1, axis=1)                                     # edges a_k -> b_k
-        p = P[:, idx][:, :, :, None, :]                                      # (M,n,2,1,3)
-        da = np.linalg.norm(p - a[None, :, None], axis=-1)                   # (M,n,2,V)
-        db = np.linalg.norm(p - b[None, :, None], axis=-1)
-        L = np.linalg.norm(b - a, axis=-1)[None, :, None]                   # (1,n,1,V)
-        err = da + db - L
-        e = (b - a) / L[0, :, 0, :, None]                                    # unit edge directions
-        w = p - a[None, :, None]
-        dist = np.linalg.norm(w - np.einsum("mnkvc,nvc->mnkv", w, e)[..., None] * e[None, :, None], axis=-1)
+        a = np.array([obs.boards[i].outline for i in idx])                  # (n,V,2) vertices q_k, z = 0
+        edge = np.roll(a, -1, axis=1) - a                                    # q_{k+1} - q_k
+        L = np.linalg.norm(edge, axis=-1)                                    # (n,V)
+        nrm = np.stack([-edge[..., 1], edge[..., 0]], axis=-1) / L[..., None]  # in-plane edge normals
+        Pi = P[:, idx]
+        xy, z2 = Pi[..., :2], Pi[..., 2:3] ** 2                               # (M,n,2,2), (M,n,2,1)
+        # |p - q_k| from the expansion |xy|^2 - 2 xy.q_k + |q_k|^2 + z^2; |p - q_{k+1}| is its roll
+        d2 = (np.sum(xy**2, axis=-1)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a)
+              + np.sum(a**2, axis=-1)[None, :, None, :] + z2)
+        da = np.sqrt(np.maximum(d2, 0.0))                                    # (M,n,2,V)
+        err = da + np.roll(da, -1, axis=-1) - L[None, :, None, :]
+        perp = np.einsum("mnkc,nvc->mnkv", xy, nrm) - np.sum(a * nrm, axis=-1)[None, :, None, :]
+        dist = np.sqrt(perp**2 + z2)                                         # point-to-line distances
         pair = dist[:, :, 0, :, None] + dist[:, :, 1, None, :]              # (M,n,V,V)
         pair[..., np.arange(V), np.arange(V)] = np.inf                       # the two edges differ
         best = np.argmin(pair.reshape(M, len(idx), V * V), axis=-1)
