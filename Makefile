@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
 .DEFAULT_GOAL := help
-.PHONY: help setup test test-slow lint bench reproduce-paper clean
+.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
@@ -36,6 +36,9 @@ bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughp
 
 reproduce-paper: $(STAMP) ## Run the paper's sweeps, write results/paper/ (tables, figures 3-7, REPORT.md)
 	$(PY) -m experiments.reproduce
+
+explain-paper: $(STAMP) ## Ablations of peng2022 + unstated-setting sweeps, write results/explain/ (< 10 min on 2 cores)
+	$(PY) -m experiments.explain
 
 clean: ## Remove the virtual environment and caches
 	rm -rf $(VENV) .pytest_cache .ruff_cache outputs multirun

@@ -262,3 +262,8 @@ def calibrate(observations: Observations, method: str = "lidarcam", **options) -
     cov = info.pop("covariance", None)
     return CalibrationResult(method, True, np.asarray(T, float), None, np.asarray(cands, float),
                              time.perf_counter() - t0, None if cov is None else np.asarray(cov, float), info=info)
+
+
+from .ablations import register_ablations  # noqa: E402
+
+register_ablations()
