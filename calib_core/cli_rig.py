@@ -7,9 +7,6 @@ returns the exit code. Bad input raises a LidarcamError, which ``cli.main`` prin
 from __future__ import annotations
 
 import argparse
-import sys
-
-from .errors import LidarcamError
 
 
 def _options(args):
@@ -91,19 +88,3 @@ def add_parsers(subparsers) -> None:
 
 
 add_parser = add_parsers  # the name calib_core.cli's _VERB_MODULES hook calls
-
-
-def main(argv=None) -> int:
-    """Stand-alone entry (``python -m calib_core.cli_rig extract|report ...``), same exit codes as lidarcam."""
-    parser = argparse.ArgumentParser(prog="lidarcam")
-    add_parsers(parser.add_subparsers(dest="verb", required=True, metavar="VERB"))
-    args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except LidarcamError as err:
-        print(f"lidarcam {args.verb}: error: {err}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

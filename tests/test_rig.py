@@ -200,12 +200,6 @@ def test_find_board_segment_refuses_when_the_board_is_not_in_the_scan(rng):
 
 
 # ----------------------------------------------------------------------------------------------- simulated rig
-try:
-    import simulate.camera  # noqa: F401
-    HAVE_SIM = True
-except ImportError:
-    HAVE_SIM = False
-needs_sim = pytest.mark.skipif(not HAVE_SIM, reason="the simulator (simulate.camera) is not on this branch yet")
 
 
 @pytest.fixture(scope="module")
@@ -220,7 +214,6 @@ def rig(tmp_path_factory):
     return ds, obs, diags
 
 
-@needs_sim
 def test_extraction_matches_the_simulated_truth(rig):
     ds, obs, diags = rig
     gt = ds.ground_truth
@@ -243,7 +236,6 @@ def test_extraction_matches_the_simulated_truth(rig):
         assert len(b.scan) >= 0.9 * (hi - lo), (name, len(b.scan), hi - lo)
 
 
-@needs_sim
 def test_calibration_from_extracted_rig_recovers_the_truth(rig):
     from calib_core.methods import calibrate
 
@@ -258,7 +250,6 @@ def test_calibration_from_extracted_rig_recovers_the_truth(rig):
         assert e_R < 2.5 and e_t < 0.15, (method, e_R, e_t)
 
 
-@needs_sim
 def test_report_files_and_overlay_points_on_the_board(rig, tmp_path):
     from calib_core.methods import calibrate
     from calib_core.report import project_scan, write_report
@@ -287,7 +278,6 @@ def test_report_files_and_overlay_points_on_the_board(rig, tmp_path):
         assert np.mean(coloured) > 0.9, name
 
 
-@needs_sim
 def test_bad_poses_in_a_rig_are_skipped_with_reasons(rig, tmp_path):
     ds, _, _ = rig
     root = tmp_path / "bad"
@@ -308,7 +298,6 @@ def test_bad_poses_in_a_rig_are_skipped_with_reasons(rig, tmp_path):
     assert "manual window -170.0..-160.0 deg holds 0 points" in reasons["004"]
 
 
-@needs_sim
 def test_manual_window_overrides_the_search(rig, tmp_path):
     ds, obs, diags = rig
     d = diags[2]
@@ -321,9 +310,8 @@ def test_manual_window_overrides_the_search(rig, tmp_path):
     assert d2.used and d2.source == "window" and d2.n_points == d.n_points - 8
 
 
-@needs_sim
 def test_cli_extract_and_report(rig, tmp_path, capsys):
-    from calib_core.cli_rig import main
+    from calib_core.cli import main
     from calib_core.methods import calibrate
 
     ds, obs, _ = rig
@@ -346,7 +334,6 @@ def test_cli_extract_and_report(rig, tmp_path, capsys):
     assert len(err) == 1 and "not a dataset folder" in err[0]
 
 
-@needs_sim
 def test_keyed_xy_scans_plain_camera_and_jpg(tmp_path):
     from simulate import SimOptions
     from simulate.dataset import write_dataset
