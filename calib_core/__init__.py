@@ -14,8 +14,11 @@ __all__ = [
     "extrinsic_yaml", "load_observations", "observations_from_dict", "observations_to_dict", "save_observations",
 ]
 
-from .methods import calibrate  # noqa: E402
+from .entry import calibrate  # noqa: E402
+from .methods import register_builtins  # noqa: E402
 from .registry import METHODS, get_method  # noqa: E402
 from .result import CalibrationResult, SolveFailure, load_result  # noqa: E402
 
 __all__ += ["METHODS", "CalibrationResult", "SolveFailure", "calibrate", "get_method", "load_result"]
+
+register_builtins()

@@ -1,10 +1,14 @@
-"""The table of calibration methods: name, minimum boards, citation and function, read by the CLI,
-the experiments and the README instead of if-chains on method names."""
+"""The table of calibration methods: name, minimum boards, citation, summary, origin and function, read by the
+CLI, the experiments and the README instead of if-chains on method names.
+
+The table is filled explicitly: ``calib_core.methods.register_builtins`` adds the project's methods when
+``calib_core`` is imported; plugins add theirs with ``register`` (see ``calib_core.plugins``).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .errors import CalibrationError
 
@@ -15,7 +19,8 @@ class Method:
 
     ``func(obs, **options) -> (T_lidar_cam 4x4, candidates (M,4,4), info dict)``; it raises
     ``SolveFailure`` with a reason when it cannot solve. An ``info["covariance"]`` (6x6) becomes the result's
-    covariance.
+    covariance. ``origin`` says where the method comes from (``"lidarcam"`` for the project's own, else the
+    plugin's module or entry point); ``cost`` says how its run time grows with the number of boards N.
     """
 
     name: str
@@ -23,33 +28,46 @@ class Method:
     min_boards: int
     citation: str
     summary: str
+    origin: str = "lidarcam"
+    cost: str = ""
 
 
 METHODS: dict[str, Method] = {}
+"""Every registered method by name (read-only for callers: use ``register``)."""
 
 SUFFIXES: dict[str, Callable[[Method], Method]] = {}
 """Method-name suffixes (``"ml"`` for ``X+ml``, ...): each makes a derived method from its base method. A name
-``X+s`` that is not registered is built on first use from ``X`` and ``SUFFIXES[s]``."""
+``X+s`` that is not in ``METHODS`` is built by ``get_method`` from ``X`` and ``SUFFIXES[s]``."""
 
 
-def register(name: str, *, min_boards: int, citation: str, summary: str):
-    """Decorator adding a method function to ``METHODS`` under ``name``."""
-    def wrap(func):
-        if name in METHODS:
-            raise CalibrationError(f"method {name!r} registered twice")
-        METHODS[name] = Method(name, func, min_boards, citation, summary)
-        return func
-    return wrap
+def register(method: Method) -> Method:
+    """Add ``method`` to ``METHODS``; CalibrationError if its name is taken."""
+    if method.name in METHODS:
+        raise CalibrationError(f"method {method.name!r} is already registered (from {METHODS[method.name].origin})")
+    METHODS[method.name] = method
+    return method
+
+
+def register_suffix(suffix: str, factory: Callable[[Method], Method]) -> None:
+    """Declare the suffix ``+suffix``: ``factory(base)`` makes ``base.name + "+" + suffix``."""
+    SUFFIXES[suffix] = factory
 
 
 def get_method(name: str) -> Method:
-    """The registered method ``name``; CalibrationError listing the known names otherwise."""
-    if name not in METHODS and "+" in name:
-        base, _, suffix = name.rpartition("+")
-        if suffix in SUFFIXES and (base in METHODS or "+" in base):
-            METHODS[name] = SUFFIXES[suffix](get_method(base))
-    try:
+    """The method ``name``: a registered one, or ``X+s`` built from ``X`` and a known suffix ``s`` (not stored);
+    CalibrationError listing the known names otherwise."""
+    if name in METHODS:
         return METHODS[name]
-    except KeyError:
-        raise CalibrationError(f"unknown method {name!r}; known: {', '.join(METHODS)} "
-                               f"(and X+{'/X+'.join(SUFFIXES)} for any X)") from None
+    base, plus, suffix = name.rpartition("+")
+    if plus and suffix in SUFFIXES:
+        try:
+            return SUFFIXES[suffix](get_method(base))
+        except CalibrationError:
+            pass
+    raise CalibrationError(f"unknown method {name!r}; known: {', '.join(METHODS)} "
+                           f"(and X+{'/X+'.join(SUFFIXES)} for any X)")
+
+
+def derived(base: Method, suffix: str, func: Callable, summary: str) -> Method:
+    """A method derived from ``base`` under ``base.name + "+" + suffix`` (same minimum boards and citation)."""
+    return replace(base, name=f"{base.name}+{suffix}", func=func, summary=summary)

@@ -16,6 +16,13 @@ from .errors import CalibrationError
 from .observations import Observations
 from .residuals import ScanData
 
+EDGE_SIGMA_M = 0.03
+"""Scale (metres) of the endpoint-against-edge term of the ``lidarcam`` score: absorbs the range noise and the beam
+spacing at the board edges (0.25 deg at 5 m is 22 mm)."""
+
+OUTLINE_SIGMA_M = 0.03
+"""Scale (metres) of the points-inside-the-outline term of the ``lidarcam`` score."""
+
 
 def plane_distances(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     """(M,K) signed point-to-plane distances (metres) of every scan point under every candidate."""
@@ -179,8 +186,8 @@ def outside_outline(xy: np.ndarray, outline: np.ndarray) -> np.ndarray:
     return np.where(inside, 0.0, dist)
 
 
-def lidarcam(obs: Observations, candidates: np.ndarray, *, sigma_m: float = 0.02, edge_sigma_m: float = 0.03,
-             outline_sigma_m: float = 0.03, behind_penalty: float = np.inf, return_details: bool = False):
+def lidarcam(obs: Observations, candidates: np.ndarray, *, sigma_m: float = 0.02, edge_sigma_m: float = EDGE_SIGMA_M,
+             outline_sigma_m: float = OUTLINE_SIGMA_M, behind_penalty: float = np.inf, return_details: bool = False):
     """Our selection cost: a negative log-likelihood over all the evidence, per candidate (lower is better).
 
     ``cost = 0.5 sum_k (e_k / sigma)^2 + 0.5 sum_{i,end} (d_{i,end} / edge_sigma)^2 + 0.5 sum_k (o_k / outline_sigma)^2
@@ -217,7 +224,7 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, sigma_m: float = 0.02
 
 
 def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, sigma_m: float = 0.02,
-                       edge_sigma_m: float = 0.03, outline_sigma_m: float = 0.03) -> np.ndarray:
+                       edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M) -> np.ndarray:
     """The residual vector of the ``lidarcam`` cost at one extrinsic (its squared norm / 2 is the cost without the
     behind-the-camera penalty): range residuals / sigma, endpoint errors / edge sigma, outline distances / outline
     sigma."""
@@ -227,5 +234,8 @@ def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, sigma_m: f
               for b, P in zip(obs.boards, points_in_boards(obs, C), strict=True)]
     return np.concatenate(parts)
 
+
+PENG2022_OPTIONS = ("delta_m", "normalise_candidates", "beta_norm", "beta_eps", "error", "weighting")
+"""The options of the ``peng2022`` scorer (the paper's readings); their defaults are in its signature."""
 
 SCORERS = {"point_to_plane": point_to_plane, "peng2022": peng2022, "lidarcam": lidarcam}

@@ -1,5 +1,5 @@
 """``make bench``: the time of one ``calibrate`` per registered method on 8 boards (median over many
-repetitions), and the minimal solver's throughput on one core (``calib_core.minimal.solve_triples``).
+repetitions), and the minimal solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``).
 
     python -m experiments.bench [--boards 8] [--problems 10] [--repeats 20] [--triples 10000]
 
@@ -54,7 +54,7 @@ def time_methods(obs_list: list, repeats: int) -> list[dict]:
 
 def triple_arrays(obs_list: list, n_triples: int):
     """Stacked plane/line arrays of at least ``n_triples`` board triples drawn from ``obs_list``."""
-    from calib_core.minimal import board_triples
+    from calib_core.solvers.vasconcelos import board_triples
 
     ns, ds, ps, us = [], [], [], []
     while sum(len(x) for x in ns) < n_triples:
@@ -70,7 +70,7 @@ def triple_arrays(obs_list: list, n_triples: int):
 
 def time_minimal(obs_list: list, n_triples: int, repeats: int = 3) -> dict:
     """Triples per second of one vectorised ``solve_triples`` call on ``n_triples`` triples (best of repeats)."""
-    from calib_core.minimal import solve_triples
+    from calib_core.solvers.vasconcelos import solve_triples
 
     n, d, p, u = triple_arrays(obs_list, n_triples)
     best = float("inf")

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from calib_core.minimal import solve_triples
+from calib_core.solvers.vasconcelos import solve_triples
 
 
 def random_instance(rng: np.random.Generator, n_triples: int, *, max_tilt_deg: float = 60.0,

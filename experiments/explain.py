@@ -25,7 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from calib_core.ablations import ABLATIONS, INVARIANT, SCALE_ONLY  # noqa: E402
+from calib_core.methods.ablations import ABLATIONS, INVARIANT, SCALE_ONLY  # noqa: E402
 
 from .aggregate import summarise, write_tables  # noqa: E402
 from .catalog import method_colour, method_label, method_order  # noqa: E402

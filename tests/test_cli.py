@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calib_core import load_result
-from calib_core.cli import main
+from lidarcam_cli import main
 
 
 @pytest.fixture

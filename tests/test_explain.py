@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from calib_core import METHODS, calibrate
-from calib_core.ablations import ABLATIONS, INVARIANT, SCALE_ONLY
+from calib_core.methods.ablations import ABLATIONS, INVARIANT, SCALE_ONLY
 from simulate import SimOptions, generate
 
 N_PROBLEMS = 30

@@ -8,13 +8,13 @@ from scenes import make_observations, random_extrinsic
 from test_uncertainty import error_vector, vertical_board_poses
 
 from calib_core import METHODS, calibrate, get_method, load_result
-from calib_core.cli import main
 from calib_core.errors import CalibrationError
 from calib_core.io import save_observations
 from calib_core.metrics import pose_errors
 from calib_core.refine import robust_cost
 from calib_core.residuals import ScanData, range_residuals
 from calib_core.transforms import make_T
+from lidarcam_cli import main
 
 BASES = ["zhang_pless_linear", "vasconcelos", "peng2022"]
 

@@ -5,9 +5,9 @@ import pytest
 
 import simulate
 from calib_core import BoardObservation, Observations, calibrate
-from calib_core.candidates import minimal_candidates
 from calib_core.metrics import pose_errors
 from calib_core.selection import point_to_plane
+from calib_core.solvers.candidates import minimal_candidates
 from calib_core.transforms import invert_T, make_T, rotvec_to_matrix
 
 SEED_METHODS = ["zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022"]

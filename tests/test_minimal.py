@@ -1,4 +1,4 @@
-"""Tests of calib_core.minimal (Vasconcelos 2012 minimal solver) on noise-free synthetic triples."""
+"""Tests of calib_core.solvers.vasconcelos (Vasconcelos 2012 minimal solver) on noise-free synthetic triples."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import zlib
 import numpy as np
 import pytest
 
-from calib_core.minimal import (
+from calib_core.solvers.vasconcelos import (
     MAX_SOLUTIONS,
     REASON_PLANES,
     REASON_SCAN_LINES,
@@ -234,7 +234,7 @@ def test_near_real_option_adds_flagged_candidates_only():
 
 
 def test_closed_form_orientation_matches_kabsch():
-    from calib_core.minimal import _abs_orientation_3pt
+    from calib_core.solvers.vasconcelos import _abs_orientation_3pt
 
     rng = rng_for("test_closed_form_orientation_matches_kabsch")
     K = 200

@@ -11,10 +11,10 @@ import cv2
 import numpy as np
 import pytest
 
-from calib_core.dataset import DatasetError, load_board, load_camera, load_dataset, make_scan, read_scan_csv
-from calib_core.extract import ExtractionError, ExtractOptions, extract, find_board_segment, format_diagnostics
 from calib_core.metrics import pose_errors
 from calib_core.transforms import invert_T, make_T, rotvec_to_matrix, transform_points
+from rig.dataset import DatasetError, load_board, load_camera, load_dataset, make_scan, read_scan_csv
+from rig.extract import ExtractionError, ExtractOptions, extract, find_board_segment, format_diagnostics
 
 R_NOMINAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # camera axes -> lidar axes
 
@@ -177,7 +177,7 @@ def _synthetic_scene(rng, clutter=True):
 
 class _Board:
     def __init__(self, outline):
-        from calib_core.dataset import BoardSpec
+        from rig.dataset import BoardSpec
 
         self.spec = BoardSpec(6, 5, 0.12, outline)
 
@@ -237,7 +237,7 @@ def test_extraction_matches_the_simulated_truth(rig):
 
 
 def test_calibration_from_extracted_rig_recovers_the_truth(rig):
-    from calib_core.methods import calibrate
+    from calib_core import calibrate
 
     _, obs, _ = rig
     # 6 boards, 10 mm range noise, board poses from 640x480 images (0.2-0.6 deg per board pose). Measured on
@@ -251,8 +251,8 @@ def test_calibration_from_extracted_rig_recovers_the_truth(rig):
 
 
 def test_report_files_and_overlay_points_on_the_board(rig, tmp_path):
-    from calib_core.methods import calibrate
-    from calib_core.report import project_scan, write_report
+    from calib_core import calibrate
+    from rig.report import project_scan, write_report
 
     ds, obs, _ = rig
     res = calibrate(obs, method="zhang_pless")
@@ -311,8 +311,8 @@ def test_manual_window_overrides_the_search(rig, tmp_path):
 
 
 def test_cli_extract_and_report(rig, tmp_path, capsys):
-    from calib_core.cli import main
-    from calib_core.methods import calibrate
+    from calib_core import calibrate
+    from lidarcam_cli import main
 
     ds, obs, _ = rig
     out = tmp_path / "obs.json"
@@ -345,4 +345,4 @@ def test_keyed_xy_scans_plain_camera_and_jpg(tmp_path):
     ds = load_dataset(root)
     obs, diags = extract(ds, ExtractOptions(range_sigma_m=0.005))
     assert obs.n_boards == 4, format_diagnostics(diags)
-    assert "fewer than 5" in " ".join(__import__("calib_core.report", fromlist=["x"]).report_warnings(obs, [1.0] * 4))
+    assert "fewer than 5" in " ".join(__import__("rig.report", fromlist=["x"]).report_warnings(obs, [1.0] * 4))

@@ -296,7 +296,7 @@ def test_simulate_trial_scans_match_generate():
 
 
 def test_cli_writes_a_valid_observation_file(tmp_path):
-    from calib_core.cli import main
+    from lidarcam_cli import main
 
     out = tmp_path / "obs.json"
     assert main(["simulate", "--boards", "3", "--noise-mm", "20", "--seed", "1", "--trial", "0",

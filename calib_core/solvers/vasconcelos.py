@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import LidarcamError
+from ..errors import LidarcamError
 
 # Reasons (the ``reasons`` entries; ``None`` means solved).
 REASON_NONFINITE = "non-finite input"

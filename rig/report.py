@@ -13,13 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
+from calib_core.errors import LidarcamError
+from calib_core.io import extrinsic_yaml
+from calib_core.metrics import pose_errors
+from calib_core.observations import Observations
+from calib_core.result import CalibrationResult
+from calib_core.transforms import invert_T, quaternion_xyzw, transform_points
+
 from .dataset import CameraModel, Dataset
-from .errors import LidarcamError
-from .io import extrinsic_yaml
-from .metrics import pose_errors
-from .observations import Observations
-from .result import CalibrationResult
-from .transforms import invert_T, quaternion_xyzw, transform_points
 
 MIN_POSES = 5
 PARALLEL_DEG = 15.0
@@ -42,7 +43,7 @@ class ReportSummary:
 def _as_result(result) -> dict:
     """A CalibrationResult, a ``load_result`` dict or a path -> dict with method, ok, reason, T, covariance."""
     if isinstance(result, (str, Path)):
-        from .result import load_result
+        from calib_core.result import load_result
 
         result = load_result(result)
     if isinstance(result, CalibrationResult):

@@ -1,4 +1,4 @@
-"""Ablations of ``peng2022`` as registered method variants (issue 7, "explain the gap to the paper").
+"""Ablations of ``peng2022`` as registered method variants (to explain the gap between our reproduction and the paper).
 
 Each variant is ``peng2022`` with one option fixed (a ``functools.partial``, not a copy of the method):
 
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from functools import partial, update_wrapper
 
-from .registry import METHODS, register
+from ..registry import Method
 
 ABLATIONS: dict[str, dict] = {
     "peng2022/equal": {"weighting": "equal"},
@@ -48,13 +48,12 @@ SCALE_ONLY = ("peng2022/betamax", "peng2022/betanone")
 """Variants that rescale every exponent by one positive number: same choice unless the zero guard bites."""
 
 
-def register_ablations(base: str = "peng2022") -> None:
-    """Register every ``ABLATIONS`` variant of the method ``base`` (idempotent)."""
-    m = METHODS[base]
+def ablations(base: Method) -> list[Method]:
+    """Every ``ABLATIONS`` variant of the method ``base`` (``peng2022``)."""
+    out = []
     for name, fixed in ABLATIONS.items():
-        if name in METHODS:
-            continue
-        func = update_wrapper(partial(m.func, **fixed), m.func)
+        func = update_wrapper(partial(base.func, **fixed), base.func)
         opts = ", ".join(f"{k}={v!r}" for k, v in fixed.items())
-        register(name, min_boards=m.min_boards, citation=m.citation,
-                 summary=f"ablation: {base} with {opts}")(func)
+        out.append(Method(name, func, base.min_boards, base.citation, f"ablation: {base.name} with {opts}",
+                          cost=base.cost))
+    return out

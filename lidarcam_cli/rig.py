@@ -1,7 +1,7 @@
 """CLI verbs for real rigs: ``lidarcam extract DATASET --out obs.json`` and ``lidarcam report DATASET RESULT``.
 
-``add_parsers(subparsers)`` registers both verbs on the ``lidarcam`` parser (``calib_core.cli``); each handler
-returns the exit code. Bad input raises a LidarcamError, which ``cli.main`` prints as one line and exits 2.
+``add_parsers(subparsers)`` registers both verbs; each handler returns the exit code. Bad input raises a
+LidarcamError, which ``lidarcam_cli.main`` prints as one line and exits 2.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import argparse
 
 
 def _options(args):
-    from .extract import ExtractOptions
+    from rig.extract import ExtractOptions
 
     return ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma,
                           max_reproj_px=args.max_reproj)
@@ -30,9 +30,9 @@ def cmd_extract(args) -> int:
     import json
     from pathlib import Path
 
-    from .dataset import DatasetError, load_dataset
-    from .extract import extract, format_diagnostics
-    from .io import save_observations
+    from calib_core.io import save_observations
+    from rig.dataset import DatasetError, load_dataset
+    from rig.extract import extract, format_diagnostics
 
     ds = load_dataset(args.dataset)
     obs, diags = extract(ds, _options(args))
@@ -49,11 +49,11 @@ def cmd_extract(args) -> int:
 
 def cmd_report(args) -> int:
     """``lidarcam report``: overlays, residual plots and report.md for a result on a dataset."""
-    from .dataset import load_dataset
-    from .extract import extract
-    from .io import load_observations
-    from .report import write_report
-    from .result import load_result
+    from calib_core.io import load_observations
+    from calib_core.result import load_result
+    from rig.dataset import load_dataset
+    from rig.extract import extract
+    from rig.report import write_report
 
     ds = load_dataset(args.dataset)
     res = load_result(args.result)
@@ -86,5 +86,3 @@ def add_parsers(subparsers) -> None:
     _add_extract_options(p)
     p.set_defaults(func=cmd_report)
 
-
-add_parser = add_parsers  # the name calib_core.cli's _VERB_MODULES hook calls

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .errors import LidarcamError
+from calib_core.errors import LidarcamError
+
+from . import rig, simulate
 
 
 def _cmd_methods(args) -> int:
-    from .registry import METHODS as table
+    from calib_core.registry import METHODS as table
 
     w = max(len(n) for n in table)
     print(f"{'method':<{w}}  min boards  citation / summary")
@@ -19,9 +21,9 @@ def _cmd_methods(args) -> int:
 
 
 def _cmd_calibrate(args) -> int:
-    from .io import extrinsic_yaml, load_observations
-    from .methods import calibrate
-    from .metrics import pose_errors
+    from calib_core import calibrate
+    from calib_core.io import extrinsic_yaml, load_observations
+    from calib_core.metrics import pose_errors
 
     obs = load_observations(args.observations)
     res = calibrate(obs, method=args.method)
@@ -60,7 +62,7 @@ def _cmd_calibrate(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .registry import METHODS
+    from calib_core.registry import METHODS
 
     p = argparse.ArgumentParser(prog="lidarcam", description="2D lidar - camera extrinsic calibration")
     sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
@@ -72,17 +74,12 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--out", help="write the result JSON (lidarcam.result/1) here")
     sp.add_argument("--yaml", help="write the extrinsic as YAML here")
     sp.set_defaults(func=_cmd_calibrate)
-    for mod in _VERB_MODULES:
-        __import__(mod, fromlist=["add_parser"]).add_parser(sub)
+    simulate.add_parsers(sub)
+    rig.add_parsers(sub)
     return p
 
 
-_VERB_MODULES: list[str] = ["simulate.cli", "calib_core.cli_rig"]
-
-
 def main(argv=None) -> int:
-    from . import methods  # noqa: F401  (fills the registry)
-
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)

@@ -6,7 +6,7 @@ import argparse
 import sys
 from dataclasses import MISSING, fields
 
-from .options import SimOptions
+from simulate.options import SimOptions
 
 # Short spellings kept next to the generated one-flag-per-field names.
 ALIASES = {"n_boards": ["--boards"]}
@@ -16,7 +16,7 @@ def _flag(name: str) -> str:
     return "--" + name.replace("_", "-")
 
 
-def add_parser(subparsers) -> argparse.ArgumentParser:
+def add_parsers(subparsers) -> argparse.ArgumentParser:
     """Register ``simulate`` on an argparse ``subparsers``; one flag per SimOptions field, plus
     ``--seed``, ``--trial`` and ``--out``. Sets ``func`` to ``run``."""
     p = subparsers.add_parser(
@@ -43,9 +43,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     """Generate and save; errors in the options or the sampling go to stderr with exit status 2."""
     from calib_core.io import save_observations
-
-    from . import generate
-    from .scene import SceneError
+    from simulate import generate
+    from simulate.scene import SceneError
 
     try:
         options = SimOptions(**{f.name: getattr(args, f.name) for f in fields(SimOptions)})

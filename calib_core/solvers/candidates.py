@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lines import fit_lines
-from .observations import Observations
-from .result import SolveFailure
+from ..lines import fit_lines
+from ..observations import Observations
+from ..result import SolveFailure
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,7 +40,7 @@ def minimal_candidates(obs: Observations, **solver_options) -> CandidateSet:
     """
     if obs.n_boards < 3:
         raise SolveFailure(f"the minimal solver needs at least 3 boards, got {obs.n_boards}")
-    from .minimal import board_triples, solve_triples  # the solver module is the heavy part: load on use
+    from .vasconcelos import board_triples, solve_triples  # the solver module is the heavy part: load on use
 
     lines = fit_lines(obs)
     n, d = obs.planes_cam()

@@ -17,10 +17,11 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from calib_core.errors import LidarcamError
+from calib_core.observations import BoardObservation, Observations
+from calib_core.transforms import make_T, transform_points
+
 from .dataset import BoardSpec, CameraModel, Dataset, DatasetError, Pose, Scan
-from .errors import LidarcamError
-from .observations import BoardObservation, Observations
-from .transforms import make_T, transform_points
 
 UNDISTORT_CRITERIA = (3, 50, 1e-10)  # cv2.TERM_CRITERIA_COUNT | EPS: OpenCV's default of 5 iterations is too few
 
