@@ -1,0 +1,7 @@
+"""``python -m lidarcam_cli``: the same as the ``lidarcam`` command."""
+
+import sys
+
+from . import main
+
+sys.exit(main())
