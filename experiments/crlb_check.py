@@ -24,7 +24,6 @@ from joblib import Parallel, delayed
 from calib_core import calibrate
 from calib_core.metrics import is_valid, pose_errors
 from calib_core.refine import refine
-from calib_core.residuals import ScanData
 from calib_core.transforms import matrix_to_rotvec
 from calib_core.uncertainty import UncertaintyError, crlb
 from simulate import SimOptions, generate
@@ -61,7 +60,7 @@ def run_trial(n_boards: int, noise_mm: float, seed: int, trial: int, small: bool
     out["norm_rot2"] = out["rot2"] / out["crlb_rot2"]
     out["norm_trans2"] = out["trans2"] / out["crlb_trans2"]
     if not small:
-        rp = refine(ScanData.from_observations(obs), r.T_lidar_cam, residual="plane")
+        rp = refine(obs.scan_data, r.T_lidar_cam, residual="plane")
         ep = error_vector(rp.T_lidar_cam, T_true)
         out["plane_rot2"] = float(ep[:3] @ ep[:3])
         out["plane_trans2"] = float(ep[3:] @ ep[3:])

@@ -22,11 +22,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from calib_core.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
+
 from .aggregate import load_settings, load_summary
 from .catalog import method_label, method_order
 from .figures import PAPER_SWEEPS
 
-OURS = "peng2022"
+PAPER = "peng2022"  # the method whose claims this report checks
 FRANCISCO = "vasconcelos"
 ZHANGS = ("zhang_pless_linear", "zhang_pless")
 
@@ -99,15 +101,15 @@ def _series(summary: pd.DataFrame, x: str, method: str, col: str) -> pd.Series:
 def improvement(summary: pd.DataFrame, x: str, claim: Claim) -> pd.Series:
     """Our improvement over ``claim.other`` per setting, in the claim's unit."""
     if claim.kind == "at_least":
-        return 100 * _series(summary, x, OURS, "valid_rate")
+        return 100 * _series(summary, x, PAPER, "valid_rate")
     if claim.kind in ("points", "relative"):
-        ours, other = _series(summary, x, OURS, "valid_rate"), _series(summary, x, claim.other, "valid_rate")
+        ours, other = _series(summary, x, PAPER, "valid_rate"), _series(summary, x, claim.other, "valid_rate")
         if claim.kind == "points":
             return 100 * (ours - other)
         with np.errstate(divide="ignore", invalid="ignore"):
             return pd.Series(100 * (ours.to_numpy() / other.reindex(ours.index).to_numpy() - 1), index=ours.index)
     col, scale = ("mean_e_R_deg", 1.0) if claim.kind == "err_deg" else ("mean_e_t_m", 1000.0)
-    return scale * (_series(summary, x, claim.other, col) - _series(summary, x, OURS, col))
+    return scale * (_series(summary, x, claim.other, col) - _series(summary, x, PAPER, col))
 
 
 def judge(claim: Claim, values: np.ndarray) -> str:
@@ -133,7 +135,7 @@ def check_claims(tables: Path, sweeps: dict[str, pd.DataFrame]) -> list[Verdict]
     for claim in paper_claims():
         summary = sweeps.get(claim.sweep)
         methods = set() if summary is None else set(summary["method"])
-        if summary is None or OURS not in methods or (claim.other and claim.other not in methods):
+        if summary is None or PAPER not in methods or (claim.other and claim.other not in methods):
             out.append(Verdict(claim, (), (), "not run"))
             continue
         x = PAPER_SWEEPS[claim.sweep].x
@@ -238,11 +240,11 @@ def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verd
         paras.append(txt)
     # 2. Where selection loses: the truth among the candidates vs the candidate picked.
     for name, summary in (("boards", boards), ("noise", noise)):
-        if summary is None or not {OURS, FRANCISCO} <= set(summary["method"]):
+        if summary is None or not {PAPER, FRANCISCO} <= set(summary["method"]):
             continue
         cand = _mean_rate(summary, FRANCISCO, "some_candidate_valid_rate")
         truth = _mean_rate(summary, FRANCISCO, "truth_among_rate")
-        pv, fv = _mean_rate(summary, OURS, "valid_rate"), _mean_rate(summary, FRANCISCO, "valid_rate")
+        pv, fv = _mean_rate(summary, PAPER, "valid_rate"), _mean_rate(summary, FRANCISCO, "valid_rate")
         gap = 100 * (pv - fv)
         verdict = ("selection makes no difference here" if abs(gap) < 0.5 else
                    f"the {'gain' if gap > 0 else 'loss'} of {abs(gap):.0f} points for Peng 2022 is all selection")
@@ -318,7 +320,8 @@ def build_report(tables: str | Path) -> str:
              "(`summary_<sweep>.csv`, `trials_<sweep>.csv`); do not edit by hand.", "",
              f"- Trials per point: {', '.join(map(str, n_trials))}; methods: "
              f"{', '.join(f'`{m}`' for m in methods)}.",
-             "- Valid: e_R < 8 deg and e_t < 0.8 m; a method that returned nothing counts as invalid.",
+             f"- Valid: e_R < {VALID_MAX_ROT_DEG:g} deg and e_t < {VALID_MAX_TRANS_M:g} m; a method that returned "
+             "nothing counts as invalid.",
              "- Verdict summary: " + ", ".join(f"{k}: {v}" for k, v in counts.items()) + ".", "",
              "## The paper's claims, one by one", "",
              "Improvements are Peng 2022 over the named method (positive = Peng 2022 better). Verdict rules are in "

@@ -15,7 +15,6 @@ and the reason (a ``CalibrationError`` -- unknown method or option -- is a confi
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import math
 import os
@@ -29,8 +28,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from calib_core import METHODS, CalibrationError, calibrate, get_method
-from calib_core.metrics import is_valid, pose_errors
+from calib_core import CalibrationError, calibrate, get_method
+from calib_core.metrics import (
+    TRUTH_MAX_ROT_DEG,
+    TRUTH_MAX_TRANS_M,
+    VALID_MAX_ROT_DEG,
+    VALID_MAX_TRANS_M,
+    is_valid,
+    pose_errors,
+)
+from calib_core.uncertainty import conditioning, crlb
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -49,7 +56,8 @@ class RunnerError(RuntimeError):
 
 
 def _default_metrics() -> dict[str, Any]:
-    return {"max_rot_deg": 8.0, "max_trans_m": 0.8, "truth_rot_deg": 1.0, "truth_trans_m": 0.05,
+    return {"max_rot_deg": VALID_MAX_ROT_DEG, "max_trans_m": VALID_MAX_TRANS_M, "truth_rot_deg": TRUTH_MAX_ROT_DEG,
+            "truth_trans_m": TRUTH_MAX_TRANS_M,
             "uncertainty": True, "crlb_sigma_mm": None}
 
 
@@ -93,10 +101,9 @@ class Cell:
         return dict(self.method_options.get(method, {}))
 
 
-def resolve_methods(names: Iterable[str], optional: Iterable[str] = ()) -> tuple[str, ...]:
-    """``names`` (each must be registered: CalibrationError otherwise) plus the registered ``optional`` ones."""
+def resolve_methods(names: Iterable[str]) -> tuple[str, ...]:
+    """``names``, each registered or derivable (``X+ml``): CalibrationError otherwise."""
     out = [get_method(n).name for n in names]
-    out += [n for n in optional if n in METHODS and n not in out]
     if not out:
         raise RunnerError("no method to run")
     return tuple(out)
@@ -131,27 +138,21 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     return row
 
 
-def have_uncertainty() -> bool:
-    """True when the issue-5 module ``calib_core.uncertainty`` (CRLB, conditioning) is installed."""
-    return importlib.util.find_spec("calib_core.uncertainty") is not None
-
-
 def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
     """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number."""
     out = {"crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan, "conditioning": np.nan}
-    if not (cell.metrics.get("uncertainty", True) and have_uncertainty()):
+    if not cell.metrics.get("uncertainty", True):
         return out
-    from calib_core import uncertainty
 
     sigma_mm = cell.metrics.get("crlb_sigma_mm")
     sigma_mm = cell.sim.get("noise_mm", 0.0) if sigma_mm is None else sigma_mm
     try:
-        bound = uncertainty.crlb(obs, sigma_m=float(sigma_mm) / 1000.0)
+        bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
         out.update(crlb_rot_deg=float(bound.rot_rms_deg), crlb_trans_mm=1000.0 * float(bound.trans_rms_m))
     except Exception:  # noqa: BLE001 -- a degenerate board set has no bound: NaN, not a dead cell
         pass
     try:
-        out["conditioning"] = float(uncertainty.conditioning(obs))
+        out["conditioning"] = float(conditioning(obs))
     except Exception:  # noqa: BLE001
         pass
     return out
