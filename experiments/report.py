@@ -53,7 +53,7 @@ class Claim:
 
 
 def paper_claims() -> list[Claim]:
-    """METHOD.md "The paper's claims" and the error claims of the paper's Section 3.1 text (Fig. 4, 6)."""
+    """docs/METHOD.md "The paper's claims" and the error claims of the paper's Section 3.1 text (Fig. 4, 6)."""
     claims = [Claim("boards", "valid-solution probability +2 to +20 points vs Francisco (3-8 boards)",
                     "abstract, Fig. 3a", "points", FRANCISCO, 2, 20)]
     claims += [Claim("boards", "valid-solution probability +30% to +260% vs Zhang (relative, 3-8 boards)",
