@@ -27,7 +27,7 @@ def calibrate(observations: Observations, method: str = "lidarcam", **options) -
         T, cands, info = m.func(observations, **options)
     except SolveFailure as fail:
         return CalibrationResult(method, False, reason=fail.reason, candidates=fail.candidates,
-                                 seconds=time.perf_counter() - t0)
+                                 seconds=time.perf_counter() - t0, info=fail.info)
     except TypeError as exc:
         if "unexpected keyword" in str(exc):
             raise CalibrationError(f"{method}: {exc}") from None
