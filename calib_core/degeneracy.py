@@ -14,8 +14,11 @@ A direction is *weak* when its 1-sigma in scaled units exceeds ``MAX_SCALED_SIGM
 or 10 % of the typical range of translation) or when it carries no information at all (singular value below
 ``NULL_CONDITIONING`` of the largest, whatever the noise). Weak directions are *not determined* (``geometric``:
 the methods refuse to present them, ``ok=False``) when the board geometry is their cause: no information at
-all, or board normals within ``MIN_NORMAL_SPREAD_DEG`` of one plane (vertical boards). Otherwise they are weak
-for lack of data (few boards, high noise): the answer stands and a warning names them with their sigma.
+all, or board normals within ``MIN_NORMAL_SPREAD_DEG`` of one plane. Otherwise they are weak for lack of data
+(few boards, high noise): the answer stands and a warning names them with their sigma. Boards standing vertical
+(normals within ``MIN_NORMAL_SPREAD_DEG`` of the scan plane, the rig of a ground robot) leave roll, pitch and z
+not determined whatever their sigma: a lean that small is of the order of the board-pose and flatness errors
+the range model leaves out.
 """
 
 from __future__ import annotations
@@ -139,8 +142,10 @@ class Degeneracy:
             return (f"{self._what()} {verb} poorly determined (1-sigma {self._sigma_words()}): {self.cause}; "
                     "add board poses")
         keys = ", ".join(f"{fixed_key(a)!r}: ..." for a in self.axes)
-        return (f"{self._what()} {verb} not determined by these boards: {self.cause}; give their values and "
-                f"calibrate the rest with fixed={{{keys}}}")
+        lean = "" if not np.all(np.isfinite(self.sigmas)) else \
+            f" (the range model alone would give 1-sigma {self._sigma_words()}, leaving out board-pose errors)"
+        return (f"{self._what()} {verb} not determined by these boards: {self.cause}{lean}; give their values "
+                f"and calibrate the rest with fixed={{{keys}}}")
 
     def to_dict(self) -> dict:
         """JSON-able summary: axes, aligned, geometric, cause, message, directions, sigmas (None for infinite)."""
@@ -170,6 +175,20 @@ def board_set_cause(obs: Observations, T_lidar_cam: np.ndarray) -> str:
     return f"too little data for the range noise ({obs.n_boards} boards)"
 
 
+VERTICAL_AXES = ("roll", "pitch", "z")
+"""What a rig of vertical boards leaves free, exactly, in the lidar-origin axes."""
+
+
+def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> bool:
+    """The boards stand (nearly) vertical: normals within ``MIN_NORMAL_SPREAD_DEG`` (spread) of one plane whose
+    perpendicular is within ``VERTICAL_TOL_DEG`` of the lidar's z axis."""
+    if obs.n_boards < 2 or normal_spread_deg(obs) >= MIN_NORMAL_SPREAD_DEG:
+        return False
+    m = obs.planes_cam()[0] @ np.asarray(T_lidar_cam, float)[:3, :3].T
+    a = np.linalg.eigh(m.T @ m)[1][:, 0]
+    return bool(np.degrees(np.arccos(min(abs(a[2]), 1.0))) < VERTICAL_TOL_DEG)
+
+
 def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float | None = None, *,
                             max_scaled_sigma: float = MAX_SCALED_SIGMA,
                             null_conditioning: float = NULL_CONDITIONING) -> Degeneracy:
@@ -178,23 +197,43 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     Eigen-decomposition of the range model's Fisher information in the scaled lidar-origin axes.
     ``range_sigma_m``: the range noise std (metres); ``None`` estimates it from the range residuals at
     ``T_lidar_cam`` (``K - 6`` degrees of freedom), as the methods' covariance does.
+
+    Vertical boards (``vertical_boards``) leave roll, pitch and z free exactly; boards that lean by less than
+    ``MIN_NORMAL_SPREAD_DEG`` fix them only through that lean, which is of the order of the board-pose and
+    board-flatness errors the range model leaves out: these three are then not determined whatever their
+    sigma under the range model (reported as ``sigmas``).
     """
     T = np.asarray(T_lidar_cam, float)
     e, J = range_residuals(T, obs.scan_data, jacobian=True)
     L = typical_range(obs)
     Js = origin_jacobian(J, T) * np.r_[np.ones(3), np.full(3, L)]
     sigma = float(np.sqrt(e @ e / max(len(e) - 6, 1))) if range_sigma_m is None else float(range_sigma_m)
-    lam, V = np.linalg.eigh(Js.T @ Js)
+    F = Js.T @ Js
+    lam, V = np.linalg.eigh(F)
     null = lam <= (null_conditioning**2) * lam[-1]
     sig = np.where(null, np.inf, sigma / np.sqrt(np.where(null, 1.0, lam)))
     weak = null | (sig > max_scaled_sigma)
-    U = V[:, weak].T
+    U, sig_u = V[:, weak].T, sig[weak]
+    vertical = vertical_boards(obs, T)
+    if vertical:
+        E = np.eye(6)[[AXES.index(a) for a in VERTICAL_AXES]]
+        other = np.sum((U @ E.T) ** 2, axis=1) < 0.5
+        U, sig_u = np.concatenate([E, U[other]]), np.r_[_marginal_sigmas(F, E, sigma, null_conditioning),
+                                                        sig_u[other]]
     k = len(U)
     order = np.argsort(-np.sum(U**2, axis=0), kind="stable")
     n_axes = next((n for n in range(k, 6) if np.all(np.sum(U[:, order[:n]] ** 2, axis=1) >= ALIGNED_SHARE)), 6)
-    geometric = bool(k and (null.any() or normal_spread_deg(obs) < MIN_NORMAL_SPREAD_DEG))
-    return Degeneracy(U, sig[weak], tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
+    geometric = bool(k and (vertical or null.any() or normal_spread_deg(obs) < MIN_NORMAL_SPREAD_DEG))
+    return Degeneracy(U, sig_u, tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
                       board_set_cause(obs, T) if k else "", L, sigma)
+
+
+def _marginal_sigmas(F: np.ndarray, E: np.ndarray, sigma: float, null_conditioning: float) -> np.ndarray:
+    """1-sigma (scaled) of the unit directions ``E`` (k,6) under information ``F / sigma^2``; inf if singular."""
+    lam, V = np.linalg.eigh(F)
+    if lam[0] <= (null_conditioning**2) * lam[-1]:
+        return np.full(len(E), np.inf)
+    return sigma * np.sqrt(np.einsum("ij,jk,ik->i", E, (V / lam) @ V.T, E))
 
 
 def pair_angle_deg(obs: Observations) -> float:
