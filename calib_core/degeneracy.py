@@ -62,6 +62,9 @@ projection) inside the undetermined subspace."""
 VERTICAL_TOL_DEG = 10.0
 """The normals' common perpendicular within this of the lidar z axis: the boards are called vertical."""
 
+VERTICAL_MISFIT_DEG = 2.5
+"""Or: one rotation turns every board normal onto its scan line's normal in the scan plane within this (RMS)."""
+
 AXES = ("roll", "pitch", "yaw", "x", "y", "z")
 AXIS_WORDS = {"roll": "roll (rotation about the lidar x axis)", "pitch": "pitch (about the lidar y axis)",
               "yaw": "yaw (about the lidar z axis)", "x": "x (translation along the lidar x axis)",
@@ -99,7 +102,7 @@ class Degeneracy:
             of them as weak directions (then exactly these axes are weak; otherwise combinations of them are).
         geometric: the board geometry leaves them free (no information, or normals nearly in one plane): they
             are *not determined* and a method must not present them as estimated.
-        cause: why, in words (e.g. "every board is vertical (normals within 0.0 deg of the scan plane)").
+        cause: why, in words (e.g. "every board stands vertical (normals 0.0 deg RMS from the scan plane)").
         scale_m: the typical range used to scale translations; range_sigma_m: the noise std used.
     """
 
@@ -165,8 +168,6 @@ def board_set_cause(obs: Observations, T_lidar_cam: np.ndarray) -> str:
     m = obs.planes_cam()[0] @ np.asarray(T_lidar_cam, float)[:3, :3].T      # normals in the lidar frame
     a = np.linalg.eigh(m.T @ m)[1][:, 0]                                     # their common perpendicular
     tilt = float(np.degrees(np.arcsin(np.clip(np.max(np.abs(m @ a)), 0.0, 1.0))))
-    if tilt < VERTICAL_TOL_DEG and np.degrees(np.arccos(min(abs(a[2]), 1.0))) < VERTICAL_TOL_DEG:
-        return f"every board is vertical (normals within {tilt:.1f} deg of the scan plane)"
     if tilt < VERTICAL_TOL_DEG:
         return (f"every board normal lies within {tilt:.1f} deg of the plane perpendicular to "
                 f"({a[0]:+.2f}, {a[1]:+.2f}, {a[2]:+.2f}) in the lidar frame")
@@ -179,14 +180,25 @@ VERTICAL_AXES = ("roll", "pitch", "z")
 """What a rig of vertical boards leaves free, exactly, in the lidar-origin axes."""
 
 
-def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> bool:
-    """The boards stand (nearly) vertical: normals within ``MIN_NORMAL_SPREAD_DEG`` (spread) of one plane whose
-    perpendicular is within ``VERTICAL_TOL_DEG`` of the lidar's z axis."""
+def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> float | None:
+    """How far (RMS, degrees) the boards lean from vertical when they stand (nearly) vertical, else None.
+
+    Vertical: normals within ``MIN_NORMAL_SPREAD_DEG`` (spread) of one plane, and that plane is the lidar's
+    horizontal: its perpendicular within ``VERTICAL_TOL_DEG`` of the lidar z axis at ``T_lidar_cam``, or, since an
+    extrinsic estimated from such boards may itself be tilted, one rotation turns every normal onto its scan
+    line's normal in the scan plane within ``VERTICAL_MISFIT_DEG`` (``partial.vertical_start``, no extrinsic).
+    """
     if obs.n_boards < 2 or normal_spread_deg(obs) >= MIN_NORMAL_SPREAD_DEG:
-        return False
+        return None
+    try:
+        misfit = vertical_start(obs)[1]
+    except (SolveFailure, ValueError, np.linalg.LinAlgError):
+        misfit = np.inf
     m = obs.planes_cam()[0] @ np.asarray(T_lidar_cam, float)[:3, :3].T
     a = np.linalg.eigh(m.T @ m)[1][:, 0]
-    return bool(np.degrees(np.arccos(min(abs(a[2]), 1.0))) < VERTICAL_TOL_DEG)
+    if np.degrees(np.arccos(min(abs(a[2]), 1.0))) < VERTICAL_TOL_DEG:
+        return float(min(misfit, np.degrees(np.arcsin(np.sqrt(np.mean(m[:, 2] ** 2))))))
+    return float(misfit) if misfit < VERTICAL_MISFIT_DEG else None
 
 
 def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float | None = None, *,
@@ -214,7 +226,8 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     sig = np.where(null, np.inf, sigma / np.sqrt(np.where(null, 1.0, lam)))
     weak = null | (sig > max_scaled_sigma)
     U, sig_u = V[:, weak].T, sig[weak]
-    vertical = vertical_boards(obs, T)
+    lean = vertical_boards(obs, T)
+    vertical = lean is not None
     if vertical:
         E = np.eye(6)[[AXES.index(a) for a in VERTICAL_AXES]]
         other = np.sum((U @ E.T) ** 2, axis=1) < 0.5
@@ -224,8 +237,10 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     order = np.argsort(-np.sum(U**2, axis=0), kind="stable")
     n_axes = next((n for n in range(k, 6) if np.all(np.sum(U[:, order[:n]] ** 2, axis=1) >= ALIGNED_SHARE)), 6)
     geometric = bool(k and (vertical or null.any() or normal_spread_deg(obs) < MIN_NORMAL_SPREAD_DEG))
+    cause = "" if not k else board_set_cause(obs, T) if lean is None else \
+        f"every board stands vertical (normals {lean:.1f} deg RMS from the scan plane)"
     return Degeneracy(U, sig_u, tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
-                      board_set_cause(obs, T) if k else "", L, sigma)
+                      cause, L, sigma)
 
 
 def _marginal_sigmas(F: np.ndarray, E: np.ndarray, sigma: float, null_conditioning: float) -> np.ndarray:

@@ -43,7 +43,7 @@ def test_vertical_boards_leave_exactly_roll_pitch_and_height_free(seed):
     np.testing.assert_allclose(_projector(d.directions), _axes_projector(d.axes), atol=1e-6)
     assert np.all(np.isinf(d.sigmas))
     msg = d.message()
-    assert "every board is vertical" in msg and "'roll_deg'" in msg and "'z_m'" in msg and "not determined" in msg
+    assert "every board stands vertical" in msg and "'roll_deg'" in msg and "'z_m'" in msg and "not determined" in msg
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -98,7 +98,7 @@ def test_vertical_rig_calibration_refuses_and_names_the_directions():
         assert not r.ok and r.T_lidar_cam is None, method
         assert "roll" in r.reason and "pitch" in r.reason and "z (height" in r.reason and "fixed=" in r.reason
         assert r.info["degeneracy"]["axes"] == ["roll", "pitch", "z"]
-        assert r.to_dict()["degeneracy"]["cause"].startswith("every board is vertical")
+        assert r.to_dict()["degeneracy"]["cause"].startswith("every board stands vertical")
 
 
 def test_boards_leaning_a_little_still_leave_roll_pitch_and_height_undetermined():
