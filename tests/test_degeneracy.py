@@ -162,3 +162,12 @@ def test_board_set_warnings_have_one_home():
         T = o.T_lidar_cam_true
         assert report_warnings(o, [1.0] * o.n_boards, T) == degeneracy_warnings(o, T)
     assert any("board 1" in w for w in report_warnings(obs, [1.0, 9.0, 1.0, 1.0, 1.0, 1.0]))
+
+
+def test_vertical_boards_are_recognised_at_a_tilted_estimate():
+    """An extrinsic estimated from near-vertical boards may itself be tilted by 15 deg; the boards still read
+    as vertical (their normals turn onto the scan lines' normals), and roll, pitch and z are named."""
+    obs = vertical_rig(8, lean_deg=1.0)
+    tilted = make_T(rotvec_to_matrix([np.radians(15), np.radians(-10), 0.0]), np.zeros(3)) @ obs.T_lidar_cam_true
+    d = undetermined_directions(obs, tilted, 0.005)
+    assert d.axes == ("roll", "pitch", "z") and not d.determined and "stands vertical" in d.cause
