@@ -14,11 +14,11 @@ A direction is *weak* when its 1-sigma in scaled units exceeds ``MAX_SCALED_SIGM
 or 10 % of the typical range of translation) or when it carries no information at all (singular value below
 ``NULL_CONDITIONING`` of the largest, whatever the noise). Weak directions are *not determined* (``geometric``:
 the methods refuse to present them, ``ok=False``) when the board geometry is their cause: no information at
-all, or board normals within ``MIN_NORMAL_SPREAD_DEG`` of one plane. Otherwise they are weak for lack of data
-(few boards, high noise): the answer stands and a warning names them with their sigma. Boards standing vertical
-(normals within ``MIN_NORMAL_SPREAD_DEG`` of the scan plane, the rig of a ground robot) leave roll, pitch and z
-not determined whatever their sigma: a lean that small is of the order of the board-pose and flatness errors
-the range model leaves out.
+all, or boards standing vertical (normals within ``MIN_NORMAL_SPREAD_DEG`` of the scan plane, the rig of a ground
+robot), which leave roll, pitch and z not determined whatever their sigma: a lean that small is of the order of
+the board-pose and flatness errors the range model leaves out. Otherwise they are weak for lack of data (few
+boards, high noise, normals near one other plane): the answer stands and a warning names them with their sigma
+(on simulated sets of that kind, with exact board poses, the estimates are mostly still valid).
 """
 
 from __future__ import annotations
@@ -100,8 +100,8 @@ class Degeneracy:
         axes: the fewest lidar axes (names from ``AXES``) whose span holds every weak direction to at least
             ``ALIGNED_SHARE`` (squared norm): fixing them removes the weak subspace. ``aligned``: there are as many
             of them as weak directions (then exactly these axes are weak; otherwise combinations of them are).
-        geometric: the board geometry leaves them free (no information, or normals nearly in one plane): they
-            are *not determined* and a method must not present them as estimated.
+        geometric: the board geometry leaves them free (no information, or vertical boards): they are *not
+            determined* and a method must not present them as estimated.
         cause: why, in words (e.g. "every board stands vertical (normals 0.0 deg RMS from the scan plane)").
         scale_m: the typical range used to scale translations; range_sigma_m: the noise std used.
     """
@@ -186,7 +186,8 @@ def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> float | None:
     Vertical: normals within ``MIN_NORMAL_SPREAD_DEG`` (spread) of one plane, and that plane is the lidar's
     horizontal: its perpendicular within ``VERTICAL_TOL_DEG`` of the lidar z axis at ``T_lidar_cam``, or, since an
     extrinsic estimated from such boards may itself be tilted, one rotation turns every normal onto its scan
-    line's normal in the scan plane within ``VERTICAL_MISFIT_DEG`` (``partial.vertical_start``, no extrinsic).
+    line's normal in the scan plane within ``VERTICAL_MISFIT_DEG`` (``partial.vertical_start``, no extrinsic;
+    from ``MIN_BOARDS`` boards on: three normals turn onto three scan lines too easily to tell).
     """
     if obs.n_boards < 2 or normal_spread_deg(obs) >= MIN_NORMAL_SPREAD_DEG:
         return None
@@ -198,7 +199,7 @@ def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> float | None:
     a = np.linalg.eigh(m.T @ m)[1][:, 0]
     if np.degrees(np.arccos(min(abs(a[2]), 1.0))) < VERTICAL_TOL_DEG:
         return float(min(misfit, np.degrees(np.arcsin(np.sqrt(np.mean(m[:, 2] ** 2))))))
-    return float(misfit) if misfit < VERTICAL_MISFIT_DEG else None
+    return float(misfit) if misfit < VERTICAL_MISFIT_DEG and obs.n_boards >= MIN_BOARDS else None
 
 
 def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float | None = None, *,
@@ -236,7 +237,7 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     k = len(U)
     order = np.argsort(-np.sum(U**2, axis=0), kind="stable")
     n_axes = next((n for n in range(k, 6) if np.all(np.sum(U[:, order[:n]] ** 2, axis=1) >= ALIGNED_SHARE)), 6)
-    geometric = bool(k and (vertical or null.any() or normal_spread_deg(obs) < MIN_NORMAL_SPREAD_DEG))
+    geometric = bool(k and (vertical or null.any()))
     cause = "" if not k else board_set_cause(obs, T) if lean is None else \
         f"every board stands vertical (normals {lean:.1f} deg RMS from the scan plane)"
     return Degeneracy(U, sig_u, tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
