@@ -238,7 +238,11 @@ def _require(data: dict, key: str, path: Path):
 def load_camera(path) -> CameraModel:
     """Read camera.yaml: ``image_width``, ``image_height``, ``camera_matrix`` (3x3), ``distortion_coefficients``."""
     path = Path(path)
-    data = read_yaml(path)
+    return camera_from_dict(read_yaml(path), path)
+
+
+def camera_from_dict(data: dict, path: Path) -> CameraModel:
+    """A CameraModel from camera.yaml's keys (already parsed); errors name ``path``."""
     try:
         w, h = int(_require(data, "image_width", path)), int(_require(data, "image_height", path))
     except (TypeError, ValueError):
