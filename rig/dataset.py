@@ -131,7 +131,8 @@ class Pose:
 
     Attributes: ``name`` (file stem, e.g. ``"003"``); ``image_path`` (or None); ``scan`` (or None);
     ``window`` (bearing_min, bearing_max) radians from windows.yaml, or None; ``error``: a DatasetError when
-    the image or scan is missing or bad (the pose is then skipped by extraction), else None.
+    the image or scan is missing or bad (the pose is then skipped by extraction), else None; ``corners``: the
+    checkerboard detector's corners (N,2 pixels) when found already (extraction then skips the detection).
     """
 
     name: str
@@ -139,6 +140,7 @@ class Pose:
     scan: Scan | None
     window: tuple[float, float] | None = None
     error: DatasetError | None = None
+    corners: np.ndarray | None = None
 
     def read_image(self) -> np.ndarray:
         """The image as 8-bit grayscale (H, W)."""

@@ -140,8 +140,10 @@ def _solve_pose(obj: np.ndarray, corners: np.ndarray, camera: CameraModel):
     return make_T(R, tvec.ravel()), rms
 
 
-def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags: int | None = None) -> BoardDetection:
+def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags: int | None = None,
+                 corners: np.ndarray | None = None) -> BoardDetection:
     """Find the checkerboard in ``gray`` and its pose ``T_cam_board``; raises ExtractionError when not found.
+    ``corners`` (N,2): the detector's corners found already (e.g. for the intrinsics), to skip the detection.
 
     The detector's corner order is made canonical: the board frame is right-handed with z pointing away from the
     camera (a mirrored order is reversed along rows) and, when ``cols + rows`` is odd and board.yaml states the
@@ -151,7 +153,9 @@ def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags:
 
     if flags is None:
         flags = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
-    found, corners = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags=flags)
+    found = corners is not None
+    if not found:
+        found, corners = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags=flags)
     if not found or corners is None:
         raise ExtractionError(f"checkerboard with {board.cols}x{board.rows} inner corners not found in the image")
     corners = corners.reshape(-1, 2).astype(float)
@@ -387,7 +391,8 @@ def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = Non
     try:
         if pose.error is not None:
             raise pose.error
-        det = detect_board(pose.read_image(), dataset.camera, dataset.board, opts.detector_flags)
+        det = detect_board(pose.read_image(), dataset.camera, dataset.board, opts.detector_flags,
+                           pose.corners)
         diag.n_corners = len(det.corners)
         diag.reproj_rms_px = det.reproj_rms_px
         diag.cam_distance_m = float(np.linalg.norm(
