@@ -132,7 +132,8 @@ class Pose:
     Attributes: ``name`` (file stem, e.g. ``"003"``); ``image_path`` (or None); ``scan`` (or None);
     ``window`` (bearing_min, bearing_max) radians from windows.yaml, or None; ``error``: a DatasetError when
     the image or scan is missing or bad (the pose is then skipped by extraction), else None; ``corners``: the
-    checkerboard detector's corners (N,2 pixels) when found already (extraction then skips the detection).
+    checkerboard detector's corners (N,2 pixels) when found already (extraction then skips the detection;
+    an empty array: the detector found no board).
     """
 
     name: str
