@@ -28,7 +28,14 @@ from rig.intrinsics import calibrate_intrinsics, find_corners, format_intrinsics
 from rig.public_sets import ACFR, EDENSHIN, KAZMIERCZAK, load_acfr, load_edenshin, load_kazmierczak
 from rig.report import save_overlay
 
-from .real_eval import HAVE_LIBRARY_CV, degeneracy_verdict, leaderboard, leaderboard_md, range_noise_m
+from .real_eval import (
+    HAVE_LIBRARY_CV,
+    degeneracy_verdict,
+    leaderboard,
+    leaderboard_md,
+    planar_calibration,
+    range_noise_m,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022", "lidarcam")
@@ -36,8 +43,16 @@ OVERLAY_METHOD = "lidarcam"
 
 
 def _best_T(rows, prefer=OVERLAY_METHOD):
+    """The preferred method's extrinsic, else the one with the lowest held-out (then in-sample) residual."""
     by = {r["method"]: r for r in rows if r["ok"]}
-    r = by.get(prefer) or next(iter(by.values()), None)
+    if prefer in by:
+        r = by[prefer]
+    else:
+        def key(r):
+            cv = (r.get("cv") or {}).get("rms_mm")
+            return (0, cv) if cv is not None and np.isfinite(cv) else (1, r.get("fit_rms_mm", np.inf))
+
+        r = min(by.values(), key=key, default=None)
     return (None, None) if r is None else (np.asarray(r["T_lidar_cam"]), r["method"])
 
 
@@ -69,8 +84,9 @@ def _section(rs, obs, rows, sigma, verdict, extra_md, overlays_md, published: bo
     md = [f"## {rs.name}", "", *[f"- {n}" for n in rs.notes], ""] + extra_md
     md += ["### Leaderboard", ""] + leaderboard_md(rows, sigma, published) + [""]
     md += ["### Degeneracy", "", verdict[0], ""]
-    md += ["### Scan on the image", "", f"Through the `{OVERLAY_METHOD}` extrinsic; colour: distance to the board "
-           "plane (mm); large dots: the board's segment; yellow: the board outline from the camera.", ""]
+    md += ["### Scan on the image", "", "Through the extrinsic named in each title (`lidarcam` where it solves); "
+           "colour: distance to the board plane (mm); large dots: the board's segment; yellow: the board outline "
+           "from the camera.", ""]
     return md + overlays_md + [""]
 
 
@@ -135,7 +151,7 @@ def run_kazmierczak(folder: Path, out: Path) -> tuple[list[str], dict]:
     extra = ["### Camera intrinsics from the images", "",
              "The author's intrinsics are rough (principal point fixed at the image centre, 0.85 px); refitted "
              "from the detected boards:", ""] + format_intrinsics(fit) + [""]
-    extra += [f"Extraction options: outline not known (the pattern's outline is a lower bound), range sigma 30 mm "
+    extra += ["Extraction options: outline not known (the pattern's outline is a lower bound), range sigma 30 mm "
               "for the segment split (the Hokuyo reads the black and white squares at ranges a few cm apart)."]
     extra += [""] + _extraction_md(diags, obs)
     used = [d for d in diags if d.used]
@@ -154,13 +170,31 @@ def run_acfr(folder: Path, out: Path) -> tuple[list[str], dict]:
     rows = leaderboard(obs, METHODS, sigma)
     T, m = _best_T(rows)
     verdict = degeneracy_verdict(obs, T, sigma)
+    axes = _verdict_axes(obs, T, sigma)
+    planar, T_planar = planar_calibration(obs, axes) if axes else ([], None)
+    if T_planar is not None:
+        T, m = T_planar, "lidarcam (planar)"
     images = {p.name: p.read_image() for p in poses}
     full = {p.name: p.scan.points for p in poses}
     ov = _overlays(rs, obs, T, m, out, ["00", "03"], images, full)
     extra = _extraction_md(diags, obs)
-    return (_section(rs, obs, rows, sigma, verdict, extra, ov, False),
+    section = _section(rs, obs, rows, sigma, verdict, extra, ov, False)
+    if planar:
+        i = section.index("### Scan on the image")
+        section[i:i] = ["### Calibration of the determined part", ""] + planar + [""]
+    return (section,
             {"rows": rows, "range_sigma_mm": 1000 * sigma, "verdict": verdict[0],
              "segments_deg": {d.name: d.bearing_deg for d in diags}, "ranges_m": {d.name: d.range_m for d in diags}})
+
+
+def _verdict_axes(obs, T, sigma) -> tuple[str, ...]:
+    """The mounting axes the library's degeneracy analysis names as not determined (empty without it)."""
+    try:
+        from calib_core.degeneracy import undetermined_directions
+    except ImportError:
+        return ()
+    d = undetermined_directions(obs, T, sigma)
+    return tuple(d.axes) if not d.determined else ()
 
 
 RUNNERS = ((EDENSHIN, run_edenshin), (KAZMIERCZAK, run_kazmierczak), (ACFR, run_acfr))

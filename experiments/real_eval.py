@@ -141,3 +141,25 @@ def leaderboard_md(rows: list[dict], sigma_m: float, published: bool) -> list[st
             "calibrated from the others, its scan points against its board plane from the camera; time: the full "
             "fit plus every fold."]
     return out
+
+
+def planar_calibration(obs: Observations, verdict_axes, given: dict | None = None
+                       ) -> tuple[list[str], np.ndarray | None]:
+    """(Markdown lines, T_lidar_cam or None): ``lidarcam`` with the undetermined mounting parameters fixed
+    (``calibrate(..., fixed=)``; ``given`` values, else 0) and the estimated ones with their 1-sigma."""
+    try:
+        from calib_core.mounting import UNIT_NAMES
+    except ImportError:
+        return ["Calibration with fixed mounting parameters: not available in this build of the library."], None
+    names = [f"{a}_deg" if f"{a}_deg" in UNIT_NAMES else f"{a}_m" for a in verdict_axes]
+    fixed = {n: (given or {}).get(n, 0.0) for n in names}
+    res = calib_core.calibrate(obs, "lidarcam", fixed=fixed)
+    if not res.ok:
+        return [f"Calibration with {fixed} fixed failed: {res.reason}"], None
+    info = res.info or {}
+    val, sig = info.get("mounting", {}), info.get("mounting_sigma", {})
+    cells = ", ".join(f"{n} = {val[n]:.3f} +- {sig[n]:.3f}" for n in UNIT_NAMES if n in sig)
+    fixed_txt = ", ".join(f"{k} = {v:g}" for k, v in fixed.items())
+    return [f"`lidarcam` with {fixed_txt} fixed (not measured for this rig: placeholders for the mounting a "
+            f"user measures; the estimated parameters do not depend on them here): {cells} (1-sigma).",
+            *(f"- warning: {w}" for w in info.get("warnings", []))], res.T_lidar_cam

@@ -113,7 +113,7 @@ def load_acfr(folder, square_m: float = 0.019) -> RealSet:
     """The 5 image / PCD pairs (i-th file of each folder, sorted), 8 x 11 inner corners, ``square_m``."""
     folder = Path(folder)
     _need(folder, "images", "lasers")
-    images = sorted((folder / "images").glob("*.png"))
+    images = sorted(p for p in (folder / "images").iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
     lasers = sorted((folder / "lasers").glob("*.pcd"))
     if len(images) != len(lasers):
         raise DatasetError(f"{len(images)} images but {len(lasers)} scans", file=folder)
