@@ -36,6 +36,9 @@ CORNER_SIGMA_FLOOR_PX = 1e-3
 """Least corner noise std (pixels) an estimate may return (noise-free corners would weigh infinitely)."""
 RANGE_SIGMA_FLOOR_M = 1e-6
 """Least range noise std (metres) an estimate may return."""
+START_CORNER_SIGMA_PX = 0.1
+START_RANGE_SIGMA_M = 0.002
+"""Floors of the noise stds of the first solve (corner RMS at the observed poses, scan-line noise estimate)."""
 
 
 class JointError(LidarcamError):
@@ -236,15 +239,16 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         corner_sigma_px, range_sigma_m: noise stds; ``None`` estimates each from its own residuals (corners:
             ``2J - 6N`` degrees of freedom, ranges ``K - 6``), re-solving until they change by less than
             ``sigma_rtol`` (at most ``sigma_iters`` solves). Start values: the corner RMS at the observed poses,
-            the scan-line estimate of ``uncertainty.scan_noise_estimate``.
+            the scan-line estimate of ``uncertainty.scan_noise_estimate`` (floored by ``START_*``).
         loss, f_scale: scipy robust loss on the normalised residuals, its scale in noise stds.
     Raises:
         JointError: no corners or camera; UncertaintyError: the joint information is singular.
     """
     T_e, T_b = np.asarray(T0, float), board_poses(obs)
     est_c, _ = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards)
-    sc = corner_sigma_px if corner_sigma_px is not None else est_c
-    sr = range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs)
+    # start weights from each sensor alone, floored so that neither sensor swamps the other before the solve
+    sc = corner_sigma_px if corner_sigma_px is not None else max(est_c, START_CORNER_SIGMA_PX)
+    sr = range_sigma_m if range_sigma_m is not None else max(scan_noise_estimate(obs), START_RANGE_SIGMA_M)
     for _ in range(max(1, sigma_iters)):
         T_e, T_b, _, nit, converged = _solve(obs, T_e, T_b, sc, sr, loss, f_scale, max_iter)
         new_c, new_r = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards)
@@ -304,3 +308,21 @@ def joint_crlb(obs: Observations, range_sigma_m: float, corner_sigma_px: float, 
     else:
         cov = marginal_covariance(obs, T_lidar_cam, T_b, corner_sigma_px, range_sigma_m)
     return Crlb(sigma_rot_deg(cov), sigma_trans_m(cov), cov)
+
+
+def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
+               range_sigma_m: float | None = None, loss: str = "linear", f_scale: float = 2.5,
+               max_iter: int = 50) -> tuple[np.ndarray, np.ndarray, dict]:
+    """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
+    (T_lidar_cam, covariance, info) with ``info["covariance_model"] = JOINT_MODEL`` and the noise figures.
+
+    Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
+    """
+    j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
+                     f_scale=f_scale, max_iter=max_iter)
+    info = {"covariance_model": JOINT_MODEL, "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m,
+            "corner_rms_px": j.corner_rms_px, "range_rms_m": j.range_rms_m, "joint_cost": j.cost,
+            "joint_iterations": j.iterations, "joint_converged": j.converged}
+    if not j.converged:
+        info["warnings"] = [f"joint refinement stopped after {max_iter} iterations without converging"]
+    return j.T_lidar_cam, j.covariance, info
