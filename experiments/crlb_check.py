@@ -1,4 +1,6 @@
-"""Is ``lidarcam`` efficient and consistent? Monte-Carlo check against the CRLB of the range-noise model.
+"""Is ``lidarcam`` efficient and consistent? Monte-Carlo check against the CRLB of the range-noise model (exact
+board poses) or, with ``--pose-mode pixel`` (noisy image corners, ``--pixel-noise-px``), of the joint model over
+corners and ranges (``calib_core.joint.joint_crlb`` at the true board poses).
 
 Per (boards, noise) cell, over simulated trials (``simulate.generate``): valid rate of ``lidarcam``; RMS
 rotation error (norm of the rotation vector, = e_R) and translation error, against the CRLB at the truth
@@ -9,6 +11,9 @@ where some candidate of the minimal solver is valid, against ``lidarcam``'s vali
 
 Run (about 3 minutes on 2 cores):
     OMP_NUM_THREADS=1 python -m experiments.crlb_check --trials 200 --n-jobs 2 --out results/crlb_check.json
+With camera noise (the joint model's targets):
+    OMP_NUM_THREADS=1 python -m experiments.crlb_check --pose-mode pixel --pixel-noise-px 0.5 1.0 --boards 8 \
+        --noise-mm 20 --small-boards --trials 200 --out results/crlb_check_pixel.json
 """
 
 from __future__ import annotations
@@ -22,23 +27,28 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from calib_core import calibrate
-from calib_core.metrics import is_valid, pose_errors
+from calib_core.joint import joint_crlb
+from calib_core.metrics import error_vector, is_valid, pose_errors
 from calib_core.refine import refine
-from calib_core.transforms import matrix_to_rotvec
 from calib_core.uncertainty import UncertaintyError, crlb
 from simulate import SimOptions, generate
 
 
-def error_vector(T: np.ndarray, T_true: np.ndarray) -> np.ndarray:
-    """(rotation vector of ``R R_true^T`` (rad, lidar frame), ``t - t_true`` (m)): the covariance's parameters."""
-    return np.r_[matrix_to_rotvec(T[:3, :3] @ T_true[:3, :3].T), T[:3, 3] - T_true[:3, 3]]
+def bound(obs, noise_mm: float, pixel_noise_px: float):
+    """The CRLB of the trial: joint (range and corner noise) with image corners, else range-only."""
+    if obs.has_corners:
+        return joint_crlb(obs, noise_mm / 1000.0, pixel_noise_px, T_cam_board=np.asarray(obs.meta["T_cam_board_true"]))
+    return crlb(obs, noise_mm / 1000.0)
 
 
-def run_trial(n_boards: int, noise_mm: float, seed: int, trial: int, small: bool) -> dict:
+def run_trial(n_boards: int, noise_mm: float, seed: int, trial: int, small: bool, pose_mode: str = "exact",
+              pixel_noise_px: float = 0.0) -> dict:
     """One trial: lidarcam's errors, NEES, CRLB, the point-to-plane refinement's error, candidate validity."""
-    obs = generate(SimOptions(n_boards=n_boards, noise_mm=noise_mm), seed=seed, trial=trial)
+    obs = generate(SimOptions(n_boards=n_boards, noise_mm=noise_mm, pose_mode=pose_mode,
+                              pixel_noise_px=pixel_noise_px), seed=seed, trial=trial)
     T_true = obs.T_lidar_cam_true
-    out: dict = {"n_boards": n_boards, "noise_mm": noise_mm, "trial": trial, "small": small}
+    out: dict = {"n_boards": n_boards, "noise_mm": noise_mm, "trial": trial, "small": small,
+                 "pixel_noise_px": pixel_noise_px}
     r = calibrate(obs, "lidarcam")
     C = r.candidates             # the minimal solver's (boards with a line-like scan) and, at >= 5 boards, Zhang's
     out["some_candidate_valid"] = bool(len(C) and np.any(is_valid(*pose_errors(C, T_true))))
@@ -51,8 +61,10 @@ def run_trial(n_boards: int, noise_mm: float, seed: int, trial: int, small: bool
     out["rot2"] = float(e[:3] @ e[:3])
     out["trans2"] = float(e[3:] @ e[3:])
     out["nees"] = float(e @ np.linalg.solve(r.covariance, e))
+    out["covariance_model"] = r.info.get("covariance_model", "")
+    out["sigma_rot_deg"] = float(r.sigma_rot_deg)
     try:
-        b = crlb(obs, noise_mm / 1000.0)
+        b = bound(obs, noise_mm, pixel_noise_px)
         out["crlb_rot2"] = float(np.trace(b.cov[:3, :3]))
         out["crlb_trans2"] = float(np.trace(b.cov[3:, 3:]))
     except UncertaintyError:
@@ -80,6 +92,8 @@ def summarise(rows: list[dict]) -> dict:
 
     s.update(rms_rot_deg=float(np.degrees(rms("rot2"))), rms_trans_mm=1000 * rms("trans2"),
              crlb_rot_deg=float(np.degrees(rms("crlb_rot2"))), crlb_trans_mm=1000 * rms("crlb_trans2"))
+    s["reported_sigma_rot_deg"] = float(np.sqrt(np.mean([r["sigma_rot_deg"] ** 2 for r in v])))
+    s["covariance_models"] = sorted({r["covariance_model"] for r in v})
     s["ratio_rot"] = s["rms_rot_deg"] / s["crlb_rot_deg"]
     s["ratio_trans"] = s["rms_trans_mm"] / s["crlb_trans_mm"]
     # per trial, each error against its own scene's bound: sqrt(mean(|e|^2 / trace CRLB)), ~1 when efficient
@@ -99,22 +113,26 @@ def main(argv=None) -> int:
     p.add_argument("--small-trials", type=int, default=None, help="trials at the small board counts (default --trials)")
     p.add_argument("--boards", type=int, nargs="+", default=[6, 8])
     p.add_argument("--noise-mm", type=float, nargs="+", default=[20.0, 30.0])
-    p.add_argument("--small-boards", type=int, nargs="+", default=[3, 4], help="at 20 mm only")
+    p.add_argument("--small-boards", type=int, nargs="*", default=[3, 4], help="at 20 mm only")
+    p.add_argument("--pose-mode", default="exact", choices=["exact", "pixel"])
+    p.add_argument("--pixel-noise-px", type=float, nargs="+", default=[0.5], help="with --pose-mode pixel")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--n-jobs", type=int, default=2)
     p.add_argument("--out", help="write the summary JSON here")
     a = p.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    cells = [(n, s, False, a.trials) for n in a.boards for s in a.noise_mm]
-    cells += [(n, 20.0, True, a.small_trials or a.trials) for n in a.small_boards]
+    pxs = a.pixel_noise_px if a.pose_mode == "pixel" else [0.0]
+    cells = [(n, s, False, a.trials, px) for n in a.boards for s in a.noise_mm for px in pxs]
+    cells += [(n, 20.0, True, a.small_trials or a.trials, px) for n in a.small_boards for px in pxs]
     t0 = time.perf_counter()
-    jobs = [delayed(run_trial)(n, s, a.seed, k, small) for n, s, small, T in cells for k in range(T)]
+    jobs = [delayed(run_trial)(n, s, a.seed, k, small, a.pose_mode, px) for n, s, small, T, px in cells
+            for k in range(T)]
     rows = Parallel(n_jobs=a.n_jobs, batch_size=16)(jobs)
     summary = []
-    for n, s, small, _ in cells:
+    for n, s, small, _, px in cells:
         cell = summarise([r for r in rows if r["n_boards"] == n and r["noise_mm"] == s and
-                          r["small"] == small])
-        cell.update(n_boards=n, noise_mm=s)
+                          r["small"] == small and r["pixel_noise_px"] == px])
+        cell.update(n_boards=n, noise_mm=s, pose_mode=a.pose_mode, pixel_noise_px=px)
         summary.append(cell)
         print(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in cell.items()}))
     print(f"{time.perf_counter() - t0:.0f} s")

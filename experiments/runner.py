@@ -29,12 +29,14 @@ import numpy as np
 import pandas as pd
 
 from calib_core import CalibrationError, calibrate, get_method
+from calib_core.joint import corner_residuals, joint_crlb
 from calib_core.metrics import (
     TRUTH_MAX_ROT_DEG,
     TRUTH_MAX_TRANS_M,
     VALID_MAX_ROT_DEG,
     VALID_MAX_TRANS_M,
     is_valid,
+    nees,
     pose_errors,
 )
 from calib_core.uncertainty import conditioning, crlb
@@ -45,7 +47,7 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 RESULT_COLUMNS = (
     "trial", "method", "ok", "reason", "e_R_deg", "e_t_m", "valid", "n_candidates", "true_among_candidates",
     "some_candidate_valid", "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds",
-    "crlb_rot_deg", "crlb_trans_mm", "conditioning",
+    "crlb_rot_deg", "crlb_trans_mm", "conditioning", "nees",
 )
 # Columns that legitimately differ between two runs of the same settings (wall time).
 TIMING_COLUMNS = ("seconds",)
@@ -114,7 +116,7 @@ def resolve_methods(names: Iterable[str]) -> tuple[str, ...]:
 def _failure_row(base: dict, method: str, reason: str) -> dict:
     return {**base, "method": method, "ok": False, "reason": reason, "e_R_deg": np.nan, "e_t_m": np.nan,
             "valid": False, "n_candidates": 0, "true_among_candidates": False, "some_candidate_valid": False,
-            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan}
+            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan, "nees": np.nan}
 
 
 def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, Any]:
@@ -122,11 +124,12 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     row: dict[str, Any] = {"ok": bool(result.ok), "reason": result.reason or "", "seconds": float(result.seconds),
                            "n_candidates": result.n_candidates, "e_R_deg": np.nan, "e_t_m": np.nan,
                            "valid": False, "true_among_candidates": False, "some_candidate_valid": False,
-                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan}
+                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "nees": np.nan}
     if result.ok:
         e_R, e_t = pose_errors(result.T_lidar_cam, T_true)
         row.update(e_R_deg=float(e_R), e_t_m=float(e_t),
                    valid=bool(is_valid(e_R, e_t, metrics["max_rot_deg"], metrics["max_trans_m"])))
+        row["nees"] = nees(result.T_lidar_cam, result.covariance, T_true)
     if result.n_candidates:
         cR, ct = pose_errors(result.candidates, T_true)
         best = int(np.nanargmin(cR)) if np.isfinite(cR).any() else 0
@@ -138,8 +141,25 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     return row
 
 
+def corner_sigma_px(obs, sim: dict) -> float | None:
+    """The corner noise std (px) of a simulated trial with image corners: ``pixel_noise_px`` in ``pixel`` mode, the
+    RMS detection error against the true poses in ``image`` mode; None without corners or true poses."""
+    if not obs.has_corners or "T_cam_board_true" not in obs.meta:
+        return None
+    from simulate import SimOptions
+
+    o = SimOptions(**sim)
+    if o.pose_mode == "pixel":
+        return o.pixel_noise_px
+    e = corner_residuals(obs, np.asarray(obs.meta["T_cam_board_true"], float))
+    return float(np.sqrt(np.mean(e**2)))
+
+
 def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
-    """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number."""
+    """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number.
+
+    With image corners the bound is that of the joint model (range and corner noise, board poses unknown, at the
+    true poses; ``corner_sigma_px``), else that of the range model (board poses exact)."""
     out = {"crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan, "conditioning": np.nan}
     if not cell.metrics.get("uncertainty", True):
         return out
@@ -147,7 +167,11 @@ def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
     sigma_mm = cell.metrics.get("crlb_sigma_mm")
     sigma_mm = cell.sim.get("noise_mm", 0.0) if sigma_mm is None else sigma_mm
     try:
-        bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
+        px = corner_sigma_px(obs, cell.sim)
+        if px is None:
+            bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
+        else:
+            bound = joint_crlb(obs, float(sigma_mm) / 1000.0, px, T_cam_board=np.asarray(obs.meta["T_cam_board_true"]))
         out.update(crlb_rot_deg=float(bound.rot_rms_deg), crlb_trans_mm=1000.0 * float(bound.trans_rms_m))
     except Exception:  # noqa: BLE001 -- a degenerate board set has no bound: NaN, not a dead cell
         pass
