@@ -49,6 +49,8 @@ RESULT_COLUMNS = (
     "some_candidate_valid", "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds",
     "crlb_rot_deg", "crlb_trans_mm", "conditioning", "nees",
 )
+# Columns a trial function may leave out (written as NaN): added after other trial functions were written.
+OPTIONAL_RESULT_COLUMNS = ("nees",)
 # Columns that legitimately differ between two runs of the same settings (wall time).
 TIMING_COLUMNS = ("seconds",)
 
@@ -270,6 +272,9 @@ def _write_atomic(df: pd.DataFrame, path: Path) -> None:
 def _write_chunk(cell: Cell, trials: Sequence[int], methods: Sequence[str], rows: list[dict]) -> None:
     cols = list(cell.columns()) + list(RESULT_COLUMNS)
     df = pd.DataFrame(rows)
+    for c in OPTIONAL_RESULT_COLUMNS:
+        if c not in df:
+            df[c] = np.nan
     df = df[cols + [c for c in df.columns if c not in cols]]
     tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
     _write_atomic(df, cell.dir / f"chunk-{min(trials):05d}-{max(trials):05d}-{tag}.csv")
