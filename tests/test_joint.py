@@ -182,3 +182,18 @@ def test_rotating_the_whole_problem_rotates_the_joint_answer(rng):
     T0[:3] = Rz @ T0[:3]
     res2 = joint_refine(rot, T0)
     np.testing.assert_allclose(res2.T_lidar_cam[:3], Rz @ res.T_lidar_cam[:3], atol=1e-7)
+
+
+def test_robust_loss_resists_a_false_corner():
+    obs = pixel_problem(trial=6, px=0.3)
+    T0 = calibrate(obs, "lidarcam", use_corners=False).T_lidar_cam
+    clean = joint_refine(obs, T0, corner_sigma_px=0.3, range_sigma_m=0.02)
+    bad_px = obs.boards[2].corners_px.copy()
+    bad_px[[0, 7]] += [40.0, -30.0]
+    bad = Observations(tuple(replace(b, corners_px=bad_px) if i == 2 else b for i, b in enumerate(obs.boards)),
+                       obs.T_lidar_cam_true, obs.meta, obs.camera)
+    plain = joint_refine(bad, T0, corner_sigma_px=0.3, range_sigma_m=0.02)
+    robust = joint_refine(bad, T0, corner_sigma_px=0.3, range_sigma_m=0.02, loss="cauchy")
+    d_plain = np.linalg.norm(error_vector(plain.T_lidar_cam, clean.T_lidar_cam))
+    d_robust = np.linalg.norm(error_vector(robust.T_lidar_cam, clean.T_lidar_cam))
+    assert d_robust < 0.2 * d_plain
