@@ -13,11 +13,12 @@ found is skipped with its reason, never used.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from calib_core.errors import LidarcamError
+from calib_core.camera import Camera
+from calib_core.errors import LidarcamError, ObservationError
 from calib_core.lines import tls_line
 from calib_core.observations import BoardObservation, Observations
 from calib_core.transforms import make_T, transform_points
@@ -459,7 +460,8 @@ def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = Non
         _board_finish(scan, idx, diag)
         if diag.source == "window" and diag.line_rms_mm > 1000 * opts.split_tol:
             diag.notes.append(f"window points fit a line only to {diag.line_rms_mm:.0f} mm RMS")
-        obs = BoardObservation(det.T_cam_board, dataset.board.outline, scan.points[idx])
+        obs = BoardObservation(det.T_cam_board, dataset.board.outline, scan.points[idx], det.corners,
+                               dataset.board.corners)
         diag.used = True
         return obs, diag, det
     except (ExtractionError, DatasetError) as err:
@@ -497,7 +499,7 @@ def _resolve_ambiguous(dataset: Dataset, boards: list, diags: list[PoseDiagnosti
     segment whose points lie on the board plane through that extrinsic, when it is clearly the best; otherwise
     the pose stays skipped and its reason says what the extrinsic showed."""
     todo = [k for k, d in enumerate(diags) if d.ambiguous]
-    good = [b for b in boards if b is not None]
+    good = [replace(b, corners_px=None, corners_board=None) for b in boards if b is not None]
     if not todo or len(good) < 3:
         return
     from calib_core.entry import calibrate
@@ -525,7 +527,8 @@ def _resolve_ambiguous(dataset: Dataset, boards: list, diags: list[PoseDiagnosti
         if best < opts.split_tol and best < opts.resolve_ratio * second:
             i0, i1 = d.ambiguous[order[0]]
             idx = np.arange(i0, i1)
-            boards[k] = BoardObservation(T_cb, dataset.board.outline, pose.scan.points[idx])
+            boards[k] = BoardObservation(T_cb, dataset.board.outline, pose.scan.points[idx], dets[d.name].corners,
+                                         dataset.board.corners)
             d.used, d.reason = True, None
             _board_finish(pose.scan, idx, d)
             d.notes.append(f"ambiguous segments resolved by the extrinsic of {len(good)} other boards "
@@ -552,7 +555,7 @@ def _merge_duplicates(boards: list, diags: list[PoseDiagnostics], groups: list[i
                 diags[k].notes.append(f"near-duplicate of pose {diags[rep].name}: merged into its board")
         if len(members) > 1:
             merged[diags[rep].name] = [diags[k].name for k in members if k != rep]
-        out.append(BoardObservation(boards[rep].T_cam_board, boards[rep].outline, pts))
+        out.append(replace(boards[rep], scan=pts))
     return out, merged
 
 
@@ -564,7 +567,10 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
     then each pose's board segment is searched for, and a group's boards are merged into one
     (``opts.merge_duplicates``). ``Observations.meta`` holds ``poses`` (the pose name of each board, in order),
     ``skipped`` (pose -> reason), ``merged`` (pose -> the near-duplicates merged into its board),
-    ``reproj_rms_px`` per board and ``dataset`` (the folder). The ground truth of a simulated dataset
+    ``reproj_rms_px`` per board and ``dataset`` (the folder). Every board carries its detected corners (distorted
+    pixels, canonical order) and their board-frame positions, and the observations the camera intrinsics, so the
+    joint model over corners and ranges applies (``meta["camera_note"]`` says why not when the intrinsics do not
+    fit ``calib_core.camera.Camera``). The ground truth of a simulated dataset
     (ground_truth.yaml ``T_lidar_cam``) becomes ``T_lidar_cam_true``.
     """
     from .multipose import duplicate_groups, static_masks
@@ -579,6 +585,7 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
         statics = static_masks([p.scan if p.error is None else None for p in dataset.poses], groups,
                                opts.static_tol_m)
     boards, diags = [], []
+    camera, camera_note = _camera(dataset)
     for k, pose in enumerate(dataset.poses):
         det = dets[pose.name]
         if isinstance(det, Exception):
@@ -601,7 +608,20 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
             "skipped": {d.name: d.reason for d in diags if not d.used},
             "merged": merged,
             "reproj_rms_px": [reps[i].reproj_rms_px for i in range(len(boards))]}
-    return Observations(tuple(boards), None if gt is None else np.asarray(gt, float), meta), diags
+    if camera is None:
+        boards = [replace(b, corners_px=None, corners_board=None) for b in boards]
+        meta["camera_note"] = camera_note
+    return Observations(tuple(boards), None if gt is None else np.asarray(gt, float), meta, camera), diags
+
+
+def _camera(dataset: Dataset) -> tuple[Camera | None, str]:
+    """The dataset's intrinsics for the observations (the boards then carry their detected corners), or None and
+    why the joint model cannot use them."""
+    c = dataset.camera
+    try:
+        return Camera(c.K, c.dist, c.width, c.height), ""
+    except ObservationError as err:
+        return None, f"image corners left out, the joint model cannot use the camera: {err}"
 
 
 def format_diagnostics(diags: list[PoseDiagnostics]) -> str:
