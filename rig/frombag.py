@@ -153,21 +153,18 @@ def check_candidate(ctx: _Ctx, run: tuple[int, int], frames: dict[int, np.ndarra
     st, o = ctx.st, ctx.opts
     a, b = run
     c = (a + b - 1) // 2
-    dets = {}
-    for i in (c - 1, c, c + 1):
-        try:
-            dets[i] = detect_board(frames[int(st.image_bag_ns[i])], ctx.camera, ctx.board, ctx.eo.detector_flags)
-        except ExtractionError as err:
-            if i == c:
-                raise ExtractionError(f"no board: {err}") from None
-            dets[i] = None
-    det = dets[c]
+    gray = frames[int(st.image_bag_ns[c])]
+    try:
+        det = detect_board(gray, ctx.camera, ctx.board, ctx.eo.detector_flags)
+    except ExtractionError as err:
+        raise ExtractionError(f"no board: {err}") from None
     if det.reproj_rms_px > ctx.eo.max_reproj_px:
         raise ExtractionError(f"no board: corner reprojection RMS {det.reproj_rms_px:.2f} px > "
                               f"{ctx.eo.max_reproj_px} px")
-    move = stills.corner_motion(det.corners, [None if dets[i] is None else dets[i].corners for i in (c - 1, c + 1)])
+    tracked = [stills.track_corners(gray, det.corners, frames[int(st.image_bag_ns[i])]) for i in (c - 1, c + 1)]
+    move = stills.corner_motion(det.corners, tracked)
     if move > o.still_px:
-        raise ExtractionError(f"corners moving: {move:.2f} px to a neighbouring frame > {o.still_px} px")
+        raise ExtractionError(f"corners moving: {move:.2f} px RMS to a neighbouring frame > {o.still_px} px")
     k = int(ctx.pairing.scan[c])
     if k < 0:
         raise ExtractionError(f"no scan: nearest scan {1000 * ctx.pairing.dt_s[c]:.1f} ms away > tolerance "

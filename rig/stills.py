@@ -2,10 +2,11 @@
 
 A recording is mostly motion and near-duplicates. The picking runs in stages, each a pure function here:
 ``still_runs`` finds runs of frames whose thumbnail barely changes (cheap, every frame); the centre of each run
-is the run's candidate (the others are its near-duplicates); a candidate is still when its board's corners move
-less than ``still_px`` to both neighbouring frames and its scan segment stays put (``scan_segment_shift``);
-``too_close`` drops a pose within ``min_angle_deg`` and ``min_move_m`` of one already kept; ``spread_order``
-chooses up to ``max_poses`` that spread the board normals (``calib_core.uncertainty.normal_spread_deg``).
+is the run's candidate (the others are its near-duplicates); a candidate is still when its board's corners,
+detected in it and tracked into both neighbouring frames (``track_corners``), move less than ``still_px``
+(``corner_motion``) and its scan segment stays put (``scan_segment_shift``); ``too_close`` drops a pose within
+``min_angle_deg`` and ``min_move_m`` of one already kept; ``spread_order`` chooses up to ``max_poses`` that
+spread the board normals (``calib_core.uncertainty.normal_spread_deg``).
 Pixels, metres, degrees at the option edges; radians and metres inside.
 """
 
@@ -26,7 +27,7 @@ class PickOptions:
 
     Attributes:
         max_poses: at most this many poses are kept (chosen to spread the board normals).
-        still_px: a candidate's corners may move at most this much (max over corners, pixels) to each neighbour.
+        still_px: a candidate's corners may move at most this much (RMS over corners, pixels) to each neighbour.
         quiet_grey: a frame is quiet when its thumbnail changes by at most this (mean absolute grey level) from
             the previous and to the next frame; 0 = automatic (3 x the 5th percentile of the changes + 0.2).
         min_run: fewest consecutive quiet frames that make a still run.
@@ -81,14 +82,28 @@ def still_runs(motion: np.ndarray, threshold: float, min_run: int) -> list[tuple
 
 
 def corner_motion(corners: np.ndarray, neighbours: list[np.ndarray | None]) -> float:
-    """Largest corner displacement (pixels) from ``corners`` (N,2) to any neighbour's corners (inf when a
-    neighbour's board was not found)."""
+    """RMS corner displacement (pixels) from ``corners`` (N,2) to a neighbour's corners, the largest over the
+    neighbours (inf when a neighbour's board was not found). RMS, not max: a moving board moves every corner,
+    while detector jitter moves single corners by a few tenths of a pixel."""
     out = 0.0
     for c in neighbours:
         if c is None or c.shape != corners.shape:
             return math.inf
-        out = max(out, float(np.max(np.linalg.norm(c - corners, axis=1))))
+        out = max(out, float(np.sqrt(np.mean(np.sum((c - corners) ** 2, axis=1)))))
     return out
+
+
+def track_corners(gray: np.ndarray, corners: np.ndarray, other: np.ndarray) -> np.ndarray | None:
+    """Where the corners (N,2) of ``gray`` are in the frame ``other`` (pyramidal Lucas-Kanade,
+    ``cv2.calcOpticalFlowPyrLK``, sub-pixel); None when a corner is lost."""
+    import cv2
+
+    p0 = np.ascontiguousarray(corners, np.float32).reshape(-1, 1, 2)
+    p1, status, _ = cv2.calcOpticalFlowPyrLK(gray, other, p0, None, winSize=(15, 15), maxLevel=3,
+                                             criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-3))
+    if p1 is None or not np.all(status):
+        return None
+    return p1.reshape(-1, 2).astype(float)
 
 
 def scan_segment_shift(bearing_step: float, seg_a: tuple[np.ndarray, np.ndarray],
