@@ -112,8 +112,9 @@ def _sync(st: Streams, motion: np.ndarray, opts: stills.PickOptions) -> tuple[ti
         if est.reliable:
             sync.update(offset_s=est.offset_s, offset_source="estimated")
         else:
-            sync["offset_source"] = (f"given; the estimate {1000 * est.offset_s:.1f} ms is unreliable "
-                                     f"(peak correlation {est.correlation:.2f})")
+            sync["offset_source"] = (f"given; the estimate {1000 * est.offset_s:.1f} ms is unreliable: peak "
+                                     f"correlation {est.correlation:.2f}, halves {1000 * est.halves_s[0]:.1f} and "
+                                     f"{1000 * est.halves_s[1]:.1f} ms")
     pairing = timesync.pair_nearest(st.image_ns, st.scan_ns, opts.sync_tol_s, sync["offset_s"])
     sync["tol_s"] = pairing.tol_s
     return pairing, sync
@@ -147,12 +148,11 @@ class _Ctx:
     pairing: timesync.Pairing
 
 
-def check_candidate(ctx: _Ctx, run: tuple[int, int], frames: dict[int, np.ndarray]):
-    """The centre frame of a still run: (BoardObservation, pose record) or raises ExtractionError with the
-    skip reason (``category: detail``)."""
+def check_candidate(ctx: _Ctx, run: tuple[int, int], c: int, frames: dict[int, np.ndarray]):
+    """Frame ``c`` of a still run: (BoardObservation, pose record) or raises ExtractionError with the skip reason
+    (``category: detail``)."""
     st, o = ctx.st, ctx.opts
     a, b = run
-    c = (a + b - 1) // 2
     gray = frames[int(st.image_bag_ns[c])]
     try:
         det = detect_board(gray, ctx.camera, ctx.board, ctx.eo.detector_flags)
@@ -173,7 +173,7 @@ def check_candidate(ctx: _Ctx, run: tuple[int, int], frames: dict[int, np.ndarra
         scan, idx = _segment(st, k, det.T_cam_board, ctx.board, ctx.eo)
     except ExtractionError as err:
         raise ExtractionError(f"no segment: {err}") from None
-    h = max(1, (b - a) // 4)
+    h = max(1, min(c - a, b - 1 - c, (b - a) // 4))
     shift_m, shift_beams = 0.0, 0.0
     step = float(st.bearing[1] - st.bearing[0]) if len(st.bearing) > 1 else 1.0
     near = timesync.pair_nearest(st.image_ns[[c - h, c + h]], st.scan_ns, math.inf, ctx.pairing.offset_s).scan
@@ -200,13 +200,16 @@ def check_candidate(ctx: _Ctx, run: tuple[int, int], frames: dict[int, np.ndarra
 def _log_runs(log: list[dict], runs, motion, thr) -> None:
     for i, f in enumerate(log):
         f["reason"] = f"moving: thumbnail change {np.nan_to_num(motion[i]):.2f} (or to the next frame) > {thr:.2f}" \
-            " grey levels"
-    for a, b in runs:
-        c = (a + b - 1) // 2
-        for i in range(a, b):
-            log[i]["reason"] = f"duplicate: still run {a}-{b - 1}, frame {c} stands for it"
+            " grey levels (99.9th percentile)"
+    for run in runs:
+        tries = ", ".join(map(str, stills.run_tries(run)))
+        for i in range(*run):
+            log[i]["reason"] = f"duplicate: still run {run[0]}-{run[1] - 1}, frames {tries} stand for it"
     if len(log):
         log[0]["reason"] = log[-1]["reason"] = "moving: no neighbour on one side (first or last frame)"
+
+
+RETRY = ("corners moving", "scan moving")  # reasons after which the next frame of the run is tried
 
 
 def pick(ctx: _Ctx, motion: np.ndarray) -> tuple[list[dict], list[dict], list[BoardObservation], float]:
@@ -217,19 +220,22 @@ def pick(ctx: _Ctx, motion: np.ndarray) -> tuple[list[dict], list[dict], list[Bo
     log = [{"frame": i, "stamp_ns": int(t), "kept": False, "pose": None, "reason": ""}
            for i, t in enumerate(st.image_ns)]
     _log_runs(log, runs, motion, thr)
-    need = [int(st.image_bag_ns[i]) for a, b in runs for i in range((a + b - 1) // 2 - 1, (a + b - 1) // 2 + 2)]
+    need = [int(st.image_bag_ns[i]) for r in runs for c in stills.run_tries(r) for i in (c - 1, c, c + 1)]
     frames = _fetch(ctx.src, ctx.image_topic, need)
     cands, boards = [], []
     for run in runs:
-        c = (run[0] + run[1] - 1) // 2
-        try:
-            obs, rec = check_candidate(ctx, run, frames)
-        except ExtractionError as err:
-            log[c]["reason"] = str(err)
-            continue
-        rec["image"] = frames[int(st.image_bag_ns[c])]
-        cands.append(rec)
-        boards.append(obs)
+        for c in stills.run_tries(run):
+            try:
+                obs, rec = check_candidate(ctx, run, c, frames)
+            except ExtractionError as err:
+                log[c]["reason"] = str(err)
+                if str(err).startswith(RETRY):
+                    continue
+                break
+            rec["image"] = frames[int(st.image_bag_ns[c])]
+            cands.append(rec)
+            boards.append(obs)
+            break
     kept_T: list[tuple[int, np.ndarray]] = []
     uniq = []
     for i in np.argsort([r["corner_motion_px"] for r in cands], kind="stable"):

@@ -28,8 +28,9 @@ class PickOptions:
     Attributes:
         max_poses: at most this many poses are kept (chosen to spread the board normals).
         still_px: a candidate's corners may move at most this much (RMS over corners, pixels) to each neighbour.
-        quiet_grey: a frame is quiet when its thumbnail changes by at most this (mean absolute grey level) from
-            the previous and to the next frame; 0 = automatic (3 x the 5th percentile of the changes + 0.2).
+        quiet_grey: a frame is quiet when its thumbnail changes by at most this (99.9th percentile of the absolute
+            grey-level differences, ``timesync.image_motion``) from the previous and to the next frame;
+            0 = automatic (3 x the 5th percentile of the changes + 0.2).
         min_run: fewest consecutive quiet frames that make a still run.
         scan_still_m: the board segment of the paired scan and of the scans at the run's ends may differ by at
             most this median range change (metres) ...
@@ -79,6 +80,17 @@ def still_runs(motion: np.ndarray, threshold: float, min_run: int) -> list[tuple
     edges = np.diff(np.concatenate([[0], quiet.astype(np.int8), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     return [(int(a), int(b)) for a, b in zip(starts, ends, strict=True) if b - a >= max(1, min_run)]
+
+
+def run_tries(run: tuple[int, int]) -> list[int]:
+    """Frames of a still run ``[a, b)`` tried in turn as its candidate: the centre, then the quarter points (a run
+    can hold a slow move between two rests; one of them is then still)."""
+    a, b = run
+    out = []
+    for c in ((a + b - 1) // 2, a + (b - a) // 4, a + (3 * (b - a)) // 4):
+        if a <= c < b and c not in out:
+            out.append(c)
+    return out
 
 
 def corner_motion(corners: np.ndarray, neighbours: list[np.ndarray | None]) -> float:

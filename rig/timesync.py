@@ -52,12 +52,17 @@ def pair_nearest(image_ns: np.ndarray, scan_ns: np.ndarray, tol_s: float | None 
     return Pairing(np.where(ok, best, -1), dt, float(tol_s), float(offset_s))
 
 
+IMAGE_MOTION_PERCENTILE = 99.9  # a board filling a small part of the image still dominates this percentile
+
+
 def image_motion(thumbs: np.ndarray) -> np.ndarray:
-    """(N,) mean absolute grey-level change of each thumbnail from the previous one (NaN for the first)."""
-    th = np.asarray(thumbs, np.float32)
-    out = np.full(len(th), np.nan)
-    if len(th) > 1:
-        out[1:] = np.abs(np.diff(th, axis=0)).reshape(len(th) - 1, -1).mean(axis=1)
+    """(N,) change of each thumbnail from the previous one (NaN for the first): the ``IMAGE_MOTION_PERCENTILE``
+    percentile of the absolute grey-level differences, so a small moving board is not averaged away by a still
+    background."""
+    out = np.full(len(thumbs), np.nan)
+    for i in range(1, len(thumbs)):  # one frame at a time: a float copy of every thumbnail would not be small
+        d = np.abs(thumbs[i].astype(np.float32) - thumbs[i - 1].astype(np.float32))
+        out[i] = float(np.percentile(d, IMAGE_MOTION_PERCENTILE))
     return out
 
 
@@ -76,13 +81,15 @@ def scan_motion(ranges: np.ndarray, clip_m: float = 0.5) -> np.ndarray:
 
 @dataclass(frozen=True)
 class OffsetEstimate:
-    """``offset_s`` (scan clock minus image clock), ``correlation`` at the peak (Pearson, -1..1), ``reliable``
-    (peak correlation >= 0.5 and not at the edge of the searched window), ``window_s`` the half-width searched."""
+    """``offset_s`` (scan clock minus image clock), ``correlation`` at the peak (Pearson, -1..1), ``halves_s`` the
+    estimates from the first and the second half of the recording, ``reliable`` (peak correlation >= 0.5, peak
+    not at the edge of the +-``window_s`` searched, and the halves within ``consistency_s`` of each other)."""
 
     offset_s: float
     correlation: float
     reliable: bool
     window_s: float
+    halves_s: tuple[float, float] = (math.nan, math.nan)
 
 
 def _midpoints(t_ns: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -91,33 +98,46 @@ def _midpoints(t_ns: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return (0.5 * (t[1:] + t[:-1]))[ok], np.asarray(m[1:], float)[ok]
 
 
-def estimate_offset(image_ns: np.ndarray, image_m: np.ndarray, scan_ns: np.ndarray, scan_m: np.ndarray,
-                    max_offset_s: float = 0.5, step_s: float = 0.002) -> OffsetEstimate:
-    """Constant clock offset between the streams from their motion signals (``image_motion``, ``scan_motion``):
-    the lag, within +-``max_offset_s``, that maximises the Pearson correlation of the image motion at ``t`` with
-    the scan motion at ``t + lag`` (both resampled every ``step_s``; parabolic refinement of the peak). Needs the
-    board to move and rest: a recording without still stretches gives a flat, unreliable peak."""
-    ti, mi = _midpoints(image_ns, np.asarray(image_m, float))
-    ts, ms = _midpoints(scan_ns, np.asarray(scan_m, float))
-    if len(ti) < 4 or len(ts) < 4:
-        return OffsetEstimate(0.0, math.nan, False, max_offset_s)
-    lags = np.arange(-max_offset_s, max_offset_s + step_s / 2, step_s)
-    lo, hi = max(ti[0], ts[0] + max_offset_s), min(ti[-1], ts[-1] - max_offset_s)
-    if hi - lo < 10 * step_s:
-        return OffsetEstimate(0.0, math.nan, False, max_offset_s)
-    grid = np.arange(lo, hi, step_s)
-    a = np.interp(grid, ti, mi)
-    a = (a - a.mean()) / (a.std() + 1e-12)
-    corr = np.empty(len(lags))
-    for k, lag in enumerate(lags):  # loop over lags (hundreds), vectorised over the signal
-        b = np.interp(grid + lag, ts, ms)
-        corr[k] = float(np.mean(a * (b - b.mean())) / (b.std() + 1e-12))
+def _pearson(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = a - a.mean(), b - b.mean()
+    return float(np.mean(a * b) / (a.std() * b.std() + 1e-12))
+
+
+def _peak(lags: np.ndarray, corr: np.ndarray) -> tuple[float, int]:
+    """Lag of the correlation maximum, refined by a parabola through its neighbours; and its index."""
     k = int(np.argmax(corr))
     off = float(lags[k])
     if 0 < k < len(lags) - 1:
         c0, c1, c2 = corr[k - 1], corr[k], corr[k + 1]
         den = c0 - 2 * c1 + c2
         if den < 0:
-            off += float(0.5 * (c0 - c2) / den * step_s)
-    reliable = bool(corr[k] >= 0.5 and 0 < k < len(lags) - 1)
-    return OffsetEstimate(off, float(corr[k]), reliable, max_offset_s)
+            off += float(0.5 * (c0 - c2) / den * (lags[1] - lags[0]))
+    return off, k
+
+
+def estimate_offset(image_ns: np.ndarray, image_m: np.ndarray, scan_ns: np.ndarray, scan_m: np.ndarray,
+                    max_offset_s: float = 0.5, step_s: float = 0.002, consistency_s: float = 0.01
+                    ) -> OffsetEstimate:
+    """Constant clock offset between the streams from their motion signals (``image_motion``, ``scan_motion``):
+    the lag, within +-``max_offset_s``, that maximises the Pearson correlation of the image motion at ``t`` with
+    the scan motion at ``t + lag`` (both resampled every ``step_s``; parabolic refinement of the peak). Needs the
+    board to move and rest; smooth moves give a broad peak, which the split-half test flags as unreliable."""
+    ti, mi = _midpoints(image_ns, np.asarray(image_m, float))
+    ts, ms = _midpoints(scan_ns, np.asarray(scan_m, float))
+    lags = np.arange(-max_offset_s, max_offset_s + step_s / 2, step_s)
+    if len(ti) < 4 or len(ts) < 4:
+        return OffsetEstimate(0.0, math.nan, False, max_offset_s)
+    lo, hi = max(ti[0], ts[0] + max_offset_s), min(ti[-1], ts[-1] - max_offset_s)
+    if hi - lo < 20 * step_s:
+        return OffsetEstimate(0.0, math.nan, False, max_offset_s)
+    grid = np.arange(lo, hi, step_s)
+    a = np.interp(grid, ti, mi)
+    half = len(grid) // 2
+    corr = np.empty((3, len(lags)))
+    for k, lag in enumerate(lags):  # loop over lags (hundreds), vectorised over the signal
+        b = np.interp(grid + lag, ts, ms)
+        corr[:, k] = _pearson(a, b), _pearson(a[:half], b[:half]), _pearson(a[half:], b[half:])
+    off, k = _peak(lags, corr[0])
+    h1, h2 = _peak(lags, corr[1])[0], _peak(lags, corr[2])[0]
+    reliable = bool(corr[0, k] >= 0.5 and 0 < k < len(lags) - 1 and abs(h1 - h2) <= consistency_s)
+    return OffsetEstimate(off, float(corr[0, k]), reliable, max_offset_s, (h1, h2))

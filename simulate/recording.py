@@ -38,6 +38,7 @@ class RecordingOptions:
         fps, scan_hz: image and scan rates (Hz).
         still_s, move_s: how long the board rests at each pose and travels between poses (s).
         time_offset_s: scan stamps = true time + this (a lidar clock ahead of the camera's when > 0).
+        eased: moves start and stop at zero speed (smoothstep); False: constant speed, abrupt start and stop.
         image_format: ``raw`` (sensor_msgs/Image mono8), ``png`` or ``jpeg`` (CompressedImage).
         ros: 1 (``.bag``) or 2 (a rosbag2 folder); storage: ``sqlite3`` or ``mcap`` (ROS 2 only).
         image_topic, scan_topic, info_topic: topic names.
@@ -50,6 +51,7 @@ class RecordingOptions:
     still_s: float = 1.0
     move_s: float = 1.0
     time_offset_s: float = 0.0
+    eased: bool = True
     image_format: str = "raw"
     ros: int = 1
     storage: str = "sqlite3"
@@ -74,8 +76,9 @@ class RecordingTruth:
     n_scans: int
 
 
-def board_trajectory(T_lidar_board: np.ndarray, still_s: float, move_s: float):
-    """(duration_s, pose(t) -> 4x4, still (N,2)): rest at each pose, eased moves between them."""
+def board_trajectory(T_lidar_board: np.ndarray, still_s: float, move_s: float, eased: bool = True):
+    """(duration_s, pose(t) -> 4x4, still (N,2)): rest at each pose, moves between them (smoothstep-eased or at
+    constant speed)."""
     n = len(T_lidar_board)
     period = still_s + move_s
     still = np.array([[k * period, k * period + still_s] for k in range(n)])
@@ -87,7 +90,7 @@ def board_trajectory(T_lidar_board: np.ndarray, still_s: float, move_s: float):
         if u <= 0 or k == n - 1:
             return T_lidar_board[k]
         u = min(u, 1.0)
-        s = u * u * (3 - 2 * u)
+        s = u * u * (3 - 2 * u) if eased else u
         T = np.eye(4)
         T[:3, :3] = Slerp([0, 1], rots[k:k + 2])([s]).as_matrix()[0]
         T[:3, 3] = (1 - s) * T_lidar_board[k, :3, 3] + s * T_lidar_board[k + 1, :3, 3]
@@ -212,7 +215,7 @@ def write_recording_bag(options: SimOptions, seed: int, path, rec: RecordingOpti
         return bool(cv2.findChessboardCornersSB(img, (cols, rows), flags=cv2.CALIB_CB_ACCURACY)[0])
 
     scene = sample_scene(o, rng_geo, accept=accept)
-    duration, pose, still = board_trajectory(scene.T_lidar_board, rec.still_s, rec.move_s)
+    duration, pose, still = board_trajectory(scene.T_lidar_board, rec.still_s, rec.move_s, rec.eased)
     T_cam_lidar = invert_T(scene.T_lidar_cam)
     bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
     rng_room = np.random.default_rng(np.random.SeedSequence(entropy=int(seed), spawn_key=(7919, int(trial))))

@@ -46,7 +46,7 @@ class Converted:
 def recording(request, tmp_path_factory):
     """One bag flavour written by the simulator and converted by ``lidarcam bag --estimate-offset``."""
     root = tmp_path_factory.mktemp(request.param)
-    rec = RecordingOptions(fps=15.0, scan_hz=20.0, still_s=0.8, move_s=0.6, time_offset_s=OFFSET_S,
+    rec = RecordingOptions(fps=15.0, scan_hz=20.0, still_s=0.8, move_s=0.6, time_offset_s=OFFSET_S, eased=False,
                            **KINDS[request.param])
     bag = root / ("rec.bag" if rec.ros == 1 else "rec")
     truth = write_recording_bag(SIM, 3, bag, rec)
