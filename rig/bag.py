@@ -180,8 +180,11 @@ def read_camera_info(src: BagSource, topic: str) -> CameraModel:
         if not (K[0, 0] > 0 and K[1, 1] > 0):
             raise BagError(f"camera-info topic {topic!r}: K is zero (uncalibrated camera); give --camera "
                            "camera.yaml", file=src.path)
-        if D.size not in (0, 4, 5, 8, 12, 14) or not np.any(D):
-            D = D[:5] if D.size >= 5 and np.any(D) else np.zeros(0)
+        if not np.any(D):
+            D = np.zeros(0)
+        elif D.size not in (4, 5, 8, 12, 14):
+            raise BagError(f"camera-info topic {topic!r}: {D.size} distortion coefficients; OpenCV takes 4, 5, 8, "
+                           "12 or 14; give --camera camera.yaml", file=src.path)
         return CameraModel(int(msg.width), int(msg.height), K, D)
     raise BagError(f"camera-info topic {topic!r} has no message", file=src.path)
 

@@ -120,13 +120,19 @@ def _sync(st: Streams, motion: np.ndarray, opts: stills.PickOptions) -> tuple[ti
     return pairing, sync
 
 
-def _fetch(src: BagSource, topic: str, bag_ns: list[int]) -> dict[int, np.ndarray]:
-    """Pass two: the full-resolution frames at the given bag times."""
+def _fetch(src: BagSource, topic: str, st: Streams, frames: list[int]) -> dict[int, np.ndarray]:
+    """Pass two: the full-resolution images of the given frames (indices into ``st``), read again by bag time
+    and matched by header stamp (two messages may share a bag time)."""
     out = {}
-    for t in sorted(set(bag_ns)):
+    for i in sorted(set(frames)):
+        t = int(st.image_bag_ns[i])
         for fr in iter_images(src, topic, start=t, stop=t + 1):
-            out[t] = fr.gray
-            break
+            if fr.stamp_ns == st.image_ns[i]:
+                out[i] = fr.gray
+                break
+        else:
+            raise BagError(f"image topic {topic!r}: the frame stamped {st.image_ns[i]} ns is gone on the second "
+                           "read", file=src.path)
     return out
 
 
@@ -150,10 +156,10 @@ class _Ctx:
 
 def check_candidate(ctx: _Ctx, run: tuple[int, int], c: int, frames: dict[int, np.ndarray]):
     """Frame ``c`` of a still run: (BoardObservation, pose record) or raises ExtractionError with the skip reason
-    (``category: detail``)."""
+    (``category: detail``). ``frames``: full-resolution images by frame index."""
     st, o = ctx.st, ctx.opts
     a, b = run
-    gray = frames[int(st.image_bag_ns[c])]
+    gray = frames[c]
     try:
         det = detect_board(gray, ctx.camera, ctx.board, ctx.eo.detector_flags)
     except ExtractionError as err:
@@ -161,7 +167,7 @@ def check_candidate(ctx: _Ctx, run: tuple[int, int], c: int, frames: dict[int, n
     if det.reproj_rms_px > ctx.eo.max_reproj_px:
         raise ExtractionError(f"no board: corner reprojection RMS {det.reproj_rms_px:.2f} px > "
                               f"{ctx.eo.max_reproj_px} px")
-    tracked = [stills.track_corners(gray, det.corners, frames[int(st.image_bag_ns[i])]) for i in (c - 1, c + 1)]
+    tracked = [stills.track_corners(gray, det.corners, frames[i]) for i in (c - 1, c + 1)]
     move = stills.corner_motion(det.corners, tracked)
     if move > o.still_px:
         raise ExtractionError(f"corners moving: {move:.2f} px RMS to a neighbouring frame > {o.still_px} px")
@@ -220,8 +226,8 @@ def pick(ctx: _Ctx, motion: np.ndarray) -> tuple[list[dict], list[dict], list[Bo
     log = [{"frame": i, "stamp_ns": int(t), "kept": False, "pose": None, "reason": ""}
            for i, t in enumerate(st.image_ns)]
     _log_runs(log, runs, motion, thr)
-    need = [int(st.image_bag_ns[i]) for r in runs for c in stills.run_tries(r) for i in (c - 1, c, c + 1)]
-    frames = _fetch(ctx.src, ctx.image_topic, need)
+    need = [i for r in runs for c in stills.run_tries(r) for i in (c - 1, c, c + 1)]
+    frames = _fetch(ctx.src, ctx.image_topic, st, need)
     cands, boards = [], []
     for run in runs:
         for c in stills.run_tries(run):
@@ -232,7 +238,7 @@ def pick(ctx: _Ctx, motion: np.ndarray) -> tuple[list[dict], list[dict], list[Bo
                 if str(err).startswith(RETRY):
                     continue
                 break
-            rec["image"] = frames[int(st.image_bag_ns[c])]
+            rec["image"] = frames[c]
             cands.append(rec)
             boards.append(obs)
             break

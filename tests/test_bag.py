@@ -171,3 +171,36 @@ def test_offset_estimate_recovers_a_shift_of_a_synthetic_signal():
         est = timesync.estimate_offset(t_img.astype(np.int64), np.r_[np.nan, mi], t_scan.astype(np.int64),
                                        np.r_[np.nan, ms])
         assert est.reliable and abs(est.offset_s - off) < 0.003, (off, est)
+
+
+# ------------------------------------------------------------------------------------------------ opt-in: memory
+_PEAK_RSS = """
+import resource, sys
+from rig.frombag import bag_to_dataset
+from rig.stills import PickOptions
+conv = bag_to_dataset(sys.argv[1], sys.argv[2], "/camera/image_raw", "/scan", sys.argv[3],
+                      camera_info_topic="/camera/camera_info", opts=PickOptions())
+print(len(conv.poses), conv.n_images, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+"""
+
+
+@pytest.mark.slow
+def test_a_2_gib_bag_is_read_in_under_1_gib_of_memory(tmp_path):
+    """1280x1024 raw mono8 images at 30 fps, long rests: about 2 GiB of bag; the conversion's peak resident
+    memory (a fresh process, ``ru_maxrss``) must stay under 1 GiB."""
+    import subprocess
+    import sys
+
+    sim = SimOptions(n_boards=16, cam_width=1280, cam_height=1024, focal_px=1000.0, render_supersample=1,
+                     noise_mm=10.0, dist_min_m=2.0, dist_max_m=4.0)
+    rec = RecordingOptions(fps=30.0, scan_hz=40.0, still_s=3.0, move_s=0.5, ros=1, image_format="raw")
+    truth = write_recording_bag(sim, 5, tmp_path / "big.bag", rec)
+    size = (tmp_path / "big.bag").stat().st_size
+    assert size > 2 * 2**30 * 0.95, f"bag is only {size / 2**30:.2f} GiB"
+    out = subprocess.run([sys.executable, "-c", _PEAK_RSS, str(tmp_path / "big.bag"), str(tmp_path / "ds"),
+                          str(tmp_path / "big.board.yaml")], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[1])
+    n_poses, n_images, rss_kib = (int(v) for v in out.stdout.split()[-3:])
+    print(f"bag {size / 2**30:.2f} GiB, {n_images} images, {n_poses} poses, peak RSS {rss_kib / 2**20:.2f} GiB")
+    assert n_images == truth.n_images and n_poses == len(truth.still)
+    assert rss_kib < 2**20, f"peak resident memory {rss_kib / 2**20:.2f} GiB"
