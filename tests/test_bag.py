@@ -204,3 +204,35 @@ def test_a_2_gib_bag_is_read_in_under_1_gib_of_memory(tmp_path):
     print(f"bag {size / 2**30:.2f} GiB, {n_images} images, {n_poses} poses, peak RSS {rss_kib / 2**20:.2f} GiB")
     assert n_images == truth.n_images and n_poses == len(truth.still)
     assert rss_kib < 2**20, f"peak resident memory {rss_kib / 2**20:.2f} GiB"
+
+
+def _board_with_normal(n, t=(0.0, 0.0, 3.0)):
+    from calib_core.observations import BoardObservation
+    from calib_core.transforms import make_T
+
+    n = np.asarray(n, float) / np.linalg.norm(n)
+    x = np.cross([0.0, 1.0, 0.0], n)
+    x /= np.linalg.norm(x)
+    R = np.column_stack([x, np.cross(n, x), n])
+    outline = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    return BoardObservation(make_T(R, np.asarray(t)), outline, np.array([[3.0, 0.1], [3.0, -0.1], [3.0, 0.0]]))
+
+
+def test_spread_order_prefers_the_board_that_leaves_the_plane_of_normals():
+    # five normals in the x-z plane (degenerate) and one tilted up: the tilted one must be among the first three
+    flat = [_board_with_normal([np.sin(a), 0.0, np.cos(a)]) for a in np.radians([-30, -15, 0, 15, 30])]
+    up = _board_with_normal([0.0, np.sin(0.4), np.cos(0.4)])
+    order, spread = stills.spread_order(flat + [up], np.zeros(6), 3)
+    assert 5 in order and spread > 5.0
+    order_flat, spread_flat = stills.spread_order(flat, np.zeros(5), 5)
+    assert spread_flat < 1e-6 and sorted(order_flat) == list(range(5))
+
+
+def test_too_close_needs_both_small_rotation_and_small_move():
+    opts = stills.PickOptions(min_angle_deg=5.0, min_move_m=0.1)
+    a = _board_with_normal([0, 0, 1]).T_cam_board
+    b = _board_with_normal([np.sin(0.03), 0, np.cos(0.03)], t=(0.05, 0.0, 3.0)).T_cam_board  # 1.7 deg, ~5 cm
+    c = _board_with_normal([0, 0, 1], t=(0.5, 0.0, 3.0)).T_cam_board                         # same angle, 50 cm
+    centre = np.array([0.5, 0.5])
+    assert stills.too_close(b, [(7, a)], centre, opts)[0] == 7
+    assert stills.too_close(c, [(7, a)], centre, opts) is None
