@@ -56,8 +56,9 @@ def add_parsers(subparsers) -> None:
     g.add_argument("--quiet-grey", type=float, default=0.0, metavar="G",
                    help="thumbnail change under which a frame is quiet, grey levels (default: automatic)")
     g.add_argument("--min-run", type=int, default=3, help="fewest quiet frames in a still run (default: %(default)s)")
-    g.add_argument("--scan-still", type=float, default=0.01, metavar="M",
-                   help="largest median shift of the board segment within a still run (default: %(default)s m)")
+    g.add_argument("--scan-still", type=float, default=0.0, metavar="M",
+                   help="largest median shift of the board segment within a still run, metres (default: "
+                        "automatic, 4 sigma of the median at --range-sigma)")
     g.add_argument("--min-angle", type=float, default=5.0, metavar="DEG",
                    help="poses closer than this in rotation ... (default: %(default)s deg)")
     g.add_argument("--min-move", type=float, default=0.10, metavar="M",

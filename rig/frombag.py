@@ -154,6 +154,34 @@ class _Ctx:
     pairing: timesync.Pairing
 
 
+def _scan_still(ctx: _Ctx, run: tuple[int, int], c: int, k: int, bearing: np.ndarray, rng: np.ndarray,
+                T_cam_board: np.ndarray) -> float:
+    """Largest median range change (metres) of the board segment (``bearing``, ``rng`` of scan ``k``) against the
+    scans paired with the frames a quarter of the run before and after frame ``c``; raises ExtractionError
+    (``scan moving``) beyond ``scan_still_m`` (or its automatic value) or ``scan_still_beams``."""
+    st, o = ctx.st, ctx.opts
+    a, b = run
+    h = max(1, min(c - a, b - 1 - c, (b - a) // 4))
+    step = float(st.bearing[1] - st.bearing[0]) if len(st.bearing) > 1 else 1.0
+    near = timesync.pair_nearest(st.image_ns[[c - h, c + h]], st.scan_ns, math.inf, ctx.pairing.offset_s).scan
+    worst = (0.0, 0.0, 0.0)  # (median shift, end shift in beams, tolerance)
+    for j in near:
+        if j == k:
+            continue
+        try:
+            s2, i2 = _segment(st, int(j), T_cam_board, ctx.board, ctx.eo)
+        except ExtractionError:
+            raise ExtractionError(f"scan moving: no board segment in the scan {abs(j - k)} scans away") from None
+        dm, db, n = stills.scan_segment_shift(step, (bearing, rng), (s2.bearing[i2], s2.range[i2]))
+        tol = o.scan_still_m if o.scan_still_m > 0 else stills.median_shift_tolerance(ctx.eo.range_sigma_m, n)
+        dm = dm if math.isfinite(dm) else math.inf
+        if dm > tol or db > o.scan_still_beams:
+            raise ExtractionError(f"scan moving: board segment shifted {1000 * dm:.1f} mm (> {1000 * tol:.1f} mm) "
+                                  f"/ {db:.0f} beams (> {o.scan_still_beams}) {abs(j - k)} scans away")
+        worst = max(worst, (dm, db, tol))
+    return worst[0]
+
+
 def check_candidate(ctx: _Ctx, run: tuple[int, int], c: int, frames: dict[int, np.ndarray]):
     """Frame ``c`` of a still run: (BoardObservation, pose record) or raises ExtractionError with the skip reason
     (``category: detail``). ``frames``: full-resolution images by frame index."""
@@ -179,23 +207,7 @@ def check_candidate(ctx: _Ctx, run: tuple[int, int], c: int, frames: dict[int, n
         scan, idx = _segment(st, k, det.T_cam_board, ctx.board, ctx.eo)
     except ExtractionError as err:
         raise ExtractionError(f"no segment: {err}") from None
-    h = max(1, min(c - a, b - 1 - c, (b - a) // 4))
-    shift_m, shift_beams = 0.0, 0.0
-    step = float(st.bearing[1] - st.bearing[0]) if len(st.bearing) > 1 else 1.0
-    near = timesync.pair_nearest(st.image_ns[[c - h, c + h]], st.scan_ns, math.inf, ctx.pairing.offset_s).scan
-    for j in near:
-        if j == k:
-            continue
-        try:
-            s2, i2 = _segment(st, int(j), det.T_cam_board, ctx.board, ctx.eo)
-        except ExtractionError:
-            raise ExtractionError(f"scan moving: no board segment in the scan {abs(j - k)} scans away") from None
-        dm, db = stills.scan_segment_shift(step, (scan.bearing[idx], scan.range[idx]),
-                                           (s2.bearing[i2], s2.range[i2]))
-        shift_m, shift_beams = max(shift_m, dm if math.isfinite(dm) else math.inf), max(shift_beams, db)
-    if shift_m > o.scan_still_m or shift_beams > o.scan_still_beams:
-        raise ExtractionError(f"scan moving: board segment shifted {1000 * shift_m:.1f} mm / {shift_beams:.0f} "
-                              f"beams within the run (> {1000 * o.scan_still_m:.0f} mm / {o.scan_still_beams})")
+    shift_m = _scan_still(ctx, run, c, k, scan.bearing[idx], scan.range[idx], det.T_cam_board)
     rec = {"frame": c, "image_stamp_ns": int(st.image_ns[c]), "scan_stamp_ns": int(st.scan_ns[k]), "scan": k,
            "dt_ms": 1000 * float(ctx.pairing.dt_s[c]), "corner_motion_px": move,
            "scan_shift_mm": 1000 * shift_m, "reproj_rms_px": det.reproj_rms_px, "run": [a, b],

@@ -32,8 +32,9 @@ class PickOptions:
             grey-level differences, ``timesync.image_motion``) from the previous and to the next frame;
             0 = automatic (3 x the 5th percentile of the changes + 0.2).
         min_run: fewest consecutive quiet frames that make a still run.
-        scan_still_m: the board segment of the paired scan and of the scans at the run's ends may differ by at
-            most this median range change (metres) ...
+        scan_still_m: the board segment of the paired scan and of the scans a quarter of the run before and after
+            may differ by at most this median range change (metres); 0 = automatic (``median_shift_tolerance``:
+            4 standard deviations of the median of the differences at the extraction's range noise) ...
         scan_still_beams: ... and their segment ends by at most this many beams.
         min_angle_deg, min_move_m: a pose is a duplicate of a kept one when both its rotation differs by less than
             ``min_angle_deg`` and its board centre moved less than ``min_move_m``.
@@ -48,7 +49,7 @@ class PickOptions:
     still_px: float = 0.5
     quiet_grey: float = 0.0
     min_run: int = 3
-    scan_still_m: float = 0.01
+    scan_still_m: float = 0.0
     scan_still_beams: int = 2
     min_angle_deg: float = 5.0
     min_move_m: float = 0.10
@@ -118,19 +119,25 @@ def track_corners(gray: np.ndarray, corners: np.ndarray, other: np.ndarray) -> n
     return p1.reshape(-1, 2).astype(float)
 
 
+def median_shift_tolerance(range_sigma_m: float, n_beams: int) -> float:
+    """4 standard deviations (metres) of the median of ``n_beams`` differences of two ranges with Gaussian noise
+    ``range_sigma_m``: ``4 sqrt(pi/2) sqrt(2) sigma / sqrt(n)``."""
+    return 4.0 * math.sqrt(math.pi) * range_sigma_m / math.sqrt(max(n_beams, 1))
+
+
 def scan_segment_shift(bearing_step: float, seg_a: tuple[np.ndarray, np.ndarray],
-                       seg_b: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
+                       seg_b: tuple[np.ndarray, np.ndarray]) -> tuple[float, float, int]:
     """How far a board segment moved between two scans: (|median range change| over the bearings both segments
-    cover, metres; largest shift of a segment end, in beams). Each segment is (bearing (K,), range (K,)) sorted
-    by bearing; NaN, inf when they share no bearing."""
+    cover, metres; largest shift of a segment end, in beams; number of shared beams). Each segment is
+    (bearing (K,), range (K,)) sorted by bearing; (NaN, inf, 0) when they share no bearing."""
     (ba, ra), (bb, rb) = seg_a, seg_b
     lo, hi = max(ba[0], bb[0]), min(ba[-1], bb[-1])
     ends = max(abs(ba[0] - bb[0]), abs(ba[-1] - bb[-1])) / abs(bearing_step)
     if hi < lo:
-        return math.nan, math.inf
+        return math.nan, math.inf, 0
     grid = ba[(ba >= lo) & (ba <= hi)]
     d = np.interp(grid, bb, rb) - np.interp(grid, ba, ra)
-    return abs(float(np.median(d))), float(ends)
+    return abs(float(np.median(d))), float(ends), len(grid)
 
 
 def pose_difference(Ta: np.ndarray, Tb: np.ndarray, centre_board: np.ndarray) -> tuple[float, float]:

@@ -236,3 +236,15 @@ def test_too_close_needs_both_small_rotation_and_small_move():
     centre = np.array([0.5, 0.5])
     assert stills.too_close(b, [(7, a)], centre, opts)[0] == 7
     assert stills.too_close(c, [(7, a)], centre, opts) is None
+
+
+def test_scan_segment_shift_sees_a_moved_board_and_not_noise():
+    rng = np.random.default_rng(2)
+    step = np.radians(0.25)
+    b = np.arange(-40, 41) * step
+    r = 3.0 / np.cos(b)  # a wall-like board 3 m ahead
+    noisy = [r + rng.normal(0, 0.02, len(b)) for _ in range(2)]
+    dm, db, n = stills.scan_segment_shift(step, (b, noisy[0]), (b, noisy[1]))
+    assert n == len(b) and db == 0 and dm < stills.median_shift_tolerance(0.02, n)
+    dm, db, n = stills.scan_segment_shift(step, (b, noisy[0]), (b + 3 * step, noisy[1] + 0.05))
+    assert db == 3 and dm > stills.median_shift_tolerance(0.02, n)
