@@ -3,8 +3,10 @@ docs/dataset.md layout (camera.yaml, board.yaml, NNN.png, NNN.csv ``bearing_rad,
 (why each frame was kept or skipped, the time sync). ``lidarcam extract`` and ``calibrate`` then run unchanged.
 
 Two passes over the image topic: the first keeps only a thumbnail per frame (the quiet test, the offset
-estimate), the second decodes the few candidate frames again at full resolution. Scans are held as one float32
-row per scan. Memory is bounded by the thumbnails and scans, never by the bag.
+estimate), the second decodes the few candidate frames of one still run at a time again at full resolution
+(read by bag time). Scans are held as one float32 row per scan, a kept candidate as PNG bytes. Memory grows
+with the number of frames and scans (a thumbnail of about 20 kB and a scan row each), never with the bag's
+bytes.
 """
 
 from __future__ import annotations
@@ -238,10 +240,9 @@ def pick(ctx: _Ctx, motion: np.ndarray) -> tuple[list[dict], list[dict], list[Bo
     log = [{"frame": i, "stamp_ns": int(t), "kept": False, "pose": None, "reason": ""}
            for i, t in enumerate(st.image_ns)]
     _log_runs(log, runs, motion, thr)
-    need = [i for r in runs for c in stills.run_tries(r) for i in (c - 1, c, c + 1)]
-    frames = _fetch(ctx.src, ctx.image_topic, st, need)
     cands, boards = [], []
-    for run in runs:
+    for run in runs:  # full-resolution frames are read again one run at a time, and only the kept one is held
+        frames = _fetch(ctx.src, ctx.image_topic, st, [i for c in stills.run_tries(run) for i in (c - 1, c, c + 1)])
         for c in stills.run_tries(run):
             try:
                 obs, rec = check_candidate(ctx, run, c, frames)
@@ -250,7 +251,7 @@ def pick(ctx: _Ctx, motion: np.ndarray) -> tuple[list[dict], list[dict], list[Bo
                 if str(err).startswith(RETRY):
                     continue
                 break
-            rec["image"] = frames[c]
+            rec["png"] = _png(frames[c])
             cands.append(rec)
             boards.append(obs)
             break
@@ -275,9 +276,14 @@ def pick(ctx: _Ctx, motion: np.ndarray) -> tuple[list[dict], list[dict], list[Bo
     return log, [cands[i] for i in chosen], [boards[i] for i in chosen], spread
 
 
-def _write(out: Path, camera: CameraModel, board_path: Path, st: Streams, poses: list[dict]) -> None:
+def _png(gray: np.ndarray) -> bytes:
     import cv2
 
+    ok, buf = cv2.imencode(".png", gray)
+    return buf.tobytes()
+
+
+def _write(out: Path, camera: CameraModel, board_path: Path, st: Streams, poses: list[dict]) -> None:
     from .bag import camera_yaml
 
     out.mkdir(parents=True, exist_ok=True)
@@ -286,7 +292,7 @@ def _write(out: Path, camera: CameraModel, board_path: Path, st: Streams, poses:
     for n, p in enumerate(poses):
         name = f"{n:03d}"
         p["pose"] = name
-        cv2.imwrite(str(out / f"{name}.png"), p.pop("image"))
+        (out / f"{name}.png").write_bytes(p.pop("png"))
         np.savetxt(out / f"{name}.csv", np.column_stack([st.bearing, st.ranges[p["scan"]].astype(float)]),
                    delimiter=",", header="bearing_rad,range_m", comments="", fmt="%.9g")
 
