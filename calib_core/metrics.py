@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .transforms import matrix_to_rotvec
+
 VALID_MAX_ROT_DEG = 8.0
 """A solution is valid when its rotation error is below this (degrees; the paper's threshold)."""
 VALID_MAX_TRANS_M = 0.8
@@ -67,3 +69,20 @@ def sigma_rot_deg(covariance: np.ndarray) -> float:
 def sigma_trans_m(covariance: np.ndarray) -> float:
     """1-sigma translation (metres): root of the trace of the translation block of a 6x6 covariance."""
     return float(np.sqrt(np.trace(np.asarray(covariance, float)[3:, 3:])))
+
+
+def error_vector(T: np.ndarray, T_true: np.ndarray) -> np.ndarray:
+    """The 6-vector error of ``T_lidar_cam`` in a covariance's parameters: the rotation vector of
+    ``R R_true^T`` (rad, lidar frame; left perturbation) then ``t - t_true`` (m)."""
+    T, T_true = np.asarray(T, float), np.asarray(T_true, float)
+    return np.r_[matrix_to_rotvec(T[:3, :3] @ T_true[:3, :3].T), T[:3, 3] - T_true[:3, 3]]
+
+
+def nees(T: np.ndarray, T_true: np.ndarray, covariance: np.ndarray) -> float:
+    """Normalised estimation error squared ``e^T P^-1 e`` of ``T`` with its 6x6 covariance ``P`` (``error_vector``
+    parameters); chi-square with 6 degrees of freedom, mean 6, when ``P`` is honest. NaN if ``P`` is singular."""
+    e = error_vector(T, T_true)
+    try:
+        return float(e @ np.linalg.solve(np.asarray(covariance, float), e))
+    except np.linalg.LinAlgError:
+        return float("nan")

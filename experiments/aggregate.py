@@ -28,7 +28,7 @@ NON_SETTING = set(RESULT_COLUMNS) | {"sweep", "setting_key"}
 TRIAL_TABLE_COLUMNS = ("sweep", "setting_key", "n_boards", "noise_mm", "trial", "method", "ok", "reason", "valid",
                        "e_R_deg", "e_t_m", "n_candidates", "true_among_candidates", "some_candidate_valid",
                        "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds", "crlb_rot_deg",
-                       "crlb_trans_mm", "conditioning")
+                       "crlb_trans_mm", "conditioning", "nees")
 
 
 def wilson_interval(k, n, z: float = Z95) -> tuple[np.ndarray, np.ndarray]:
@@ -91,6 +91,7 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
                      "mean_crlb_trans_mm": _nanmean(g["crlb_trans_mm"]),
                      "median_conditioning": float(g["conditioning"].median()) if g["conditioning"].notna().any()
                      else np.nan,
+                     "mean_nees": _nanmean(g["nees"]) if "nees" in g else np.nan,
                      "top_failure": _top_reason(g.loc[~ok, "reason"])})
     out = pd.DataFrame(rows)
     order = {m: i for i, m in enumerate(method_order(out["method"].unique()))}

@@ -22,16 +22,10 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from calib_core import calibrate
-from calib_core.metrics import is_valid, pose_errors
+from calib_core.metrics import error_vector, is_valid, nees, pose_errors
 from calib_core.refine import refine
-from calib_core.transforms import matrix_to_rotvec
 from calib_core.uncertainty import UncertaintyError, crlb
 from simulate import SimOptions, generate
-
-
-def error_vector(T: np.ndarray, T_true: np.ndarray) -> np.ndarray:
-    """(rotation vector of ``R R_true^T`` (rad, lidar frame), ``t - t_true`` (m)): the covariance's parameters."""
-    return np.r_[matrix_to_rotvec(T[:3, :3] @ T_true[:3, :3].T), T[:3, 3] - T_true[:3, 3]]
 
 
 def run_trial(n_boards: int, noise_mm: float, seed: int, trial: int, small: bool) -> dict:
@@ -50,7 +44,7 @@ def run_trial(n_boards: int, noise_mm: float, seed: int, trial: int, small: bool
     out["valid"] = bool(is_valid(*pose_errors(r.T_lidar_cam, T_true)))
     out["rot2"] = float(e[:3] @ e[:3])
     out["trans2"] = float(e[3:] @ e[3:])
-    out["nees"] = float(e @ np.linalg.solve(r.covariance, e))
+    out["nees"] = nees(r.T_lidar_cam, T_true, r.covariance)
     try:
         b = crlb(obs, noise_mm / 1000.0)
         out["crlb_rot2"] = float(np.trace(b.cov[:3, :3]))

@@ -35,8 +35,10 @@ from calib_core.metrics import (
     VALID_MAX_ROT_DEG,
     VALID_MAX_TRANS_M,
     is_valid,
+    nees,
     pose_errors,
 )
+from calib_core.plugins import load_plugins
 from calib_core.uncertainty import conditioning, crlb
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -45,7 +47,7 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 RESULT_COLUMNS = (
     "trial", "method", "ok", "reason", "e_R_deg", "e_t_m", "valid", "n_candidates", "true_among_candidates",
     "some_candidate_valid", "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds",
-    "crlb_rot_deg", "crlb_trans_mm", "conditioning",
+    "crlb_rot_deg", "crlb_trans_mm", "conditioning", "nees",
 )
 # Columns that legitimately differ between two runs of the same settings (wall time).
 TIMING_COLUMNS = ("seconds",)
@@ -66,7 +68,8 @@ class Cell:
     """One setting of a sweep: simulator options, seed, trial count, methods and metric thresholds.
 
     ``sim`` holds ``simulate.SimOptions`` fields as plain values; ``method_options`` maps a method name to
-    its ``calibrate`` keyword options.
+    its ``calibrate`` keyword options; ``plugins`` are modules every worker imports before running (their
+    methods join the registry; ``calib_core.plugins``). Neither the plugins nor the method list change the key.
     """
 
     sweep: str
@@ -77,6 +80,7 @@ class Cell:
     method_options: dict[str, dict[str, Any]] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=_default_metrics)
     results_dir: str = "results"
+    plugins: tuple[str, ...] = ()
 
     @property
     def key(self) -> str:
@@ -114,7 +118,7 @@ def resolve_methods(names: Iterable[str]) -> tuple[str, ...]:
 def _failure_row(base: dict, method: str, reason: str) -> dict:
     return {**base, "method": method, "ok": False, "reason": reason, "e_R_deg": np.nan, "e_t_m": np.nan,
             "valid": False, "n_candidates": 0, "true_among_candidates": False, "some_candidate_valid": False,
-            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan}
+            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan, "nees": np.nan}
 
 
 def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, Any]:
@@ -122,11 +126,13 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     row: dict[str, Any] = {"ok": bool(result.ok), "reason": result.reason or "", "seconds": float(result.seconds),
                            "n_candidates": result.n_candidates, "e_R_deg": np.nan, "e_t_m": np.nan,
                            "valid": False, "true_among_candidates": False, "some_candidate_valid": False,
-                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan}
+                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "nees": np.nan}
     if result.ok:
         e_R, e_t = pose_errors(result.T_lidar_cam, T_true)
         row.update(e_R_deg=float(e_R), e_t_m=float(e_t),
                    valid=bool(is_valid(e_R, e_t, metrics["max_rot_deg"], metrics["max_trans_m"])))
+        if result.covariance is not None:
+            row["nees"] = nees(result.T_lidar_cam, T_true, result.covariance)
     if result.n_candidates:
         cR, ct = pose_errors(result.candidates, T_true)
         best = int(np.nanargmin(cR)) if np.isfinite(cR).any() else 0
@@ -186,6 +192,7 @@ TrialFn = Callable[[Cell, int, Sequence[str]], list[dict[str, Any]]]
 
 
 def _run_chunk(trial_fn: TrialFn, cell: Cell, trials: Sequence[int], methods: Sequence[str]):
+    load_plugins(cell.plugins)  # a worker process starts with the package's methods only (idempotent)
     rows = []
     for t in trials:
         rows.extend(trial_fn(cell, t, methods))
@@ -246,7 +253,7 @@ def _write_atomic(df: pd.DataFrame, path: Path) -> None:
 def _write_chunk(cell: Cell, trials: Sequence[int], methods: Sequence[str], rows: list[dict]) -> None:
     cols = list(cell.columns()) + list(RESULT_COLUMNS)
     df = pd.DataFrame(rows)
-    df = df[cols + [c for c in df.columns if c not in cols]]
+    df = df.reindex(columns=cols + [c for c in df.columns if c not in cols])  # a column a trial_fn lacks: NaN
     tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
     _write_atomic(df, cell.dir / f"chunk-{min(trials):05d}-{max(trials):05d}-{tag}.csv")
 
@@ -256,7 +263,7 @@ def _prepare(cell: Cell) -> None:
     settings = cell.dir / "settings.json"
     if not settings.exists():
         d = asdict(cell)
-        d.pop("n_trials"), d.pop("methods"), d.pop("results_dir")
+        d.pop("n_trials"), d.pop("methods"), d.pop("results_dir"), d.pop("plugins")
         settings.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
 
 

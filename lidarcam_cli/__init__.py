@@ -14,9 +14,12 @@ def _cmd_methods(args) -> int:
     from calib_core.registry import METHODS as table
 
     w = max(len(n) for n in table)
-    print(f"{'method':<{w}}  min boards  citation / summary")
+    print(f"{'method':<{w}}  min boards  origin / citation / summary / cost")
     for m in table.values():
-        print(f"{m.name:<{w}}  {m.min_boards:>10}  {m.citation}\n{'':<{w}}  {'':>10}  {m.summary}")
+        pad = f"{'':<{w}}  {'':>10}  "
+        print(f"{m.name:<{w}}  {m.min_boards:>10}  from {m.origin}: {m.citation}\n{pad}{m.summary}")
+        if m.cost:
+            print(f"{pad}cost: {m.cost}")
     return 0
 
 
@@ -85,10 +88,26 @@ def _cmd_calibrate(args) -> int:
     return 0 if res.ok else 1
 
 
+def _plugin_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plugin", action="append", default=[], metavar="MODULE",
+                   help="import this module first: its methods join the registry (repeatable; installed "
+                   "'lidarcam.methods' entry points are always loaded)")
+
+
+def load_plugins(argv) -> None:
+    """Load the installed method plugins and those named by ``--plugin`` in ``argv`` (PluginError: one line)."""
+    from calib_core.plugins import load_plugins as load
+
+    pre = argparse.ArgumentParser(add_help=False)
+    _plugin_option(pre)
+    load(pre.parse_known_args(argv)[0].plugin)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from calib_core.registry import METHODS
 
     p = argparse.ArgumentParser(prog="lidarcam", description="2D lidar - camera extrinsic calibration")
+    _plugin_option(p)
     sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
     sp = sub.add_parser("methods", help="list the calibration methods")
     sp.set_defaults(func=_cmd_methods)
@@ -109,6 +128,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        load_plugins(argv)
+    except LidarcamError as err:
+        print(f"lidarcam: error: {err}", file=sys.stderr)
+        return 2
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
