@@ -174,7 +174,8 @@ def run_leaderboard(suite_file: str | Path = DEFAULT_SUITE, *, full: bool = Fals
     for name, df in sim_rows.items():
         summarise(df).to_csv(out / f"summary_{name}.csv", index=False, float_format="%.6g")
     table.to_csv(out / "leaderboard.csv", index=False, float_format="%.6g")
-    figure(table, list(sim_rows), out)
+    if len(table):
+        figure(table, list(sim_rows), out)
     info = {"version": version, "suite_file": str(suite_file), "methods": methods, "plugins": plugins,
             "skipped": skipped, "cells": {k: len(v) for k, v in cells.items()},
             "trials": {k: sorted({c.n_trials for c in v}) for k, v in cells.items()},
@@ -208,8 +209,8 @@ def build_report(table: pd.DataFrame, real: pd.DataFrame | None, info: dict, crl
              f"bound applies ({', '.join(sorted(crlb)) or 'none'}); 1 = efficient, below 1 only by chance or "
              "because invalid trials are left out. *NEES*: mean of e^T P^-1 e over valid trials, for "
              "methods that report a covariance P (6 when P is honest). *ms*: median time per call.", ""]
-    lines += markdown_table(table)
-    lines += ["", "![leaderboard](leaderboard.png)", ""]
+    lines += [*markdown_table(table), "", "![leaderboard](leaderboard.png)", ""] if len(table) else [
+        "No simulated suite ran.", ""]
     if real is not None and not real.empty:
         lines += ["## Real data", "",
                   "Every method on each real observation file. Without ground truth a real rig has no valid rate; "
