@@ -142,6 +142,12 @@ def plan(suites: Sequence[Suite], methods, plugins, overrides, results_dir: str,
     return cells, skipped
 
 
+def _shown(path: str | Path) -> str:
+    """``path`` relative to the working directory when inside it (reports name no machine's folders)."""
+    p = Path(path).resolve()
+    return str(p.relative_to(Path.cwd())) if p.is_relative_to(Path.cwd()) else str(path)
+
+
 def _rows(cells: list[Cell]) -> pd.DataFrame:
     frames = [f for f in (load_cell(c) for c in cells) if not f.empty]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
@@ -176,10 +182,11 @@ def run_leaderboard(suite_file: str | Path = DEFAULT_SUITE, *, full: bool = Fals
     table.to_csv(out / "leaderboard.csv", index=False, float_format="%.6g")
     if len(table):
         figure(table, list(sim_rows), out)
-    info = {"version": version, "suite_file": str(suite_file), "methods": methods, "plugins": plugins,
+    info = {"version": version, "suite_file": _shown(suite_file), "methods": methods, "plugins": plugins,
             "skipped": skipped, "cells": {k: len(v) for k, v in cells.items()},
             "trials": {k: sorted({c.n_trials for c in v}) for k, v in cells.items()},
             "rows_computed": after - before, "rows": after, "run_s": t_run, "cores": os.cpu_count(),
+            "load": os.getloadavg()[1],
             "full": full, "overrides": list(overrides)}
     report = out / "REPORT.md"
     report.write_text(build_report(table, real_table(real_rows), info, crlb))
@@ -199,7 +206,8 @@ def build_report(table: pd.DataFrame, real: pd.DataFrame | None, info: dict, crl
              f"- Methods: {len(info['methods'])}"
              + (f"; plugins: {', '.join(f'`{p}`' for p in info['plugins'])}" if info["plugins"] else "") + ".",
              f"- Run: {info['rows']} (trial, method) rows, {info['rows_computed']} computed now and the rest read "
-             f"back from the store; {info['run_s']:.0f} s wall on {info['cores']} cores"
+             f"back from the store; {info['run_s']:.0f} s wall on {info['cores']} cores (5-minute load average at the "
+             f"end {info['load']:.1f}: times grow when other processes share the cores)"
              + (f"; overrides: `{' '.join(info['overrides'])}`" if info["overrides"] else "") + ".", "",
              "## One table over every simulated suite", "",
              "Ranked by valid rate, then median rotation error. *Valid*: e_R < 8 deg and e_t < 0.8 m; a method that "
@@ -208,7 +216,8 @@ def build_report(table: pd.DataFrame, real: pd.DataFrame | None, info: dict, crl
              "Cramer-Rao bound of its own scene at its range noise, RMS over the valid trials of the suites where that "
              f"bound applies ({', '.join(sorted(crlb)) or 'none'}); 1 = efficient, below 1 only by chance or "
              "because invalid trials are left out. *NEES*: mean of e^T P^-1 e over valid trials, for "
-             "methods that report a covariance P (6 when P is honest). *ms*: median time per call.", ""]
+             "methods that report a covariance P (6 when P is honest). *ms*: median wall time per call on this run's "
+             "machine (`make bench` times methods alone).", ""]
     lines += [*markdown_table(table), "", "![leaderboard](leaderboard.png)", ""] if len(table) else [
         "No simulated suite ran.", ""]
     if real is not None and not real.empty:
