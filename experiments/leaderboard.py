@@ -212,12 +212,13 @@ def build_report(table: pd.DataFrame, real: pd.DataFrame | None, info: dict, crl
              "## One table over every simulated suite", "",
              "Ranked by valid rate, then median rotation error. *Valid*: e_R < 8 deg and e_t < 0.8 m; a method that "
              "returned nothing counts as invalid; [95% Wilson interval]. Medians are over the solutions returned, "
-             "RMS over the valid ones. *RMS / CRLB* (rotation, translation): each trial's error divided by the "
-             "Cramer-Rao bound of its own scene at its range noise, RMS over the valid trials of the suites where that "
-             f"bound applies ({', '.join(sorted(crlb)) or 'none'}); 1 = efficient, below 1 only by chance or "
-             "because invalid trials are left out. *NEES*: mean of e^T P^-1 e over valid trials, for "
-             "methods that report a covariance P (6 when P is honest). *ms*: median wall time per call on this run's "
-             "machine (`make bench` times methods alone).", ""]
+             "RMS over the valid ones. *RMS / CRLB* (rotation, translation): per setting, the RMS error of the valid "
+             "trials over the RMS of the Cramer-Rao bound of the range-noise model on the same trials "
+             "(`summary_<suite>.csv`), pooled over the settings of the suites where that bound applies "
+             f"({', '.join(sorted(crlb)) or 'none'}) as a root mean square weighted by valid trials; 1 = efficient, "
+             "below 1 only by chance or because invalid trials are left out. *NEES*: mean of e^T P^-1 e over valid "
+             "trials, for methods that report a covariance P (6 when P is honest). *ms*: median wall time per call "
+             "on this run's machine (`make bench` times methods alone).", ""]
     lines += [*markdown_table(table), "", "![leaderboard](leaderboard.png)", ""] if len(table) else [
         "No simulated suite ran.", ""]
     if real is not None and not real.empty:

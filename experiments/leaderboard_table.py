@@ -2,9 +2,13 @@
 
 One row per method, pooled over the simulated suites: valid rate with its 95% Wilson interval
 (``aggregate.wilson_interval``) and per suite, median errors (solutions returned), RMS errors (valid solutions),
-RMS / CRLB (each trial's error over its own bound, RMS over the valid trials of the suites where the
-range-noise bound applies), mean NEES where the method reports a
-covariance, median time per call.
+RMS / CRLB and mean NEES where the method reports a covariance, median time per call.
+
+RMS / CRLB and NEES come from the per-setting summaries of ``aggregate.summarise`` (the one home of those
+formulas: within a setting, RMS error over RMS bound on the valid trials). Pooled here over the settings of the
+suites where the range-noise bound applies, as the root of the mean squared ratio weighted by valid trials, so a
+setting of near-degenerate scenes (3 boards: bounds of degrees) does not drown the others as it would in one
+ratio of pooled RMS values. NEES: the mean over the valid trials that have one (as in the summaries).
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from .aggregate import wilson_interval  # noqa: E402
+from .aggregate import summarise, wilson_interval  # noqa: E402
 from .catalog import method_colour  # noqa: E402
 
 
@@ -33,8 +37,18 @@ def _median(x: pd.Series) -> float:
     return float(x.median()) if len(x) else np.nan
 
 
-def method_row(g: pd.DataFrame, crlb_suites: set[str]) -> dict:
-    """The leaderboard figures of one method's trial rows ``g`` (a ``suite`` column names each row's suite)."""
+def _weighted_rms(ratio: pd.Series, weight: pd.Series) -> float:
+    ok = ratio.notna() & (weight > 0)
+    return float(np.sqrt(np.average(ratio[ok] ** 2, weights=weight[ok]))) if ok.any() else np.nan
+
+
+def method_row(g: pd.DataFrame, summary: pd.DataFrame, crlb_suites: set[str]) -> dict:
+    """The leaderboard figures of one method from its trial rows ``g`` and its per-setting summary rows
+    ``summary`` (``aggregate.summarise``), both with a ``suite`` column. A setting that two suites share (6 boards
+    at 20 mm is in both paper sweeps) counts once in the pooled figures, in each of its suites' columns."""
+    per_suite = {f"valid_{suite}": float(s["valid"].astype(bool).mean()) for suite, s in g.groupby("suite", sort=False)}
+    g = g.drop_duplicates(["setting_key", "trial"])
+    summary = summary.drop_duplicates("setting_key")
     ok, valid = g["ok"].astype(bool), g["valid"].astype(bool)
     lo, hi = wilson_interval(int(valid.sum()), len(g))
     v = g[valid]
@@ -42,17 +56,13 @@ def method_row(g: pd.DataFrame, crlb_suites: set[str]) -> dict:
            "valid_lo95": float(lo), "valid_hi95": float(hi),
            "median_e_R_deg": _median(g.loc[ok, "e_R_deg"]), "median_e_t_mm": 1000 * _median(g.loc[ok, "e_t_m"]),
            "rms_e_R_deg": _rms(v["e_R_deg"]), "rms_e_t_mm": 1000 * _rms(v["e_t_m"])}
-    b = v[v["suite"].isin(crlb_suites) & v["crlb_rot_deg"].notna() & v["crlb_trans_mm"].notna()]
-    # each trial's error against its own scene's bound (a pooled ratio would be ruled by near-degenerate scenes)
-    row["rms_over_crlb_rot"] = _rms(b["e_R_deg"] / b["crlb_rot_deg"])
-    row["rms_over_crlb_trans"] = _rms(1000 * b["e_t_m"] / b["crlb_trans_mm"])
+    b = summary[summary["suite"].isin(crlb_suites)]
+    row["rms_over_crlb_rot"] = _weighted_rms(b["rms_over_crlb_rot"], b["n_valid"])
+    row["rms_over_crlb_trans"] = _weighted_rms(b["rms_over_crlb_trans"], b["n_valid"])
     nees = v["nees"].dropna() if "nees" in v else pd.Series(dtype=float)
-    row["mean_nees"] = float(nees.mean()) if len(nees) else np.nan
-    row["n_nees"] = len(nees)
+    row["mean_nees"], row["n_nees"] = (float(nees.mean()) if len(nees) else np.nan), len(nees)
     row["median_ms"] = 1000 * _median(g["seconds"])
-    for suite, s in g.groupby("suite", sort=False):
-        row[f"valid_{suite}"] = float(s["valid"].astype(bool).mean())
-    return row
+    return {**row, **per_suite}
 
 
 def leaderboard_table(rows: dict[str, pd.DataFrame], crlb_suites: set[str], origins: dict[str, str]) -> pd.DataFrame:
@@ -61,7 +71,9 @@ def leaderboard_table(rows: dict[str, pd.DataFrame], crlb_suites: set[str], orig
     if not frames:
         return pd.DataFrame(columns=["rank", "method", "origin"])
     df = pd.concat(frames, ignore_index=True)
-    out = pd.DataFrame([{"method": m, "origin": origins.get(m, ""), **method_row(g, crlb_suites)}
+    summ = pd.concat([summarise(f).assign(suite=f["suite"].iloc[0]) for f in frames], ignore_index=True)
+    out = pd.DataFrame([{"method": m, "origin": origins.get(m, ""),
+                         **method_row(g, summ[summ["method"] == m], crlb_suites)}
                         for m, g in df.groupby("method", sort=False)])
     out = out.sort_values(["valid_rate", "median_e_R_deg"], ascending=[False, True], kind="stable")
     out.insert(0, "rank", np.arange(1, len(out) + 1))
