@@ -84,10 +84,14 @@ def _obs_files(folder, n):
 def test_absent_suites_are_skipped_with_a_line_and_real_files_are_found(tmp_path):
     _obs_files(tmp_path / "real" / "rig", 2)
     suites = [Suite("ghost", experiment="no_such_experiment"), Suite("real", path=str(tmp_path / "real")),
-              Suite("empty", path=str(tmp_path / "nothing"))]
+              Suite("empty", path=str(tmp_path / "nothing")),
+              Suite("noise30", experiment="noise", overrides=("noise.noise_mm=30",), trials=3, full_trials=7)]
     assert [f.name for f in real_files(suites[1])] == ["pose0.json", "pose1.json"]
     cells, skipped = plan(suites, ("peng2022",), (), (), str(tmp_path / "res"), False, None)
-    assert list(cells) == ["real"] and len(cells["real"]) == 2
+    assert list(cells) == ["real", "noise30"] and len(cells["real"]) == 2
+    (c,) = cells["noise30"]  # the suite's override fixed the swept noise: one setting
+    assert c.sim["noise_mm"] == 30 and c.n_trials == 3 and c.methods == ("peng2022",)
+    assert plan(suites[3:], ("peng2022",), (), (), str(tmp_path / "res"), True, None)[0]["noise30"][0].n_trials == 7
     assert skipped[0] == "ghost: skipped, conf/experiment/no_such_experiment.yaml is absent"
     assert skipped[1].startswith("empty: skipped, no lidarcam.observations/1 file under")
 
