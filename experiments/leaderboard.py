@@ -167,13 +167,14 @@ def run_leaderboard(suite_file: str | Path = DEFAULT_SUITE, *, full: bool = Fals
     cells, skipped = plan(suites, methods, plugins, overrides, results_dir, full, trials)
     sim = [c for name, cs in cells.items() for c in cs if any(s.name == name and s.experiment for s in suites)]
     real = [c for c in (c for cs in cells.values() for c in cs) if c.sweep == REAL_SWEEP]
-    before = sum(len(load_cell(c)) for cs in cells.values() for c in cs)
+    unique = list({c.dir: c for cs in cells.values() for c in cs}.values())  # a setting two suites share: once
+    before = sum(len(load_cell(c)) for c in unique)
     run_cells(sim, n_jobs=n_jobs, progress=progress, label="leaderboard")
     if real:
         run_cells(real, n_jobs=n_jobs, progress=progress, label="leaderboard real", trial_fn=real_trial)
     t_run = time.perf_counter() - t0
     rows = {name: _rows(cs) for name, cs in cells.items()}
-    after = sum(len(df) for df in rows.values())
+    after = sum(len(load_cell(c)) for c in unique)
     out = Path(out_dir or Path(results_dir) / "leaderboard")
     out.mkdir(parents=True, exist_ok=True)
     crlb = {s.name for s in suites if s.crlb}
