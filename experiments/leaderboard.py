@@ -20,6 +20,7 @@ import argparse
 import hashlib
 import json
 import os
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -29,7 +30,7 @@ import pandas as pd
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from calib_core import CalibrationError, calibrate, load_observations
+from calib_core import CalibrationError, LidarcamError, calibrate, load_observations
 from calib_core.io import OBS_SCHEMA
 from calib_core.plugins import load_plugins
 from calib_core.registry import METHODS, get_method
@@ -253,8 +254,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--n-jobs", type=int, default=-1, help="worker processes (-1: all cores)")
     a = ap.parse_args(argv)
     overrides = list(a.overrides) + ([_names_override(a.methods.split(","))] if a.methods else [])
-    r = run_leaderboard(a.suite, full=a.full, trials=a.trials, overrides=overrides, results_dir=a.results,
-                        out_dir=a.out, n_jobs=a.n_jobs)
+    try:
+        r = run_leaderboard(a.suite, full=a.full, trials=a.trials, overrides=overrides, results_dir=a.results,
+                            out_dir=a.out, n_jobs=a.n_jobs)
+    except LidarcamError as err:  # a plugin that does not load, an unknown method: one line, exit 2
+        print(f"experiments.leaderboard: error: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
     for line in r["skipped"]:
         print(f"suite {line}")
     print(f"{len(r['methods'])} methods on {', '.join(r['cells']) or 'no suite'}: {r['rows_computed']} rows computed "

@@ -2,10 +2,14 @@
 and a plugin method running in the sweep's worker processes."""
 
 import importlib
+import os
+import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
+from joblib.externals.loky import get_reusable_executor
 
 import calib_core.plugins as plugins
 from calib_core import calibrate
@@ -131,7 +135,18 @@ def test_plugin_method_runs_in_the_sweep_worker_processes(plugin_dir, tmp_path):
     cell = Cell(sweep="plug", sim=sim, n_trials=4, methods=("peng2022", "lab_h_mine"),
                 results_dir=str(tmp_path / "res"), plugins=("lab_h",))
     df = run_cells([cell], n_jobs=2, chunk_size=1, progress=False)
+    get_reusable_executor().shutdown(wait=True)  # workers gone before interpreter exit (no loky atexit noise)
     assert len(df) == 8 and df["ok"].all()
     a = df[df["method"] == "peng2022"]["e_R_deg"].to_numpy()
     b = df[df["method"] == "lab_h_mine"]["e_R_deg"].to_numpy()
     assert (a == b).all()  # the same method under two names, on the same data
+
+
+def test_a_sweep_with_a_broken_plugin_stops_with_one_line(tmp_path):
+    root = Path(__file__).resolve().parents[1]
+    (tmp_path / "lab_i.py").write_text("raise RuntimeError('half-written')\n")
+    env = {**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{root}"}
+    r = subprocess.run([sys.executable, "-m", "experiments.run", "methods.plugins=[lab_i]", "n_trials=1",
+                        f"results_dir={tmp_path / 'res'}"], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.strip() == "experiments.run: error: plugin lab_i: cannot load (RuntimeError: half-written)"
