@@ -18,6 +18,7 @@ import hashlib
 import json
 import math
 import os
+import socket
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -269,8 +270,14 @@ def load_sweep(results_dir: str | Path, sweep: str) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
+def _tmp_name(path: Path) -> Path:
+    """A hidden temporary name next to ``path``, unique per host and process (workers of a cluster share the store
+    on one file system, where two hosts may run the same pid)."""
+    return path.with_name(f".{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
+
+
 def _write_atomic(df: pd.DataFrame, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = _tmp_name(path)
     df.to_csv(tmp, index=False, float_format="%.10g")
     os.replace(tmp, path)
 
@@ -289,7 +296,9 @@ def _prepare(cell: Cell) -> None:
     if not settings.exists():
         d = asdict(cell)
         d.pop("n_trials"), d.pop("methods"), d.pop("results_dir"), d.pop("plugins")
-        settings.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
+        tmp = _tmp_name(settings)  # whole or absent: a worker killed mid-write must not leave half a file
+        tmp.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
+        os.replace(tmp, settings)
 
 
 def pending(cell: Cell, chunk_size: int) -> list[tuple[int, ...] | tuple]:

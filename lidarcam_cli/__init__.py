@@ -7,7 +7,7 @@ import sys
 
 from calib_core.errors import LidarcamError
 
-from . import rig, simulate
+from . import bag, rig, simulate
 
 
 def _cmd_methods(args) -> int:
@@ -128,6 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=_cmd_calibrate)
     simulate.add_parsers(sub)
     rig.add_parsers(sub)
+    bag.add_parsers(sub)
     return p
 
 
