@@ -1,0 +1,176 @@
+"""Likely causes of an answer the data contradict (see ``calib_core.verdict``): each returns (name, message).
+
+- ``units``: scan coordinates, board positions or outlines about 1000x too large (millimetres written as metres),
+  judged from the data alone (ranges, board distances and sizes against each other and against plausible rigs);
+- ``mispaired`` / ``mirrored``: the scans fit every board once they are re-paired with the boards (a permutation:
+  two swapped, all shifted by one, ...) or mirrored (``y -> -y``: a lidar upside down or with its angle direction
+  reversed). Hypotheses: the data as given, mirrored, and every cyclic shift; for each, candidates of the minimal
+  solver, for each candidate the pairing of scans with board planes of least cost (Hungarian assignment, scipy),
+  the best one refined and re-tested;
+- ``scale``: the board poses fit the scans only once their translations are scaled: an error of the camera
+  intrinsics (focal length) or of the board's square size.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment, minimize_scalar
+
+from .observations import BoardObservation, Observations
+from .refine import refine
+from .result import SolveFailure
+
+UNIT_RATIO = 50.0
+"""Two lengths that should agree but differ by more than this factor point to a unit mistake (mm for m)."""
+MAX_PLAUSIBLE_RANGE_M = 200.0
+"""Median scan range (metres) above which a 2D lidar's scan is taken to be in millimetres."""
+MAX_PLAUSIBLE_BOARD_M = 20.0
+"""Board outline diameter (metres) above which the outline is taken to be in millimetres."""
+MAX_DIAGNOSE_BOARDS = 12
+"""Above this many boards the pairing hypotheses are not tried (their cost grows as N^4)."""
+
+
+def unit_causes(obs: Observations) -> list[tuple[str, str]]:
+    """Unit mistakes visible in the data alone."""
+    if not obs.n_boards:
+        return []
+    rng = np.median(np.concatenate([np.linalg.norm(b.scan, axis=1) for b in obs.boards]))
+    cam = np.median([np.linalg.norm(b.T_cam_board[:3, 3]) for b in obs.boards])
+    diam = np.median([np.ptp(b.outline, axis=0).max() for b in obs.boards])
+    seg = np.median([np.linalg.norm(b.scan[-1] - b.scan[0]) for b in obs.boards])
+    out = []
+    scans_big = rng > MAX_PLAUSIBLE_RANGE_M or (rng > UNIT_RATIO * cam and seg > UNIT_RATIO * diam)
+    poses_big = cam > MAX_PLAUSIBLE_RANGE_M or cam > UNIT_RATIO * rng
+    if scans_big:
+        out.append(("units", f"units: the scans look ~1000x too large (median range {rng:.4g} m, board distance "
+                             f"{cam:.3g} m from the camera): millimetres written as metres?"))
+    if poses_big:
+        out.append(("units", f"units: the board poses look ~1000x too large (median board distance {cam:.4g} m from "
+                             f"the camera, scan range {rng:.3g} m): millimetres written as metres?"))
+    if diam > MAX_PLAUSIBLE_BOARD_M or (diam > UNIT_RATIO * seg and not scans_big):
+        out.append(("units", f"units: the board outlines look ~1000x too large (diameter {diam:.4g} m, scan "
+                             f"segments {seg:.3g} m): millimetres written as metres?"))
+    return out
+
+
+def _rebuilt(obs: Observations, scans, trans_scale: float = 1.0) -> Observations:
+    boards = []
+    for b, s in zip(obs.boards, scans, strict=True):
+        T = np.array(b.T_cam_board)
+        T[:3, 3] *= trans_scale
+        boards.append(BoardObservation(T, b.outline, s))
+    return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta))
+
+
+def _pair_costs(obs: Observations, C: np.ndarray, sigma: float) -> np.ndarray:
+    """(M,S,P): median |range residual| / (5 sigma), capped at 10, of scan S against board plane P per candidate."""
+    n, d = obs.planes_cam()
+    m = np.einsum("mab,pb->mpa", C[:, :3, :3], n)                             # (M,P,3) normals, lidar frame
+    c = d + np.einsum("mpa,ma->mp", m, C[:, :3, 3])                            # (M,P)
+    out = np.empty((len(C), obs.n_boards, obs.n_boards))
+    for s, b in enumerate(obs.boards):
+        r = np.linalg.norm(b.scan, axis=1)
+        keep = r > 1e-3
+        beams = b.scan[keep] / r[keep, None]
+        mb = np.einsum("mpa,ka->mpk", m[..., :2], beams)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = np.abs(r[keep] - c[..., None] / mb)
+        out[:, s, :] = np.nan_to_num(np.median(e, axis=-1), nan=np.inf) if keep.any() else np.inf
+    return np.minimum(out / (5 * sigma), 10.0)
+
+
+def best_pairing(obs: Observations, sigma: float):
+    """(cost, permutation, T) of the least-cost pairing of scans with boards over the minimal-solver candidates,
+    or None: ``permutation[p]`` is the scan that belongs to board ``p``; ``T`` refined on the re-paired data."""
+    from .solvers.candidates import minimal_candidates
+
+    try:
+        C = minimal_candidates(obs).T_lidar_cam
+    except SolveFailure:
+        return None
+    if not len(C) or len(C) * obs.n_boards * sum(len(b.scan) for b in obs.boards) > 2e7:
+        return None
+    costs = _pair_costs(obs, C, sigma)
+    best = None
+    for j in range(len(C)):
+        rows, cols = linear_sum_assignment(costs[j].T)          # rows: planes, cols: scans
+        total = float(costs[j].T[rows, cols].sum())
+        if best is None or total < best[0]:
+            best = (total, cols, C[j])
+    total, perm, T0 = best
+    paired = _rebuilt(obs, [obs.boards[k].scan for k in perm])
+    try:
+        T = refine(paired.scan_data, T0, residual="range", loss="soft_l1", f_scale=3 * sigma).T_lidar_cam
+    except Exception:  # noqa: BLE001 -- a diagnosis never fails the answer
+        return None
+    return total, perm, T, paired
+
+
+def _shift_text(perm: np.ndarray) -> str:
+    N = len(perm)
+    for k in range(1, N):
+        if np.array_equal(perm, np.roll(np.arange(N), -k)):
+            return f"every board's scan belongs to the board {k} later (images and scans shifted by {k} poses)"
+    moved = [(p, int(s)) for p, s in enumerate(perm) if p != s]
+    return "mispaired scans: " + ", ".join(f"board {p} fits the scan given for board {s}" for p, s in moved[:6])
+
+
+def pairing_causes(obs: Observations, sigma: float) -> list[tuple[str, str]]:
+    """Mispaired or mirrored scans, when a re-pairing (or mirroring) fits every board."""
+    from .verdict import is_consistent
+
+    if not 4 <= obs.n_boards <= MAX_DIAGNOSE_BOARDS:
+        return []
+    N = obs.n_boards
+    hyps = [(False, np.arange(N))] + [(True, np.arange(N))] + [(False, np.roll(np.arange(N), -k)) for k in range(1, N)]
+    for mirrored, shift in hyps:
+        scans = [obs.boards[k].scan * ([1.0, -1.0] if mirrored else 1.0) for k in shift]
+        hyp = _rebuilt(obs, scans)
+        found = best_pairing(hyp, sigma)
+        if found is None:
+            continue
+        _, perm, T, paired = found
+        perm = shift[perm]
+        if (mirrored or not np.array_equal(perm, np.arange(N))) and is_consistent(paired, T, sigma):
+            if mirrored and np.array_equal(perm, np.arange(N)):
+                return [("mirrored", "mirrored scans: they fit every board once y -> -y (a lidar mounted upside "
+                                     "down, or its angle direction reversed)")]
+            name = "mirrored" if mirrored else "mispaired"
+            return [(name, ("mirrored and " if mirrored else "") + _shift_text(perm))]
+    return []
+
+
+def scale_causes(obs: Observations, T: np.ndarray, sigma: float) -> list[tuple[str, str]]:
+    """Board poses that fit only once their translations are scaled by s in 0.7..1.4 (intrinsics or square size
+    off): a bounded 1D search (scipy) of the clipped chi-square of the range residuals, refined from ``T``."""
+    from .residuals import range_residuals
+    from .verdict import CLIP_Z, is_consistent, measured_points
+
+    def fit(log_s):
+        o = _rebuilt(obs, [b.scan for b in obs.boards], float(np.exp(log_s)))
+        Ts = refine(o.scan_data, T, residual="range", loss="soft_l1", f_scale=3 * sigma, max_nfev=30).T_lidar_cam
+        z = range_residuals(Ts, measured_points(o)) / sigma
+        return float(np.sum(np.minimum(z**2, CLIP_Z**2))), Ts, o
+
+    sol = minimize_scalar(lambda x: fit(x)[0], bounds=(np.log(0.7), np.log(1.4)), method="bounded",
+                          options={"xatol": 0.004, "maxiter": 25})
+    s = float(np.exp(sol.x))
+    _, Ts, o = fit(sol.x)
+    if abs(s - 1) < 0.02 or not is_consistent(o, Ts, sigma):
+        return []
+    return [("scale", f"the board poses fit the scans only once their distances are scaled by {s:.3f}: the camera "
+                      f"intrinsics (focal length) or the board's square size are off by about {100 * (s - 1):+.0f}%")]
+
+
+def explain_contradiction(obs: Observations, T: np.ndarray, sigma: float) -> list[tuple[str, str]]:
+    """The likely causes of a contradicted answer, most specific first (empty when none is found)."""
+    causes = unit_causes(obs)
+    if causes:
+        return causes
+    try:
+        causes = pairing_causes(obs, sigma)
+        if not causes and 4 <= obs.n_boards <= MAX_DIAGNOSE_BOARDS:
+            causes = scale_causes(obs, T, sigma)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):  # a diagnosis never fails the answer
+        return []
+    return causes
