@@ -230,22 +230,22 @@ def _read_chunk(path: Path) -> pd.DataFrame:
         raise damaged(f"missing columns {missing[:4]}")
     first, last = int(m.group(1)), int(m.group(2))
     trial = pd.to_numeric(df["trial"], errors="coerce")
-    methods = list(dict.fromkeys(df["method"].astype(str))) if len(df) else []
-    tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
     if trial.isna().any() or not (trial == trial.round()).all():
         raise damaged("a trial number that is not an integer")
-    if df["method"].isna().any() or (df["method"].astype(str) == "").any():
+    if df["method"].isna().any() or not df["method"].map(lambda v: isinstance(v, str) and v != "").all():
         raise damaged("a row without a method")
+    methods = list(dict.fromkeys(df["method"]))
+    tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
     for col in ("ok", "valid"):
-        if not df[col].astype(str).isin(("True", "False")).all():
+        if not df[col].map(lambda v: str(v) in ("True", "False")).all():
             raise damaged(f"a row whose {col!r} is not True/False")
     want = {(t, mm) for t in range(first, last + 1) for mm in methods}
-    got = list(zip(trial.astype(int), df["method"].astype(str), strict=True))
+    got = list(zip(trial.astype(int), df["method"], strict=True))
     if tag != m.group(3) or len(got) != len(set(got)) or set(got) != want:
         raise damaged(f"{len(got)} rows, expected {(last - first + 1)} trials x the methods of hash {m.group(3)}")
     df["trial"] = trial.astype(int)
     for col in ("ok", "valid"):
-        df[col] = df[col].astype(str) == "True"
+        df[col] = df[col].map(lambda v: str(v) == "True").astype(bool)
     return df
 
 

@@ -14,7 +14,7 @@ from calib_core.methods.suffixes import REFINE_OPTIONS
 from calib_core.selection import PENG2022_OPTIONS
 
 
-class ConfigError(ValueError):
+class ConfigError(CalibrationError, ValueError):
     """A config value that cannot run; the message names the key."""
 
 
