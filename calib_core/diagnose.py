@@ -2,11 +2,11 @@
 
 - ``units``: scan coordinates, board positions or outlines about 1000x too large (millimetres written as metres),
   judged from the data alone (ranges, board distances and sizes against each other and against plausible rigs);
-- ``mispaired`` / ``mirrored``: the scans fit every board once they are re-paired with the boards (a permutation:
-  two swapped, all shifted by one, ...) or mirrored (``y -> -y``: a lidar upside down or with its angle direction
-  reversed). Hypotheses: the data as given, mirrored, and every cyclic shift; for each, candidates of the minimal
-  solver, for each candidate the pairing of scans with board planes of least cost (Hungarian assignment, scipy),
-  the best one refined and re-tested;
+- ``mispaired``: the scans fit every board once they are re-paired with the boards (a permutation: two swapped,
+  all shifted by one, ...): candidates of the minimal solver on board triples paired with scan triples, for each
+  candidate the pairing of scans with board planes of least cost (Hungarian assignment, scipy), the best one
+  refined and re-tested. (Mirrored scans, ``y -> -y``, fit an upside-down lidar exactly: no contradiction, see
+  ``verdict.orientation_warnings``.)
 - ``scale``: the board poses fit the scans only once their translations are scaled: an error of the camera
   intrinsics (focal length) or of the board's square size.
 """
@@ -79,16 +79,43 @@ def _pair_costs(obs: Observations, C: np.ndarray, sigma: float) -> np.ndarray:
     return np.minimum(out / (5 * sigma), 10.0)
 
 
-def best_pairing(obs: Observations, sigma: float):
-    """(cost, permutation, T) of the least-cost pairing of scans with boards over the minimal-solver candidates,
-    or None: ``permutation[p]`` is the scan that belongs to board ``p``; ``T`` refined on the re-paired data."""
-    from .solvers.candidates import minimal_candidates
+EXHAUSTIVE_PAIRING_BOARDS = 6
+"""Up to this many boards every pairing of scan triples with board triples is solved (N! / (N-3)! x C(N,3)
+minimal problems), so any permutation of the scans is found; above it, only triples paired as given."""
 
+
+def _candidates(obs: Observations, exhaustive: bool) -> np.ndarray:
+    """Minimal-solver candidates (M,4,4) from board triples paired with scan triples (as given, or every ordered
+    triple of scans when ``exhaustive``)."""
+    from itertools import permutations
+
+    from .lines import fit_lines
+    from .solvers.vasconcelos import board_triples, solve_triples
+
+    lines = fit_lines(obs)
+    n, d = obs.planes_cam()
+    p = np.array([ln.point for ln in lines])
+    u = np.array([ln.direction for ln in lines])
+    tri = board_triples(obs.n_boards)
+    if exhaustive:
+        scans = np.array([q for t in tri for q in permutations(t)])
+        P, Q = np.repeat(tri, len(scans), axis=0), np.tile(scans, (len(tri), 1))
+        keep = np.array([len(set(a) | set(b)) >= 3 for a, b in zip(P, Q, strict=True)])
+        P, Q = P[keep], Q[keep]
+    else:
+        P = Q = tri
+    return solve_triples(n[P], d[P], p[Q], u[Q]).T_lidar_cam
+
+
+def best_pairing(obs: Observations, sigma: float, exhaustive: bool = False):
+    """(cost, permutation, T, re-paired observations) of the least-cost pairing of scans with boards over the
+    minimal-solver candidates, or None: ``permutation[p]`` is the scan that belongs to board ``p``; ``T`` refined
+    on the re-paired data."""
     try:
-        C = minimal_candidates(obs).T_lidar_cam
+        C = _candidates(obs, exhaustive)
     except SolveFailure:
         return None
-    if not len(C) or len(C) * obs.n_boards * sum(len(b.scan) for b in obs.boards) > 2e7:
+    if not len(C) or len(C) * obs.n_boards * sum(len(b.scan) for b in obs.boards) > 5e7:
         return None
     costs = _pair_costs(obs, C, sigma)
     best = None
@@ -110,33 +137,31 @@ def _shift_text(perm: np.ndarray) -> str:
     N = len(perm)
     for k in range(1, N):
         if np.array_equal(perm, np.roll(np.arange(N), -k)):
-            return f"every board's scan belongs to the board {k} later (images and scans shifted by {k} poses)"
+            k = k if k <= N // 2 else k - N
+            return (f"images and scans shifted by {abs(k)} pose(s): every board fits the scan given for the board "
+                    f"{abs(k)} {'after' if k > 0 else 'before'} it")
     moved = [(p, int(s)) for p, s in enumerate(perm) if p != s]
     return "mispaired scans: " + ", ".join(f"board {p} fits the scan given for board {s}" for p, s in moved[:6])
 
 
 def pairing_causes(obs: Observations, sigma: float) -> list[tuple[str, str]]:
-    """Mispaired or mirrored scans, when a re-pairing (or mirroring) fits every board."""
+    """Mispaired scans, when a re-pairing fits every board: any permutation up to ``EXHAUSTIVE_PAIRING_BOARDS``
+    boards; above, re-pairings found from correctly paired triples, and every cyclic shift."""
     from .verdict import is_consistent
 
-    if not 4 <= obs.n_boards <= MAX_DIAGNOSE_BOARDS:
-        return []
     N = obs.n_boards
-    hyps = [(False, np.arange(N))] + [(True, np.arange(N))] + [(False, np.roll(np.arange(N), -k)) for k in range(1, N)]
-    for mirrored, shift in hyps:
-        scans = [obs.boards[k].scan * ([1.0, -1.0] if mirrored else 1.0) for k in shift]
-        hyp = _rebuilt(obs, scans)
-        found = best_pairing(hyp, sigma)
+    if not 4 <= N <= MAX_DIAGNOSE_BOARDS:
+        return []
+    exhaustive = N <= EXHAUSTIVE_PAIRING_BOARDS
+    shifts = [np.arange(N)] + ([] if exhaustive else [np.roll(np.arange(N), -k) for k in range(1, N)])
+    for shift in shifts:
+        found = best_pairing(_rebuilt(obs, [obs.boards[k].scan for k in shift]), sigma, exhaustive)
         if found is None:
             continue
         _, perm, T, paired = found
         perm = shift[perm]
-        if (mirrored or not np.array_equal(perm, np.arange(N))) and is_consistent(paired, T, sigma):
-            if mirrored and np.array_equal(perm, np.arange(N)):
-                return [("mirrored", "mirrored scans: they fit every board once y -> -y (a lidar mounted upside "
-                                     "down, or its angle direction reversed)")]
-            name = "mirrored" if mirrored else "mispaired"
-            return [(name, ("mirrored and " if mirrored else "") + _shift_text(perm))]
+        if not np.array_equal(perm, np.arange(N)) and is_consistent(paired, T, sigma):
+            return [("mispaired", _shift_text(perm))]
     return []
 
 
@@ -148,12 +173,12 @@ def scale_causes(obs: Observations, T: np.ndarray, sigma: float) -> list[tuple[s
 
     def fit(log_s):
         o = _rebuilt(obs, [b.scan for b in obs.boards], float(np.exp(log_s)))
-        Ts = refine(o.scan_data, T, residual="range", loss="soft_l1", f_scale=3 * sigma, max_nfev=30).T_lidar_cam
+        Ts = refine(o.scan_data, T, residual="range", loss="soft_l1", f_scale=3 * sigma, max_nfev=15).T_lidar_cam
         z = range_residuals(Ts, measured_points(o)) / sigma
         return float(np.sum(np.minimum(z**2, CLIP_Z**2))), Ts, o
 
     sol = minimize_scalar(lambda x: fit(x)[0], bounds=(np.log(0.7), np.log(1.4)), method="bounded",
-                          options={"xatol": 0.004, "maxiter": 25})
+                          options={"xatol": 0.005, "maxiter": 14})
     s = float(np.exp(sol.x))
     _, Ts, o = fit(sol.x)
     if abs(s - 1) < 0.02 or not is_consistent(o, Ts, sigma):

@@ -11,7 +11,8 @@ from .observations import Observations
 from .registry import get_method
 from .result import CalibrationResult, SolveFailure
 from .uncertainty import UncertaintyError
-from .verdict import check
+from .diagnose import pairing_causes, unit_causes
+from .verdict import check, data_warnings, effective_sigma
 
 SEED_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022")
 """The paper's methods: their answers stand as their papers compute them; the verdict is reported beside them
@@ -22,6 +23,21 @@ count as the same method; a derived variant (``X+ml``) is ours and is held to th
 def is_seed_method(name: str) -> bool:
     """True for the paper's methods and their ablations (``peng2022/equal``), not for ``X+suffix`` variants."""
     return "+" not in name and name.split("/")[0] in SEED_METHODS
+
+
+def _failure(obs: Observations, method: str, reason: str, candidates, t0: float, verdict: bool) -> CalibrationResult:
+    """``ok=False`` with ``reason``; with ``verdict``, what the data alone show (units, mispaired scans) is added to
+    the warnings and, as likely causes, to the reason."""
+    info: dict = {}
+    if verdict:
+        warnings = data_warnings(obs)
+        causes = unit_causes(obs) or pairing_causes(obs, effective_sigma(obs))
+        info = {"warnings": warnings, "verdict": {"consistent": None, "reason": None, "warnings": warnings,
+                                                  "causes": list(dict.fromkeys(n for n, _ in causes))}}
+        reason += "".join(f"; likely cause: {msg}" for _, msg in causes)
+    return CalibrationResult(method, False, reason=reason,
+                             candidates=np.zeros((0, 4, 4)) if candidates is None else candidates,
+                             seconds=time.perf_counter() - t0, info=info)
 
 
 def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: bool = True,
@@ -43,10 +59,9 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
     try:
         T, cands, info = m.func(observations, **options)
     except SolveFailure as fail:
-        return CalibrationResult(method, False, reason=fail.reason, candidates=fail.candidates,
-                                 seconds=time.perf_counter() - t0)
+        return _failure(observations, method, fail.reason, fail.candidates, t0, verdict)
     except UncertaintyError as err:
-        return CalibrationResult(method, False, reason=f"{method}: {err}", seconds=time.perf_counter() - t0)
+        return _failure(observations, method, f"{method}: {err}", None, t0, verdict)
     except TypeError as exc:
         if "unexpected keyword" in str(exc):
             raise CalibrationError(f"{method}: {exc}") from None

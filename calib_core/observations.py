@@ -16,6 +16,8 @@ from .errors import ObservationError
 from .transforms import ROTATION_TOL, project_to_so3, rotation_defect
 
 MIN_SCAN_POINTS = 2
+MIN_RANGE_M = 1e-3
+"""Scan points closer than this to the lidar (metres) are not measurements (a no-return is often written 0)."""
 
 
 MAX_BOARDS = 100
@@ -156,6 +158,10 @@ class BoardObservation:
         if why:
             raise ObservationError(f"outline {why}", field="outline")
         scan = numeric_array(self.scan, "scan", (None, 2), MAX_SCAN_POINTS)
+        at_origin = np.flatnonzero(np.hypot(scan[:, 0], scan[:, 1]) < MIN_RANGE_M)
+        if len(at_origin):
+            raise ObservationError(f"scan point {at_origin[0]} is at the lidar origin (range < {MIN_RANGE_M * 1000:g} "
+                                   "mm: a no-return, not a measurement; leave it out)", field="scan")
         if len(scan) < MIN_SCAN_POINTS:
             raise ObservationError(f"fewer than {MIN_SCAN_POINTS} scan points ({len(scan)})", field="scan")
         object.__setattr__(self, "T_cam_board", T)

@@ -182,6 +182,18 @@ def data_warnings(obs: Observations) -> list[str]:
     return out + [msg for _, msg in unit_causes(obs)]
 
 
+def orientation_warnings(T: np.ndarray) -> list[tuple[str, str]]:
+    """An answer with the lidar upside down against the camera: its z axis (up, the scan plane's normal) along
+    the camera's +y (down). A lidar may be mounted so; more often its scans are mirrored (angle direction
+    reversed), which a 2D scan cannot tell from an upside-down mount."""
+    up = float(np.asarray(T, float)[2, 1])      # lidar z in camera coordinates, its y component
+    if up > 0.5:
+        return [("mirrored", "the answer has the lidar upside down against the camera (lidar z along the camera's "
+                             "+y, down): if the lidar is mounted upright, its scans are mirrored (angle direction "
+                             "reversed)")]
+    return []
+
+
 def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | None = None,
           explain: bool = True) -> Verdict:
     """The verdict on ``T_lidar_cam`` for ``obs``; with ``explain``, a contradiction is explained where it can be
@@ -189,14 +201,16 @@ def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | 
     sigma = effective_sigma(obs, range_sigma_m)
     stats = board_tests(obs, T_lidar_cam, sigma)
     warnings = data_warnings(obs)
+    orient = orientation_warnings(T_lidar_cam)
+    warnings += [msg for _, msg in orient]
     bad = [s for s in stats if s["bad"]]
     if not bad:
-        return Verdict(True, None, tuple(warnings), (), sigma, tuple(stats))
+        return Verdict(True, None, tuple(warnings), tuple(n for n, _ in orient), sigma, tuple(stats))
     reason = "; ".join(f"board {s['board']}: " + ", ".join(s["bad"]) for s in bad[:4])
     if len(bad) > 4:
         reason += f"; and {len(bad) - 4} more boards"
     causes: list[tuple[str, str]] = []
-    if explain:
+    if explain and min(s["depth_m"] for s in stats) >= MIN_DEPTH_M:   # a board out of view explains itself
         from .diagnose import explain_contradiction
 
         causes = explain_contradiction(obs, T_lidar_cam, sigma)
