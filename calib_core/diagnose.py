@@ -13,44 +13,28 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy.optimize import linear_sum_assignment, minimize_scalar
 
 from .observations import BoardObservation, Observations
 from .refine import refine
+from .residuals import range_residuals
 from .result import SolveFailure
+from .verdict import (
+    CLIP_Z,
+    MIN_DEPTH_M,
+    Verdict,
+    check,
+    effective_sigma,
+    is_consistent,
+    measured_points,
+    unit_causes,
+)
 
-UNIT_RATIO = 50.0
-"""Two lengths that should agree but differ by more than this factor point to a unit mistake (mm for m)."""
-MAX_PLAUSIBLE_RANGE_M = 200.0
-"""Median scan range (metres) above which a 2D lidar's scan is taken to be in millimetres."""
-MAX_PLAUSIBLE_BOARD_M = 20.0
-"""Board outline diameter (metres) above which the outline is taken to be in millimetres."""
 MAX_DIAGNOSE_BOARDS = 12
 """Above this many boards the pairing hypotheses are not tried (their cost grows as N^4)."""
-
-
-def unit_causes(obs: Observations) -> list[tuple[str, str]]:
-    """Unit mistakes visible in the data alone."""
-    if not obs.n_boards:
-        return []
-    rng = np.median(np.concatenate([np.linalg.norm(b.scan, axis=1) for b in obs.boards]))
-    cam = np.median([np.linalg.norm(b.T_cam_board[:3, 3]) for b in obs.boards])
-    diam = np.median([np.ptp(b.outline, axis=0).max() for b in obs.boards])
-    seg = np.median([np.linalg.norm(b.scan[-1] - b.scan[0]) for b in obs.boards])
-    out = []
-    scans_big = rng > MAX_PLAUSIBLE_RANGE_M or (rng > UNIT_RATIO * cam and seg > UNIT_RATIO * diam)
-    poses_big = cam > MAX_PLAUSIBLE_RANGE_M or cam > UNIT_RATIO * rng
-    if scans_big:
-        out.append(("units", f"units: the scans look ~1000x too large (median range {rng:.4g} m, board distance "
-                             f"{cam:.3g} m from the camera): millimetres written as metres?"))
-    if poses_big:
-        out.append(("units", f"units: the board poses look ~1000x too large (median board distance {cam:.4g} m from "
-                             f"the camera, scan range {rng:.3g} m): millimetres written as metres?"))
-    if diam > MAX_PLAUSIBLE_BOARD_M or (diam > UNIT_RATIO * seg and not scans_big):
-        out.append(("units", f"units: the board outlines look ~1000x too large (diameter {diam:.4g} m, scan "
-                             f"segments {seg:.3g} m): millimetres written as metres?"))
-    return out
 
 
 def _rebuilt(obs: Observations, scans, trans_scale: float = 1.0) -> Observations:
@@ -147,8 +131,6 @@ def _shift_text(perm: np.ndarray) -> str:
 def pairing_causes(obs: Observations, sigma: float) -> list[tuple[str, str]]:
     """Mispaired scans, when a re-pairing fits every board: any permutation up to ``EXHAUSTIVE_PAIRING_BOARDS``
     boards; above, re-pairings found from correctly paired triples, and every cyclic shift."""
-    from .verdict import is_consistent
-
     N = obs.n_boards
     if not 4 <= N <= MAX_DIAGNOSE_BOARDS:
         return []
@@ -168,9 +150,6 @@ def pairing_causes(obs: Observations, sigma: float) -> list[tuple[str, str]]:
 def scale_causes(obs: Observations, T: np.ndarray, sigma: float) -> list[tuple[str, str]]:
     """Board poses that fit only once their translations are scaled by s in 0.7..1.4 (intrinsics or square size
     off): a bounded 1D search (scipy) of the clipped chi-square of the range residuals, refined from ``T``."""
-    from .residuals import range_residuals
-    from .verdict import CLIP_Z, is_consistent, measured_points
-
     def fit(log_s):
         o = _rebuilt(obs, [b.scan for b in obs.boards], float(np.exp(log_s)))
         Ts = refine(o.scan_data, T, residual="range", loss="soft_l1", f_scale=3 * sigma, max_nfev=15).T_lidar_cam
@@ -199,3 +178,19 @@ def explain_contradiction(obs: Observations, T: np.ndarray, sigma: float) -> lis
     except (ValueError, np.linalg.LinAlgError, FloatingPointError):  # a diagnosis never fails the answer
         return []
     return causes
+
+
+def judge(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None = None) -> Verdict:
+    """``verdict.check`` of ``T``, with the likely causes of a contradiction added (``explain_contradiction``;
+    skipped when a board is out of the camera's view: that explains itself)."""
+    v = check(obs, T, range_sigma_m=range_sigma_m)
+    if v.consistent or min(s["depth_m"] for s in v.boards) < MIN_DEPTH_M:
+        return v
+    causes = explain_contradiction(obs, T, v.sigma_m)
+    warnings = list(v.warnings) + [f"likely cause: {msg}" for _, msg in causes if msg not in v.warnings]
+    return replace(v, warnings=tuple(warnings), causes=tuple(dict.fromkeys([*v.causes, *(n for n, _ in causes)])))
+
+
+def data_causes(obs: Observations) -> list[tuple[str, str]]:
+    """Likely causes visible without an answer: units, or mispaired scans (``pairing_causes``)."""
+    return unit_causes(obs) or pairing_causes(obs, effective_sigma(obs))

@@ -6,13 +6,13 @@ import time
 
 import numpy as np
 
+from .diagnose import data_causes, judge
 from .errors import CalibrationError
 from .observations import Observations
 from .registry import get_method
 from .result import CalibrationResult, SolveFailure
 from .uncertainty import UncertaintyError
-from .diagnose import pairing_causes, unit_causes
-from .verdict import check, data_warnings, effective_sigma
+from .verdict import data_warnings
 
 SEED_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022")
 """The paper's methods: their answers stand as their papers compute them; the verdict is reported beside them
@@ -31,7 +31,7 @@ def _failure(obs: Observations, method: str, reason: str, candidates, t0: float,
     info: dict = {}
     if verdict:
         warnings = data_warnings(obs)
-        causes = unit_causes(obs) or pairing_causes(obs, effective_sigma(obs))
+        causes = data_causes(obs)
         info = {"warnings": warnings, "verdict": {"consistent": None, "reason": None, "warnings": warnings,
                                                   "causes": list(dict.fromkeys(n for n, _ in causes))}}
         reason += "".join(f"; likely cause: {msg}" for _, msg in causes)
@@ -74,7 +74,7 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
     cov = info.pop("covariance", None)
     cov = None if cov is None else np.asarray(cov, float)
     if verdict:
-        v = check(observations, T)
+        v = judge(observations, T)
         info["verdict"] = v.to_dict()
         warnings = list(info.get("warnings", []))
         if not v.consistent:

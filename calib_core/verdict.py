@@ -12,7 +12,7 @@ Every answer of ``calibrate`` is tested against its observations, whatever the m
 - boards in front of both sensors: every board's centre in front of the camera (its pose alone), and under the
   answer every board's scan in front of the camera; scan points away from the lidar origin.
 
-A board that fails any test contradicts the answer. ``calib_core.diagnose`` then looks for a likely cause
+A board that fails any test contradicts the answer. ``calib_core.diagnose.judge`` then looks for a likely cause
 (units, mispaired or mirrored scans, scaled board poses). Frames and units as in ``calib_core.observations``.
 """
 
@@ -169,17 +169,38 @@ def board_tests(obs: Observations, T: np.ndarray, sigma: float) -> list[dict]:
     return out
 
 
-def data_warnings(obs: Observations) -> list[str]:
-    """Warnings about the data alone: scan points at the lidar origin, and units (see ``diagnose.unit_causes``)."""
-    from .diagnose import unit_causes
-
+UNIT_RATIO = 50.0
+"""Two lengths that should agree but differ by more than this factor point to a unit mistake (mm for m)."""
+MAX_PLAUSIBLE_RANGE_M = 200.0
+"""Median scan range (metres) above which a 2D lidar's scan is taken to be in millimetres."""
+MAX_PLAUSIBLE_BOARD_M = 20.0
+"""Board outline diameter (metres) above which the outline is taken to be in millimetres."""
+def unit_causes(obs: Observations) -> list[tuple[str, str]]:
+    """Unit mistakes visible in the data alone."""
+    if not obs.n_boards:
+        return []
+    rng = np.median(np.concatenate([np.linalg.norm(b.scan, axis=1) for b in obs.boards]))
+    cam = np.median([np.linalg.norm(b.T_cam_board[:3, 3]) for b in obs.boards])
+    diam = np.median([np.ptp(b.outline, axis=0).max() for b in obs.boards])
+    seg = np.median([np.linalg.norm(b.scan[-1] - b.scan[0]) for b in obs.boards])
     out = []
-    for i, b in enumerate(obs.boards):
-        n0 = int(np.sum(np.linalg.norm(b.scan, axis=1) <= MIN_RANGE_M))
-        if n0:
-            out.append(f"board {i}: {n0} scan point(s) at the lidar origin (range <= {1000 * MIN_RANGE_M:g} mm): "
-                       "not measurements; left out of the verdict")
-    return out + [msg for _, msg in unit_causes(obs)]
+    scans_big = rng > MAX_PLAUSIBLE_RANGE_M or (rng > UNIT_RATIO * cam and seg > UNIT_RATIO * diam)
+    poses_big = cam > MAX_PLAUSIBLE_RANGE_M or cam > UNIT_RATIO * rng
+    if scans_big:
+        out.append(("units", f"units: the scans look ~1000x too large (median range {rng:.4g} m, board distance "
+                             f"{cam:.3g} m from the camera): millimetres written as metres?"))
+    if poses_big:
+        out.append(("units", f"units: the board poses look ~1000x too large (median board distance {cam:.4g} m from "
+                             f"the camera, scan range {rng:.3g} m): millimetres written as metres?"))
+    if diam > MAX_PLAUSIBLE_BOARD_M or (diam > UNIT_RATIO * seg and not scans_big):
+        out.append(("units", f"units: the board outlines look ~1000x too large (diameter {diam:.4g} m, scan "
+                             f"segments {seg:.3g} m): millimetres written as metres?"))
+    return out
+
+
+def data_warnings(obs: Observations) -> list[str]:
+    """Warnings about the data alone: units (``unit_causes``)."""
+    return [msg for _, msg in unit_causes(obs)]
 
 
 def orientation_warnings(T: np.ndarray) -> list[tuple[str, str]]:
@@ -194,29 +215,22 @@ def orientation_warnings(T: np.ndarray) -> list[tuple[str, str]]:
     return []
 
 
-def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | None = None,
-          explain: bool = True) -> Verdict:
-    """The verdict on ``T_lidar_cam`` for ``obs``; with ``explain``, a contradiction is explained where it can be
-    (``calib_core.diagnose``). ``range_sigma_m``: the range-noise std, default estimated from the scan lines."""
+def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | None = None) -> Verdict:
+    """The verdict on ``T_lidar_cam`` for ``obs`` (no explanation: ``diagnose.judge`` adds the likely causes).
+    ``range_sigma_m``: the range-noise std, default estimated from the scan lines."""
     sigma = effective_sigma(obs, range_sigma_m)
     stats = board_tests(obs, T_lidar_cam, sigma)
-    warnings = data_warnings(obs)
-    orient = orientation_warnings(T_lidar_cam)
-    warnings += [msg for _, msg in orient]
+    found = unit_causes(obs) + orientation_warnings(T_lidar_cam)
+    warnings = [msg for _, msg in found]
+    names = tuple(dict.fromkeys(n for n, _ in found))
     bad = [s for s in stats if s["bad"]]
     if not bad:
-        return Verdict(True, None, tuple(warnings), tuple(n for n, _ in orient), sigma, tuple(stats))
+        return Verdict(True, None, tuple(warnings), names, sigma, tuple(stats))
     reason = "; ".join(f"board {s['board']}: " + ", ".join(s["bad"]) for s in bad[:4])
     if len(bad) > 4:
         reason += f"; and {len(bad) - 4} more boards"
-    causes: list[tuple[str, str]] = []
-    if explain and min(s["depth_m"] for s in stats) >= MIN_DEPTH_M:   # a board out of view explains itself
-        from .diagnose import explain_contradiction
-
-        causes = explain_contradiction(obs, T_lidar_cam, sigma)
-    warnings += [f"likely cause: {msg}" for _, msg in causes if msg not in warnings]
     return Verdict(False, f"{len(bad)} of {obs.n_boards} boards contradict the answer: {reason}", tuple(warnings),
-                   tuple(dict.fromkeys(name for name, _ in causes)), sigma, tuple(stats))
+                   names, sigma, tuple(stats))
 
 
 def is_consistent(obs: Observations, T_lidar_cam: np.ndarray, sigma: float) -> bool:
