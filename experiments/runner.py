@@ -19,6 +19,7 @@ import json
 import math
 import os
 import re
+import socket
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -30,12 +31,14 @@ import numpy as np
 import pandas as pd
 
 from calib_core import CalibrationError, calibrate, get_method
+from calib_core.joint import corner_residuals, joint_crlb
 from calib_core.metrics import (
     TRUTH_MAX_ROT_DEG,
     TRUTH_MAX_TRANS_M,
     VALID_MAX_ROT_DEG,
     VALID_MAX_TRANS_M,
     is_valid,
+    nees,
     pose_errors,
 )
 from calib_core.uncertainty import conditioning, crlb
@@ -46,7 +49,7 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 RESULT_COLUMNS = (
     "trial", "method", "ok", "reason", "e_R_deg", "e_t_m", "valid", "n_candidates", "true_among_candidates",
     "some_candidate_valid", "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds",
-    "crlb_rot_deg", "crlb_trans_mm", "conditioning",
+    "crlb_rot_deg", "crlb_trans_mm", "conditioning", "nees", "sigma_rot_deg", "sigma_trans_mm",
 )
 # Columns that legitimately differ between two runs of the same settings (wall time).
 TIMING_COLUMNS = ("seconds",)
@@ -115,7 +118,8 @@ def resolve_methods(names: Iterable[str]) -> tuple[str, ...]:
 def _failure_row(base: dict, method: str, reason: str) -> dict:
     return {**base, "method": method, "ok": False, "reason": reason, "e_R_deg": np.nan, "e_t_m": np.nan,
             "valid": False, "n_candidates": 0, "true_among_candidates": False, "some_candidate_valid": False,
-            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan}
+            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan,
+            "nees": np.nan, "sigma_rot_deg": np.nan, "sigma_trans_mm": np.nan}
 
 
 def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, Any]:
@@ -123,11 +127,15 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     row: dict[str, Any] = {"ok": bool(result.ok), "reason": result.reason or "", "seconds": float(result.seconds),
                            "n_candidates": result.n_candidates, "e_R_deg": np.nan, "e_t_m": np.nan,
                            "valid": False, "true_among_candidates": False, "some_candidate_valid": False,
-                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan}
+                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan,
+                           "nees": np.nan, "sigma_rot_deg": np.nan, "sigma_trans_mm": np.nan}
     if result.ok:
         e_R, e_t = pose_errors(result.T_lidar_cam, T_true)
         row.update(e_R_deg=float(e_R), e_t_m=float(e_t),
                    valid=bool(is_valid(e_R, e_t, metrics["max_rot_deg"], metrics["max_trans_m"])))
+        if result.covariance is not None:
+            row.update(nees=nees(result.T_lidar_cam, T_true, result.covariance),
+                       sigma_rot_deg=result.sigma_rot_deg, sigma_trans_mm=result.sigma_trans_mm)
     if result.n_candidates:
         cR, ct = pose_errors(result.candidates, T_true)
         best = int(np.nanargmin(cR)) if np.isfinite(cR).any() else 0
@@ -139,8 +147,25 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     return row
 
 
+def corner_sigma_px(obs, sim: dict) -> float | None:
+    """The corner noise std (px) of a simulated trial with image corners: ``pixel_noise_px`` in ``pixel`` mode, the
+    RMS detection error against the true poses in ``image`` mode; None without corners or true poses."""
+    if not obs.has_corners or "T_cam_board_true" not in obs.meta:
+        return None
+    from simulate import SimOptions
+
+    o = SimOptions(**sim)
+    if o.pose_mode == "pixel":
+        return o.pixel_noise_px
+    e = corner_residuals(obs, np.asarray(obs.meta["T_cam_board_true"], float))
+    return float(np.sqrt(np.mean(e**2)))
+
+
 def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
-    """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number."""
+    """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number.
+
+    With image corners the bound is that of the joint model (range and corner noise, board poses unknown, at the
+    true poses; ``corner_sigma_px``), else that of the range model (board poses exact)."""
     out = {"crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan, "conditioning": np.nan}
     if not cell.metrics.get("uncertainty", True):
         return out
@@ -148,7 +173,11 @@ def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
     sigma_mm = cell.metrics.get("crlb_sigma_mm")
     sigma_mm = cell.sim.get("noise_mm", 0.0) if sigma_mm is None else sigma_mm
     try:
-        bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
+        px = corner_sigma_px(obs, cell.sim)
+        if px is None:
+            bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
+        else:
+            bound = joint_crlb(obs, float(sigma_mm) / 1000.0, px, T_cam_board=np.asarray(obs.meta["T_cam_board_true"]))
         out.update(crlb_rot_deg=float(bound.rot_rms_deg), crlb_trans_mm=1000.0 * float(bound.trans_rms_m))
     except Exception:  # noqa: BLE001 -- a degenerate board set has no bound: NaN, not a dead cell
         pass
@@ -310,9 +339,15 @@ def load_sweep(results_dir: str | Path, sweep: str) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
+def _tmp_name(path: Path) -> Path:
+    """A hidden temporary name next to ``path``, unique per host and process (workers of a cluster share the store
+    on one file system, where two hosts may run the same pid)."""
+    return path.with_name(f".{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
+
+
 def _write_atomic(df: pd.DataFrame, path: Path) -> None:
     """Write whole or not at all: a temporary file in the same folder, flushed to disk, then renamed."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = _tmp_name(path)
     with open(tmp, "w", newline="") as fh:
         df.to_csv(fh, index=False, float_format="%.10g")
         fh.flush()
@@ -323,7 +358,7 @@ def _write_atomic(df: pd.DataFrame, path: Path) -> None:
 def _write_chunk(cell: Cell, trials: Sequence[int], methods: Sequence[str], rows: list[dict]) -> None:
     cols = list(cell.columns()) + list(RESULT_COLUMNS)
     df = pd.DataFrame(rows)
-    df = df[cols + [c for c in df.columns if c not in cols]]
+    df = df.reindex(columns=cols + [c for c in df.columns if c not in cols])  # a trial_fn may omit metric columns
     tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
     _write_atomic(df, cell.dir / f"chunk-{min(trials):05d}-{max(trials):05d}-{tag}.csv")
 
@@ -334,7 +369,7 @@ def _prepare(cell: Cell) -> None:
     if not settings.exists():
         d = asdict(cell)
         d.pop("n_trials"), d.pop("methods"), d.pop("results_dir")
-        tmp = settings.with_name(f".settings.json.{os.getpid()}.tmp")
+        tmp = _tmp_name(settings)  # whole or absent: a worker killed mid-write must not leave half a file
         tmp.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
         os.replace(tmp, settings)
 
