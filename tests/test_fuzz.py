@@ -4,11 +4,10 @@ wrong answer of the default method; the seed methods' answers carry the verdict.
 from __future__ import annotations
 
 import pytest
+from fuzz_corpus import corpus
 
 from calib_core import ObservationError, calibrate, load_observations
 from calib_core.metrics import is_valid, pose_errors
-
-from .fuzz_corpus import corpus
 
 CASES = corpus(physics_seeds=2)
 FILE_CASES = [c for c in CASES if c.kind != "physics"]
