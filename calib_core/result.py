@@ -88,6 +88,10 @@ class CalibrationResult:
             d["sigma_trans_mm"] = self.sigma_trans_mm
             if "covariance_model" in self.info:
                 d["covariance_model"] = str(self.info["covariance_model"])
+        if self.info.get("warnings"):
+            d["warnings"] = [str(w) for w in self.info["warnings"]]
+        if self.info.get("verdict") is not None:
+            d["verdict"] = self.info["verdict"]
         return d
 
     def save(self, path) -> None:

@@ -20,6 +20,7 @@ from calib_core.errors import LidarcamError
 
 from .config import cell_from_cfg, register_configs
 from .runner import run_cells
+from .validate import ConfigError
 
 register_configs()
 
@@ -36,7 +37,10 @@ def summary_line(df) -> str:
 def main(cfg: DictConfig) -> float:
     try:
         cell = cell_from_cfg(cfg)
-    except LidarcamError as err:  # a plugin that does not load, an unknown method: one line, exit 2
+    except ConfigError as err:  # one line, no traceback: the config, not the code, is wrong
+        print(f"error: {err}", file=sys.stderr)
+        sys.exit(2)
+    except LidarcamError as err:  # a plugin that does not load: one line, exit 2
         print(f"experiments.run: error: {err}", file=sys.stderr)
         sys.exit(2)
     df = run_cells([cell], n_jobs=cfg.n_jobs, chunk_size=cfg.chunk_size, progress=cfg.progress,

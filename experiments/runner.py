@@ -18,6 +18,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import socket
 import sys
 import time
@@ -236,16 +237,88 @@ def read_table(path: Path, text_columns: Sequence[str] = ("reason",)) -> pd.Data
     return df
 
 
+class DamagedChunk(RunnerError):
+    """A chunk file that does not parse in full (empty, cut mid-row, junk): never read in part."""
+
+
+_CHUNK_NAME = re.compile(r"^chunk-(\d{5,})-(\d{5,})-([0-9a-f]{6})\.csv$")
+
+
 def _read_chunk(path: Path) -> pd.DataFrame:
-    return read_table(path)
+    """The rows of one chunk file, checked in full: the header has the result columns; every (trial, method) of
+    the name's trial range and of the methods whose hash the name carries appears exactly once; trial, method,
+    ok and valid are well-formed in every row. DamagedChunk otherwise."""
+    def damaged(why: str) -> DamagedChunk:
+        return DamagedChunk(f"{path}: damaged chunk file ({why})")
+
+    m = _CHUNK_NAME.match(path.name)
+    if not m:
+        raise damaged("name is not chunk-<first>-<last>-<methods hash>.csv")
+    try:
+        df = read_table(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        raise damaged(f"does not parse: {str(exc).splitlines()[0][:120]}") from None
+    missing = [c for c in RESULT_COLUMNS if c not in df.columns]
+    if missing:
+        raise damaged(f"missing columns {missing[:4]}")
+    first, last = int(m.group(1)), int(m.group(2))
+    trial = pd.to_numeric(df["trial"], errors="coerce")
+    if trial.isna().any() or not (trial == trial.round()).all():
+        raise damaged("a trial number that is not an integer")
+    if df["method"].isna().any() or not df["method"].map(lambda v: isinstance(v, str) and v != "").all():
+        raise damaged("a row without a method")
+    methods = list(dict.fromkeys(df["method"]))
+    tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
+    for col in ("ok", "valid"):
+        if not df[col].map(lambda v: str(v) in ("True", "False")).all():
+            raise damaged(f"a row whose {col!r} is not True/False")
+    want = {(t, mm) for t in range(first, last + 1) for mm in methods}
+    got = list(zip(trial.astype(int), df["method"], strict=True))
+    if tag != m.group(3) or len(got) != len(set(got)) or set(got) != want:
+        raise damaged(f"{len(got)} rows, expected {(last - first + 1)} trials x the methods of hash {m.group(3)}")
+    df["trial"] = trial.astype(int)
+    for col in ("ok", "valid"):
+        df[col] = df[col].map(lambda v: str(v) == "True").astype(bool)
+    return df
 
 
-def load_cell_dir(path: Path) -> pd.DataFrame:
-    """Every row stored under one cell folder (duplicates of a (trial, method) pair dropped)."""
-    files = sorted(Path(path).glob("chunk-*.csv"))
-    if not files:
+def verify_cell_dir(path: Path) -> list[str]:
+    """Problems of the store of one cell (empty when sound): damaged chunk files, stray temporary files."""
+    out = []
+    for f in sorted(Path(path).glob("chunk-*.csv")):
+        try:
+            _read_chunk(f)
+        except DamagedChunk as err:
+            out.append(str(err))
+    out += [f"{f}: temporary file left by an interrupted write" for f in sorted(Path(path).glob(".chunk-*.tmp"))]
+    return out
+
+
+def verify_store(results_dir: str | Path, sweep: str | None = None) -> list[str]:
+    """Problems of every cell under ``results_dir`` (one sweep, or all): see ``verify_cell_dir``."""
+    root = Path(results_dir)
+    sweeps = [root / sweep] if sweep else sorted(p for p in root.iterdir() if (p / "trials").is_dir())
+    return [msg for sw in sweeps for cell in sorted((sw / "trials").glob("*/")) for msg in verify_cell_dir(cell)]
+
+
+def load_cell_dir(path: Path, heal: bool = False) -> pd.DataFrame:
+    """Every row stored under one cell folder (duplicates of a (trial, method) pair dropped).
+
+    A damaged chunk file raises DamagedChunk; with ``heal`` it is renamed ``<name>.damaged`` (so its trials are
+    recomputed), reported on stderr, and left out whole.
+    """
+    frames = []
+    for f in sorted(Path(path).glob("chunk-*.csv")):
+        try:
+            frames.append(_read_chunk(f))
+        except DamagedChunk as err:
+            if not heal:
+                raise DamagedChunk(f"{err}; rerun the sweep to recompute it") from None
+            os.replace(f, f.with_name(f.name + ".damaged"))
+            sys.stderr.write(f"{err}: moved aside to {f.name}.damaged; its trials are recomputed\n")
+    if not frames:
         return pd.DataFrame()
-    df = pd.concat([_read_chunk(f) for f in files], ignore_index=True)
+    df = pd.concat(frames, ignore_index=True)
     return df.drop_duplicates(["trial", "method"], keep="first")
 
 
@@ -277,8 +350,12 @@ def _tmp_name(path: Path) -> Path:
 
 
 def _write_atomic(df: pd.DataFrame, path: Path) -> None:
+    """Write whole or not at all: a temporary file in the same folder, flushed to disk, then renamed."""
     tmp = _tmp_name(path)
-    df.to_csv(tmp, index=False, float_format="%.10g")
+    with open(tmp, "w", newline="") as fh:
+        df.to_csv(fh, index=False, float_format="%.10g")
+        fh.flush()
+        os.fsync(fh.fileno())
     os.replace(tmp, path)
 
 
@@ -303,7 +380,7 @@ def _prepare(cell: Cell) -> None:
 
 def pending(cell: Cell, chunk_size: int) -> list[tuple[int, ...] | tuple]:
     """(trials, methods) tasks still to run for ``cell``: consecutive trials missing the same methods."""
-    df = load_cell_dir(cell.dir)
+    df = load_cell_dir(cell.dir, heal=True)
     done = set(zip(df["trial"], df["method"], strict=True)) if not df.empty else set()
     tasks: list[tuple[list[int], tuple[str, ...]]] = []
     for t in range(cell.n_trials):
