@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
 .DEFAULT_GOAL := help
-.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper clean
+.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard verify-results clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
@@ -39,6 +39,19 @@ reproduce-paper: $(STAMP) ## Run the paper's sweeps, write results/paper/ (table
 
 explain-paper: $(STAMP) ## Ablations of peng2022 + unstated-setting sweeps, write results/explain/ (< 10 min on 2 cores)
 	$(PY) -m experiments.explain
+
+corner-noise: $(STAMP) ## Camera-noise sweeps (joint model over corners and ranges), write results/corner_noise/
+	$(PY) -m experiments.corner_noise --trials 25 --boards-trials 25
+
+REAL_DATA ?= ../shared/real-data
+real-data: $(STAMP) ## The three public rigs end to end, write results/real/ (REAL_DATA=path to the data sets)
+	$(PY) -m experiments.real_data --data $(REAL_DATA)
+
+leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v1.yaml -> results/leaderboard/ (FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
+	$(PY) -m experiments.leaderboard $(if $(FULL),--full) $(ARGS)
+
+verify-results: $(STAMP) ## Check that every stored trial chunk under results/ parses in full
+	$(PY) -m experiments.verify results
 
 clean: ## Remove the virtual environment and caches
 	rm -rf $(VENV) .pytest_cache .ruff_cache outputs multirun

@@ -6,17 +6,53 @@ import time
 
 import numpy as np
 
+from .diagnose import data_causes, judge
 from .errors import CalibrationError
 from .observations import Observations
 from .registry import get_method
 from .result import CalibrationResult, SolveFailure
+from .uncertainty import UncertaintyError
+from .verdict import data_warnings
+
+SEED_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022")
+"""The paper's methods: their answers stand as their papers compute them; the verdict is reported beside them
+(``info["verdict"]`` and warnings) and never turns them into ``ok=False``. Their ablations (``peng2022/...``)
+count as the same method; a derived variant (``X+ml``) is ours and is held to the verdict."""
 
 
-def calibrate(observations: Observations, method: str = "lidarcam", **options) -> CalibrationResult:
+def is_seed_method(name: str) -> bool:
+    """True for the paper's methods and their ablations (``peng2022/equal``), not for ``X+suffix`` variants."""
+    return "+" not in name and name.split("/")[0] in SEED_METHODS
+
+
+def _failure(obs: Observations, method: str, reason: str, candidates, t0: float, verdict: bool,
+             extra: dict | None = None) -> CalibrationResult:
+    """``ok=False`` with ``reason`` and the method's ``extra`` info (e.g. the directions a degenerate board set
+    does not determine); with ``verdict``, what the data alone show (units, mispaired scans) is added to the
+    warnings and, as likely causes, to the reason."""
+    info: dict = dict(extra or {})
+    if verdict:
+        warnings = list(info.get("warnings", []))
+        warnings += [w for w in data_warnings(obs) if w not in warnings]
+        causes = data_causes(obs)
+        info.update(warnings=warnings, verdict={"consistent": None, "reason": None, "warnings": warnings,
+                                                "causes": list(dict.fromkeys(n for n, _ in causes))})
+        reason += "".join(f"; likely cause: {msg}" for _, msg in causes)
+    return CalibrationResult(method, False, reason=reason,
+                             candidates=np.zeros((0, 4, 4)) if candidates is None else candidates,
+                             seconds=time.perf_counter() - t0, info=info)
+
+
+def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: bool = True,
+              **options) -> CalibrationResult:
     """Calibrate ``T_lidar_cam`` from ``observations`` with the registered ``method``.
 
     Returns a ``CalibrationResult``; a method that cannot solve (too few boards, degenerate data) gives
-    ``ok=False`` and a reason, never a guess. Unknown methods or options raise ``CalibrationError``.
+    ``ok=False`` and a reason, never a guess. Every answer is then tested against the data
+    (``calib_core.verdict``, in ``info["verdict"]``, its warnings in ``info["warnings"]``): an answer the data
+    contradict is ``ok=False`` with the reason, except for the paper's methods (``SEED_METHODS``), whose answer
+    stands with the contradiction as a warning. ``verdict=False`` skips the test. Unknown methods or options
+    raise ``CalibrationError``.
     """
     m = get_method(method)
     t0 = time.perf_counter()
@@ -26,14 +62,30 @@ def calibrate(observations: Observations, method: str = "lidarcam", **options) -
     try:
         T, cands, info = m.func(observations, **options)
     except SolveFailure as fail:
-        return CalibrationResult(method, False, reason=fail.reason, candidates=fail.candidates,
-                                 seconds=time.perf_counter() - t0, info=fail.info)
+        return _failure(observations, method, fail.reason, fail.candidates, t0, verdict, fail.info)
+    except UncertaintyError as err:
+        return _failure(observations, method, f"{method}: {err}", None, t0, verdict)
     except TypeError as exc:
         if "unexpected keyword" in str(exc):
             raise CalibrationError(f"{method}: {exc}") from None
         raise
+    T = np.asarray(T, float)
+    cands = np.asarray(cands, float)
+    if not np.all(np.isfinite(T)):
+        return CalibrationResult(method, False, reason=f"{method}: the solution is not finite", candidates=cands,
+                                 seconds=time.perf_counter() - t0)
     cov = info.pop("covariance", None)
-    return CalibrationResult(method, True, np.asarray(T, float), None, np.asarray(cands, float),
-                             time.perf_counter() - t0, None if cov is None else np.asarray(cov, float), info=info)
-
-
+    cov = None if cov is None else np.asarray(cov, float)
+    if verdict:
+        v = judge(observations, T)
+        info["verdict"] = v.to_dict()
+        warnings = list(info.get("warnings", []))
+        if not v.consistent:
+            warnings.append(f"the data contradict this answer: {v.reason}")
+        info["warnings"] = warnings + [w for w in v.warnings if w not in warnings]
+        if not v.consistent and not is_seed_method(method):
+            causes = [w for w in v.warnings if w.startswith("likely cause")]
+            return CalibrationResult(method, False, None, f"{method}: the data contradict the answer: {v.reason}"
+                                     + "".join(f"; {c}" for c in causes), cands, time.perf_counter() - t0,
+                                     info=info)
+    return CalibrationResult(method, True, T, None, cands, time.perf_counter() - t0, cov, info=info)

@@ -12,14 +12,55 @@ from typing import Any
 
 import numpy as np
 
+from .camera import Camera
 from .errors import ObservationError
-from .transforms import ROTATION_TOL, rotation_defect
+from .transforms import ROTATION_TOL, project_to_so3, rotation_defect
 
 MIN_SCAN_POINTS = 2
+MIN_RANGE_M = 1e-3
+"""Scan points closer than this to the lidar (metres) are not measurements (a no-return is often written 0)."""
+MIN_CORNERS = 4
+"""Fewest image corners a board may carry (a planar pose needs 4)."""
 
 
-def _frozen_array(value, name: str, shape: tuple) -> np.ndarray:
-    """Float copy of ``value``, checked against ``shape`` (None = any length) and for finiteness, read-only."""
+MAX_BOARDS = 100
+"""Most boards one problem may hold (the exhaustive methods grow as N^4); more are refused when loaded."""
+MAX_SCAN_POINTS = 20_000
+"""Most scan points on one board (a 2D lidar sweep has a few thousand beams)."""
+MAX_OUTLINE_VERTICES = 64
+"""Most vertices of one board outline."""
+LOAD_ROTATION_TOL = 1e-5
+"""Largest ``|R^T R - I|`` of a rotation read from a file: 6 written decimals give about 1e-6; such a rotation is
+re-orthonormalised (``orthonormalised``) with a note."""
+
+
+def _bad_leaf(value, depth: int) -> str | None:
+    """Why nested lists ``value`` (at most ``depth`` levels) are not all numbers (bool is not a number), or None."""
+    stack = [(value, depth, "")]
+    while stack:
+        v, d, where = stack.pop()
+        if isinstance(v, (list, tuple)):
+            if d == 0:
+                return f"nested deeper than expected at {where or 'top'}"
+            stack.extend((x, d - 1, f"{where}[{i}]") for i, x in enumerate(v))
+        elif isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+            return f"not a number at {where or 'top'} ({type(v).__name__} {str(v)[:20]!r})"
+    return None
+
+
+def numeric_array(value, name: str, shape: tuple, max_len: int | None = None) -> np.ndarray:
+    """Float copy of ``value`` (nested lists of numbers, or a numeric ndarray), checked against ``shape`` (None =
+    any length, at most ``max_len``) and for finiteness, read-only; ObservationError naming ``name`` otherwise.
+    Booleans and strings are not numbers."""
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "fiu":
+            raise ObservationError(f"not a numeric array (dtype {value.dtype})", field=name)
+    else:
+        if max_len is not None and isinstance(value, (list, tuple)) and len(value) > max_len:
+            raise ObservationError(f"{len(value)} entries, more than the limit of {max_len}", field=name)
+        why = _bad_leaf(value, len(shape))
+        if why:
+            raise ObservationError(why, field=name)
     try:
         a = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -28,10 +69,27 @@ def _frozen_array(value, name: str, shape: tuple) -> np.ndarray:
         want = "x".join("N" if s is None else str(s) for s in shape)
         raise ObservationError(f"expected shape {want}, got {'x'.join(map(str, a.shape)) or 'scalar'}",
                                field=name)
+    if max_len is not None and len(a) > max_len:
+        raise ObservationError(f"{len(a)} entries, more than the limit of {max_len}", field=name)
     if not np.all(np.isfinite(a)):
         raise ObservationError("contains NaN or inf", field=name)
     a.setflags(write=False)
     return a
+
+
+_frozen_array = numeric_array
+
+
+def orthonormalised(T, name: str) -> tuple[np.ndarray, str | None]:
+    """A 4x4 transform read from a file, its rotation projected onto SO(3) when within ``LOAD_ROTATION_TOL`` of
+    it (written with few decimals), and the note saying so (None when untouched or too far: the data model
+    then refuses it)."""
+    A = np.array(numeric_array(T, name, (4, 4)))
+    defect = rotation_defect(A[:3, :3])
+    if ROTATION_TOL < defect <= LOAD_ROTATION_TOL:
+        A[:3, :3] = project_to_so3(A[:3, :3])
+        return A, f"'{name}': rotation re-orthonormalised (|R^T R - I| was {defect:.1e})"
+    return A, None
 
 
 def _segments_cross(p1, p2, q1, q2) -> bool:
@@ -78,11 +136,16 @@ class BoardObservation:
             The paper's square of side c is ``[[0,0],[c,0],[c,c],[0,c]]``.
         scan: (K,2) lidar points on this board, in the lidar frame (scan plane z = 0), ordered by bearing;
             metres.
+        corners_px: optional (J,2) detected image corners, distorted pixels as the detector returns them.
+        corners_board: optional (J,3) the same corners in the board frame (metres; given as (J,2) on z = 0).
+            Both or neither; they need the file's ``Observations.camera``.
     """
 
     T_cam_board: np.ndarray
     outline: np.ndarray
     scan: np.ndarray
+    corners_px: np.ndarray | None = None
+    corners_board: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         T = _frozen_array(self.T_cam_board, "T_cam_board", (4, 4))
@@ -93,16 +156,50 @@ class BoardObservation:
             what = "is a reflection or singular" if not np.isfinite(defect) else \
                 f"is not orthonormal (|R^T R - I| = {defect:.2g} > {ROTATION_TOL:g})"
             raise ObservationError(f"rotation {what}", field="T_cam_board")
-        outline = _frozen_array(self.outline, "outline", (None, 2))
+        outline = numeric_array(self.outline, "outline", (None, 2), MAX_OUTLINE_VERTICES + 1)
+        if len(outline) >= 4 and np.array_equal(outline[0], outline[-1]):
+            outline = outline[:-1]  # a closed ring: the first vertex repeated at the end
+        if len(outline) > MAX_OUTLINE_VERTICES:
+            raise ObservationError(f"{len(outline)} vertices, more than the limit of {MAX_OUTLINE_VERTICES}",
+                                   field="outline")
         why = check_simple_polygon(outline)
         if why:
             raise ObservationError(f"outline {why}", field="outline")
-        scan = _frozen_array(self.scan, "scan", (None, 2))
+        scan = numeric_array(self.scan, "scan", (None, 2), MAX_SCAN_POINTS)
+        at_origin = np.flatnonzero(np.hypot(scan[:, 0], scan[:, 1]) < MIN_RANGE_M)
+        if len(at_origin):
+            raise ObservationError(f"scan point {at_origin[0]} is at the lidar origin (range < {MIN_RANGE_M * 1000:g} "
+                                   "mm: a no-return, not a measurement; leave it out)", field="scan")
         if len(scan) < MIN_SCAN_POINTS:
             raise ObservationError(f"fewer than {MIN_SCAN_POINTS} scan points ({len(scan)})", field="scan")
         object.__setattr__(self, "T_cam_board", T)
         object.__setattr__(self, "outline", outline)
         object.__setattr__(self, "scan", scan)
+        self._check_corners()
+
+    def _check_corners(self) -> None:
+        if self.corners_px is None and self.corners_board is None:
+            return
+        for name in ("corners_px", "corners_board"):
+            if getattr(self, name) is None:
+                other = "corners_board" if name == "corners_px" else "corners_px"
+                raise ObservationError(f"missing while {other} is given (both or neither)", field=name)
+        px = _frozen_array(self.corners_px, "corners_px", (None, 2))
+        planar = np.ndim(self.corners_board) == 2 and np.shape(self.corners_board)[1] == 2
+        pb = _frozen_array(self.corners_board, "corners_board", (None, 2 if planar else 3))
+        if planar:
+            pb = np.column_stack([pb, np.zeros(len(pb))])
+            pb.setflags(write=False)
+        if len(px) != len(pb):
+            raise ObservationError(f"{len(px)} image corners but {len(pb)} board corners", field="corners_board")
+        if len(px) < MIN_CORNERS:
+            raise ObservationError(f"fewer than {MIN_CORNERS} corners ({len(px)})", field="corners_px")
+        object.__setattr__(self, "corners_px", px)
+        object.__setattr__(self, "corners_board", pb)
+
+    @property
+    def has_corners(self) -> bool:
+        return self.corners_px is not None
 
     @property
     def normal_cam(self) -> np.ndarray:
@@ -153,17 +250,26 @@ class Observations:
         T_lidar_cam_true: optional 4x4 true extrinsic (maps camera points into the lidar frame;
             the paper's ``p_L = R p_C + t``).
         meta: free-form provenance (simulator settings, seed, source file); not used by the solvers.
+        camera: optional intrinsics (``calib_core.camera.Camera``); required when a board carries corners.
     """
 
     boards: tuple[BoardObservation, ...]
     T_lidar_cam_true: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    camera: Camera | None = None
 
     def __post_init__(self) -> None:
         boards = tuple(self.boards)
+        if len(boards) > MAX_BOARDS:
+            raise ObservationError(f"{len(boards)} boards, more than the limit of {MAX_BOARDS}", field="boards")
         for i, b in enumerate(boards):
             if not isinstance(b, BoardObservation):
                 raise ObservationError(f"not a BoardObservation ({type(b).__name__})", board=i)
+            if b.has_corners and self.camera is None:
+                raise ObservationError("image corners given but the file has no camera intrinsics", board=i,
+                                       field="camera")
+        if self.camera is not None and not isinstance(self.camera, Camera):
+            raise ObservationError(f"not a Camera ({type(self.camera).__name__})", field="camera")
         object.__setattr__(self, "boards", boards)
         if self.T_lidar_cam_true is not None:
             T = _frozen_array(self.T_lidar_cam_true, "ground_truth.T_lidar_cam", (4, 4))
@@ -180,7 +286,13 @@ class Observations:
 
     def subset(self, indices) -> Observations:
         """The same problem with only the boards at ``indices`` (in that order)."""
-        return Observations(tuple(self.boards[i] for i in indices), self.T_lidar_cam_true, dict(self.meta))
+        return Observations(tuple(self.boards[i] for i in indices), self.T_lidar_cam_true, dict(self.meta),
+                            self.camera)
+
+    @property
+    def has_corners(self) -> bool:
+        """True when every board carries image corners (and the camera is known): the joint model applies."""
+        return bool(self.boards) and self.camera is not None and all(b.has_corners for b in self.boards)
 
     def planes_cam(self) -> tuple[np.ndarray, np.ndarray]:
         """Board planes in the camera frame: normals (N,3) and offsets (N,), plane ``n . p_C = d``."""

@@ -23,6 +23,33 @@ def perturb(T0: np.ndarray, x: np.ndarray) -> np.ndarray:
     return T
 
 
+CHUNK_ELEMENTS = 4_000_000
+"""Budget (array elements) of one batch of candidates: scorers work on candidates in chunks of
+``candidate_chunk`` so that memory stays bounded whatever the number of candidates, points and vertices."""
+
+
+def candidate_chunk(obs: Observations) -> int:
+    """How many candidates one batch holds within ``CHUNK_ELEMENTS`` (the largest temporaries are (M,K,3) over
+    the scan points and (M,N,2,V,V) over endpoint-edge pairs)."""
+    K = sum(len(b.scan) for b in obs.boards)
+    V = max((len(b.outline) for b in obs.boards), default=0)
+    return max(1, CHUNK_ELEMENTS // max(1, 3 * K + 2 * obs.n_boards * V * V))
+
+
+def in_chunks(fn, obs: Observations, candidates: np.ndarray):
+    """``fn(candidates)`` evaluated chunk by chunk (``candidate_chunk``) and concatenated along the first axis;
+    ``fn`` returns an array, or a (array, dict of arrays) pair."""
+    C = np.asarray(candidates, float).reshape(-1, 4, 4)
+    step = candidate_chunk(obs)
+    if len(C) <= step:
+        return fn(C)
+    parts = [fn(C[i:i + step]) for i in range(0, len(C), step)]
+    if isinstance(parts[0], tuple):
+        return (np.concatenate([p[0] for p in parts]),
+                {k: np.concatenate([p[1][k] for p in parts]) for k in parts[0][1]})
+    return np.concatenate(parts)
+
+
 MIN_BEAM_INCIDENCE = 1e-6
 """|cos| of the angle between a beam and its board's normal below which the range residual is clamped: beams
 nearly parallel to a candidate's plane get residuals of a kilometre or more rather than inf."""

@@ -93,8 +93,14 @@ class CalibrationResult:
             d["covariance"] = np.asarray(self.covariance).tolist()
             d["sigma_rot_deg"] = self.sigma_rot_deg
             d["sigma_trans_mm"] = self.sigma_trans_mm
+            if "covariance_model" in self.info:
+                d["covariance_model"] = str(self.info["covariance_model"])
+        if self.info.get("warnings"):
+            d["warnings"] = [str(w) for w in self.info["warnings"]]
+        if self.info.get("verdict") is not None:
+            d["verdict"] = self.info["verdict"]
         for k in JSON_INFO:
-            if self.info.get(k) is not None:
+            if k not in d and self.info.get(k) is not None:
                 d[k] = self.info[k]
         return d
 

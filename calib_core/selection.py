@@ -14,7 +14,15 @@ from scipy.special import logsumexp
 
 from .errors import CalibrationError
 from .observations import Observations
-from .residuals import outside_outline, plane_residuals, point_line_errors, points_in_boards, range_residuals
+from .residuals import (
+    candidate_chunk,
+    in_chunks,
+    outside_outline,
+    plane_residuals,
+    point_line_errors,
+    points_in_boards,
+    range_residuals,
+)
 
 EDGE_SIGMA_M = 0.03
 """Scale (metres) of the endpoint-against-edge term of the ``lidarcam`` score: absorbs the range noise and the beam
@@ -26,7 +34,7 @@ OUTLINE_SIGMA_M = 0.03
 
 def point_to_plane(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     """Sum of squared point-to-plane distances (m^2) of all scan points over all boards, per candidate."""
-    return np.sum(plane_residuals(candidates, obs.scan_data) ** 2, axis=1)
+    return in_chunks(lambda C: np.sum(plane_residuals(C, obs.scan_data) ** 2, axis=1), obs, candidates)
 
 
 def peng2022(obs: Observations, candidates: np.ndarray, *, delta_m: float = 0.030,
@@ -48,11 +56,11 @@ def peng2022(obs: Observations, candidates: np.ndarray, *, delta_m: float = 0.03
     """
     M = len(candidates)
     if error == "point_line":
-        sq = np.sum(point_line_errors(obs, candidates) ** 2, axis=-1)                    # (M,N)
+        sq = in_chunks(lambda C: np.sum(point_line_errors(obs, C) ** 2, axis=-1), obs, candidates)  # (M,N)
     elif error == "point_plane":
         data = obs.scan_data
-        e2 = plane_residuals(candidates, data) ** 2
-        sq = np.stack([e2[:, data.board == i].sum(axis=1) for i in range(obs.n_boards)], axis=1)
+        sq = in_chunks(lambda C: np.stack([np.sum(plane_residuals(C, data)[:, data.board == i] ** 2, axis=1)
+                                           for i in range(obs.n_boards)], axis=1), obs, candidates)
     else:
         raise CalibrationError(f"peng2022: error must be 'point_line' or 'point_plane', got {error!r}")
     log_pi = -sq / (2 * delta_m**2) - np.log(np.sqrt(2 * np.pi) * delta_m)               # eq. 1, (M,N)
@@ -107,6 +115,11 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
         (M,) cost; with ``return_details`` also a dict of the four terms, each (M,).
     """
     candidates = np.asarray(candidates, float).reshape(-1, 4, 4)
+    if len(candidates) > candidate_chunk(obs):  # bounded memory: score the candidates in chunks
+        opts = {"range_sigma_m": range_sigma_m, "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m,
+                "behind_penalty": behind_penalty}
+        out = in_chunks(lambda C: lidarcam(obs, C, **opts, return_details=True), obs, candidates)
+        return out if return_details else out[0]
     rng_term = 0.5 * np.sum((range_residuals(candidates, obs.scan_data) / range_sigma_m) ** 2, axis=1)
     edge_term = 0.5 * np.sum((point_line_errors(obs, candidates) / edge_sigma_m) ** 2, axis=(1, 2))
     out_term = np.zeros(len(candidates))

@@ -18,6 +18,8 @@ import hashlib
 import json
 import math
 import os
+import re
+import socket
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -29,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from calib_core import CalibrationError, calibrate, get_method
+from calib_core.joint import corner_residuals, joint_crlb
 from calib_core.metrics import (
     TRUTH_MAX_ROT_DEG,
     TRUTH_MAX_TRANS_M,
@@ -38,6 +41,7 @@ from calib_core.metrics import (
     nees,
     pose_errors,
 )
+from calib_core.plugins import load_plugins
 from calib_core.uncertainty import conditioning, crlb
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -67,7 +71,8 @@ class Cell:
     """One setting of a sweep: simulator options, seed, trial count, methods and metric thresholds.
 
     ``sim`` holds ``simulate.SimOptions`` fields as plain values; ``method_options`` maps a method name to
-    its ``calibrate`` keyword options.
+    its ``calibrate`` keyword options; ``plugins`` are modules every worker imports before running (their
+    methods join the registry; ``calib_core.plugins``). Neither the plugins nor the method list change the key.
     """
 
     sweep: str
@@ -78,6 +83,7 @@ class Cell:
     method_options: dict[str, dict[str, Any]] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=_default_metrics)
     results_dir: str = "results"
+    plugins: tuple[str, ...] = ()
 
     @property
     def key(self) -> str:
@@ -144,8 +150,25 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     return row
 
 
+def corner_sigma_px(obs, sim: dict) -> float | None:
+    """The corner noise std (px) of a simulated trial with image corners: ``pixel_noise_px`` in ``pixel`` mode, the
+    RMS detection error against the true poses in ``image`` mode; None without corners or true poses."""
+    if not obs.has_corners or "T_cam_board_true" not in obs.meta:
+        return None
+    from simulate import SimOptions
+
+    o = SimOptions(**sim)
+    if o.pose_mode == "pixel":
+        return o.pixel_noise_px
+    e = corner_residuals(obs, np.asarray(obs.meta["T_cam_board_true"], float))
+    return float(np.sqrt(np.mean(e**2)))
+
+
 def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
-    """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number."""
+    """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number.
+
+    With image corners the bound is that of the joint model (range and corner noise, board poses unknown, at the
+    true poses; ``corner_sigma_px``), else that of the range model (board poses exact)."""
     out = {"crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan, "conditioning": np.nan}
     if not cell.metrics.get("uncertainty", True):
         return out
@@ -153,7 +176,11 @@ def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
     sigma_mm = cell.metrics.get("crlb_sigma_mm")
     sigma_mm = cell.sim.get("noise_mm", 0.0) if sigma_mm is None else sigma_mm
     try:
-        bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
+        px = corner_sigma_px(obs, cell.sim)
+        if px is None:
+            bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
+        else:
+            bound = joint_crlb(obs, float(sigma_mm) / 1000.0, px, T_cam_board=np.asarray(obs.meta["T_cam_board_true"]))
         out.update(crlb_rot_deg=float(bound.rot_rms_deg), crlb_trans_mm=1000.0 * float(bound.trans_rms_m))
     except Exception:  # noqa: BLE001 -- a degenerate board set has no bound: NaN, not a dead cell
         pass
@@ -192,6 +219,7 @@ TrialFn = Callable[[Cell, int, Sequence[str]], list[dict[str, Any]]]
 
 
 def _run_chunk(trial_fn: TrialFn, cell: Cell, trials: Sequence[int], methods: Sequence[str]):
+    load_plugins(cell.plugins)  # a worker process starts with the package's methods only (idempotent)
     rows = []
     for t in trials:
         rows.extend(trial_fn(cell, t, methods))
@@ -209,16 +237,88 @@ def read_table(path: Path, text_columns: Sequence[str] = ("reason",)) -> pd.Data
     return df
 
 
+class DamagedChunk(RunnerError):
+    """A chunk file that does not parse in full (empty, cut mid-row, junk): never read in part."""
+
+
+_CHUNK_NAME = re.compile(r"^chunk-(\d{5,})-(\d{5,})-([0-9a-f]{6})\.csv$")
+
+
 def _read_chunk(path: Path) -> pd.DataFrame:
-    return read_table(path)
+    """The rows of one chunk file, checked in full: the header has the result columns; every (trial, method) of
+    the name's trial range and of the methods whose hash the name carries appears exactly once; trial, method,
+    ok and valid are well-formed in every row. DamagedChunk otherwise."""
+    def damaged(why: str) -> DamagedChunk:
+        return DamagedChunk(f"{path}: damaged chunk file ({why})")
+
+    m = _CHUNK_NAME.match(path.name)
+    if not m:
+        raise damaged("name is not chunk-<first>-<last>-<methods hash>.csv")
+    try:
+        df = read_table(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        raise damaged(f"does not parse: {str(exc).splitlines()[0][:120]}") from None
+    missing = [c for c in RESULT_COLUMNS if c not in df.columns]
+    if missing:
+        raise damaged(f"missing columns {missing[:4]}")
+    first, last = int(m.group(1)), int(m.group(2))
+    trial = pd.to_numeric(df["trial"], errors="coerce")
+    if trial.isna().any() or not (trial == trial.round()).all():
+        raise damaged("a trial number that is not an integer")
+    if df["method"].isna().any() or not df["method"].map(lambda v: isinstance(v, str) and v != "").all():
+        raise damaged("a row without a method")
+    methods = list(dict.fromkeys(df["method"]))
+    tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
+    for col in ("ok", "valid"):
+        if not df[col].map(lambda v: str(v) in ("True", "False")).all():
+            raise damaged(f"a row whose {col!r} is not True/False")
+    want = {(t, mm) for t in range(first, last + 1) for mm in methods}
+    got = list(zip(trial.astype(int), df["method"], strict=True))
+    if tag != m.group(3) or len(got) != len(set(got)) or set(got) != want:
+        raise damaged(f"{len(got)} rows, expected {(last - first + 1)} trials x the methods of hash {m.group(3)}")
+    df["trial"] = trial.astype(int)
+    for col in ("ok", "valid"):
+        df[col] = df[col].map(lambda v: str(v) == "True").astype(bool)
+    return df
 
 
-def load_cell_dir(path: Path) -> pd.DataFrame:
-    """Every row stored under one cell folder (duplicates of a (trial, method) pair dropped)."""
-    files = sorted(Path(path).glob("chunk-*.csv"))
-    if not files:
+def verify_cell_dir(path: Path) -> list[str]:
+    """Problems of the store of one cell (empty when sound): damaged chunk files, stray temporary files."""
+    out = []
+    for f in sorted(Path(path).glob("chunk-*.csv")):
+        try:
+            _read_chunk(f)
+        except DamagedChunk as err:
+            out.append(str(err))
+    out += [f"{f}: temporary file left by an interrupted write" for f in sorted(Path(path).glob(".chunk-*.tmp"))]
+    return out
+
+
+def verify_store(results_dir: str | Path, sweep: str | None = None) -> list[str]:
+    """Problems of every cell under ``results_dir`` (one sweep, or all): see ``verify_cell_dir``."""
+    root = Path(results_dir)
+    sweeps = [root / sweep] if sweep else sorted(p for p in root.iterdir() if (p / "trials").is_dir())
+    return [msg for sw in sweeps for cell in sorted((sw / "trials").glob("*/")) for msg in verify_cell_dir(cell)]
+
+
+def load_cell_dir(path: Path, heal: bool = False) -> pd.DataFrame:
+    """Every row stored under one cell folder (duplicates of a (trial, method) pair dropped).
+
+    A damaged chunk file raises DamagedChunk; with ``heal`` it is renamed ``<name>.damaged`` (so its trials are
+    recomputed), reported on stderr, and left out whole.
+    """
+    frames = []
+    for f in sorted(Path(path).glob("chunk-*.csv")):
+        try:
+            frames.append(_read_chunk(f))
+        except DamagedChunk as err:
+            if not heal:
+                raise DamagedChunk(f"{err}; rerun the sweep to recompute it") from None
+            os.replace(f, f.with_name(f.name + ".damaged"))
+            sys.stderr.write(f"{err}: moved aside to {f.name}.damaged; its trials are recomputed\n")
+    if not frames:
         return pd.DataFrame()
-    df = pd.concat([_read_chunk(f) for f in files], ignore_index=True)
+    df = pd.concat(frames, ignore_index=True)
     return df.drop_duplicates(["trial", "method"], keep="first")
 
 
@@ -243,9 +343,19 @@ def load_sweep(results_dir: str | Path, sweep: str) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
+def _tmp_name(path: Path) -> Path:
+    """A hidden temporary name next to ``path``, unique per host and process (workers of a cluster share the store
+    on one file system, where two hosts may run the same pid)."""
+    return path.with_name(f".{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
+
+
 def _write_atomic(df: pd.DataFrame, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    df.to_csv(tmp, index=False, float_format="%.10g")
+    """Write whole or not at all: a temporary file in the same folder, flushed to disk, then renamed."""
+    tmp = _tmp_name(path)
+    with open(tmp, "w", newline="") as fh:
+        df.to_csv(fh, index=False, float_format="%.10g")
+        fh.flush()
+        os.fsync(fh.fileno())
     os.replace(tmp, path)
 
 
@@ -262,13 +372,15 @@ def _prepare(cell: Cell) -> None:
     settings = cell.dir / "settings.json"
     if not settings.exists():
         d = asdict(cell)
-        d.pop("n_trials"), d.pop("methods"), d.pop("results_dir")
-        settings.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
+        d.pop("n_trials"), d.pop("methods"), d.pop("results_dir"), d.pop("plugins")
+        tmp = _tmp_name(settings)  # whole or absent: a worker killed mid-write must not leave half a file
+        tmp.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
+        os.replace(tmp, settings)
 
 
 def pending(cell: Cell, chunk_size: int) -> list[tuple[int, ...] | tuple]:
     """(trials, methods) tasks still to run for ``cell``: consecutive trials missing the same methods."""
-    df = load_cell_dir(cell.dir)
+    df = load_cell_dir(cell.dir, heal=True)
     done = set(zip(df["trial"], df["method"], strict=True)) if not df.empty else set()
     tasks: list[tuple[list[int], tuple[str, ...]]] = []
     for t in range(cell.n_trials):

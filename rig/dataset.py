@@ -131,7 +131,9 @@ class Pose:
 
     Attributes: ``name`` (file stem, e.g. ``"003"``); ``image_path`` (or None); ``scan`` (or None);
     ``window`` (bearing_min, bearing_max) radians from windows.yaml, or None; ``error``: a DatasetError when
-    the image or scan is missing or bad (the pose is then skipped by extraction), else None.
+    the image or scan is missing or bad (the pose is then skipped by extraction), else None; ``corners``: the
+    checkerboard detector's corners (N,2 pixels) when found already (extraction then skips the detection;
+    an empty array: the detector found no board).
     """
 
     name: str
@@ -139,6 +141,7 @@ class Pose:
     scan: Scan | None
     window: tuple[float, float] | None = None
     error: DatasetError | None = None
+    corners: np.ndarray | None = None
 
     def read_image(self) -> np.ndarray:
         """The image as 8-bit grayscale (H, W)."""
@@ -202,19 +205,34 @@ def read_yaml(path: Path) -> dict:
     return data
 
 
+def _numbers(value, name: str, path: Path):
+    """``value`` when it is a number or nested lists of numbers (a string or a boolean is not)."""
+    stack = [value]
+    while stack:
+        v = stack.pop()
+        if isinstance(v, (list, tuple)):
+            stack.extend(v)
+        elif isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise DatasetError(f"'{name}': not a numeric matrix ({type(v).__name__} {str(v)[:20]!r})", file=path)
+    return value
+
+
 def _matrix(value, name: str, path: Path, shape: tuple[int | None, ...]) -> np.ndarray:
     """A numeric array from a nested list, a flat list (shape (N,) only) or an ``{rows, cols, data}`` mapping."""
     if isinstance(value, dict):
         if "data" not in value:
             raise DatasetError(f"'{name}': matrix mapping needs 'data'", file=path)
-        data = np.asarray(value["data"], dtype=float).ravel()
-        r, c = int(value.get("rows", len(data))), int(value.get("cols", 1))
+        try:
+            data = np.asarray(_numbers(value["data"], name, path), dtype=float).ravel()
+            r, c = int(value.get("rows", len(data))), int(value.get("cols", 1))
+        except (TypeError, ValueError):
+            raise DatasetError(f"'{name}': not a numeric matrix", file=path) from None
         if r * c != data.size:
             raise DatasetError(f"'{name}': rows*cols = {r}x{c} but {data.size} numbers", file=path)
         a = data.reshape(r, c)
     else:
         try:
-            a = np.asarray(value, dtype=float)
+            a = np.asarray(_numbers(value, name, path), dtype=float)
         except (TypeError, ValueError):
             raise DatasetError(f"'{name}': not a numeric matrix", file=path) from None
     if len(shape) == 1:
@@ -238,7 +256,11 @@ def _require(data: dict, key: str, path: Path):
 def load_camera(path) -> CameraModel:
     """Read camera.yaml: ``image_width``, ``image_height``, ``camera_matrix`` (3x3), ``distortion_coefficients``."""
     path = Path(path)
-    data = read_yaml(path)
+    return camera_from_dict(read_yaml(path), path)
+
+
+def camera_from_dict(data: dict, path: Path) -> CameraModel:
+    """A CameraModel from camera.yaml's keys (already parsed); errors name ``path``."""
     try:
         w, h = int(_require(data, "image_width", path)), int(_require(data, "image_height", path))
     except (TypeError, ValueError):
@@ -437,6 +459,24 @@ def _image_size(path: Path) -> tuple[int, int] | None:
     return None if img is None else (img.shape[1], img.shape[0])
 
 
+def load_ground_truth(path: Path) -> dict:
+    """ground_truth.yaml as a dict; its ``T_lidar_cam`` (a 4x4 list or ``{matrix: ...}``) checked and made a 4x4
+    array (DatasetError naming the file otherwise)."""
+    gt = read_yaml(path)
+    value = gt.get("T_lidar_cam")
+    if value is None:
+        return gt
+    if isinstance(value, dict):
+        if "matrix" not in value:
+            raise DatasetError("'T_lidar_cam' mapping needs 'matrix'", file=path)
+        value = value["matrix"]
+    T = _matrix(value, "T_lidar_cam", path, (4, 4))
+    if not np.allclose(T[3], [0, 0, 0, 1]) or abs(np.linalg.det(T[:3, :3]) - 1) > 1e-4:
+        raise DatasetError("'T_lidar_cam': not a rigid transform (last row 0 0 0 1, rotation of determinant 1)",
+                           file=path)
+    return {**gt, "T_lidar_cam": T}
+
+
 def load_dataset(root) -> Dataset:
     """Load a dataset folder (layout in the module docstring and docs/dataset.md).
 
@@ -451,7 +491,7 @@ def load_dataset(root) -> Dataset:
     board = load_board(root / "board.yaml")
     windows = load_windows(root / "windows.yaml") if (root / "windows.yaml").exists() else {}
     background = read_scan_csv(root / "background.csv") if (root / "background.csv").exists() else None
-    ground_truth = read_yaml(root / "ground_truth.yaml") if (root / "ground_truth.yaml").exists() else {}
+    ground_truth = load_ground_truth(root / "ground_truth.yaml") if (root / "ground_truth.yaml").exists() else {}
 
     images: dict[str, Path] = {}
     csvs: dict[str, Path] = {}

@@ -49,10 +49,10 @@ def _as_result(result) -> dict:
     if isinstance(result, CalibrationResult):
         return {"method": result.method, "ok": result.ok, "reason": result.reason,
                 "T_lidar_cam": result.T_lidar_cam, "covariance": result.covariance,
-                **{k: result.info.get(k) for k in JSON_INFO}}
+                "covariance_model": result.info.get("covariance_model"), **{k: result.info.get(k) for k in JSON_INFO}}
     return {"method": result.get("method", "?"), "ok": bool(result.get("ok")), "reason": result.get("reason"),
             "T_lidar_cam": result.get("T_lidar_cam"), "covariance": result.get("covariance"),
-            **{k: result.get(k) for k in JSON_INFO}}
+            "covariance_model": result.get("covariance_model"), **{k: result.get(k) for k in JSON_INFO}}
 
 
 def board_plane_distances(T_cam_lidar: np.ndarray, T_cam_board: np.ndarray, scan: np.ndarray) -> np.ndarray:
@@ -244,7 +244,8 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
                f"- rotation: {sigma_rot_deg(cov):.3f} deg overall; per axis (lidar frame, x y z): "
                f"{', '.join(f'{v:.3f}' for v in sr)} deg",
                f"- translation of T_lidar_cam: {1000 * sigma_trans_m(cov):.1f} mm overall; per axis (x y z): "
-               f"{', '.join(f'{v:.1f}' for v in st)} mm", ""]
+               f"{', '.join(f'{v:.1f}' for v in st)} mm",
+               f"- covariance model: {res.get('covariance_model') or 'not stated'}", ""]
     else:
         md += ["No covariance in the result: no 1-sigma figures.", ""]
     md += _mounting_md(res)
@@ -304,3 +305,18 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
     summary.markdown.write_text("\n".join(md) + "\n")
     return summary
+
+
+def save_overlay(path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_cam_board, outline, full_scan,
+                 board_scan, title: str, clim_mm: float = 50.0, colours: int = 128) -> Path:
+    """One scan-on-image overlay (as in ``write_report``) saved as a small palette PNG (``colours`` colours):
+    the whole scan through ``T_cam_lidar`` coloured by its distance to the board plane (mm), the board's own
+    points larger, the board outline from the camera in yellow."""
+    from PIL import Image
+
+    path = Path(path)
+    _overlay(path, gray, camera, T_cam_lidar, T_cam_board, outline, full_scan, board_scan, clim_mm, title)
+    with Image.open(path) as im:
+        small = im.convert("RGB").quantize(colours, method=Image.Quantize.MEDIANCUT)
+    small.save(path, optimize=True)
+    return path

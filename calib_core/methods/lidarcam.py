@@ -15,6 +15,7 @@ from ..degeneracy import (
     explain_failure,
     undetermined_directions,
 )
+from ..joint import RANGE_ONLY_MODEL, JointError, joint_step
 from ..lines import fit_line
 from ..mounting import parse_fixed
 from ..observations import Observations, ScanData
@@ -110,7 +111,8 @@ def lidarcam(obs: Observations, *, fixed: dict | None = None, range_sigma_m: flo
              outline_sigma_m: float = OUTLINE_SIGMA_M, behind_penalty: float = np.inf, use_zhang_pless: bool = True,
              distinct_rot_deg: float = 1.0, distinct_trans_m: float = 0.05, min_conditioning: float = NULL_CONDITIONING,
              max_scaled_sigma: float = MAX_SCALED_SIGMA, max_nfev: int = 100, polish: bool = True,
-             polish_threshold: float = 10.0, **solver_options):
+             polish_threshold: float = 10.0, use_corners: bool = True, corner_sigma_px: float | None = None,
+             **solver_options):
     """Our method.
 
     1. Candidates (``candidate_pool``): the minimal solver on all board triples (``solver_options`` go to it),
@@ -127,10 +129,13 @@ def lidarcam(obs: Observations, *, fixed: dict | None = None, range_sigma_m: flo
        board is vertical) are not presented as estimated: the result is ``ok=False``, its reason names them and
        how to calibrate the rest, ``info["degeneracy"]`` holds the analysis and the candidates start with the
        unconstrained optimum. Directions weak only for lack of data are named in ``info["warnings"]``.
-    5. Covariance ``sigma^2 (J^T J)^-1`` (``range_sigma_m`` or estimated from the final residuals), conditioning and
-       ``info["warnings"]``; after a polish the covariance is still that of the range model at the answer
-       (it ignores the outline information: conservative). Fails with a reason when no candidate exists or none
-       scores finite.
+    5. When every board carries image corners (and ``use_corners``): the joint maximum likelihood over corners and
+       ranges from that answer (``calib_core.joint``; noise stds ``corner_sigma_px``, ``range_sigma_m`` or
+       estimated), with the extrinsic's covariance, board poses marginalised (``info["covariance_model"]`` "joint").
+       Otherwise the range model's covariance ``sigma^2 (J^T J)^-1`` (``range_sigma_m`` or estimated from the final
+       residuals; "range-only, ignores camera noise"); after a polish it is still that of the range model at the
+       answer (it ignores the outline information: conservative). Conditioning and ``info["warnings"]``.
+       Fails with a reason when no candidate exists or none scores finite.
 
     ``fixed``: calibrate only the other mounting parameters (``calib_core.mounting``: the camera's pose in the
     lidar frame as roll, pitch, yaw and x, y, z), holding these at the given values, e.g.
@@ -160,12 +165,29 @@ def lidarcam(obs: Observations, *, fixed: dict | None = None, range_sigma_m: flo
     if not deg.determined:
         raise SolveFailure(f"lidarcam: {deg.message()}", np.concatenate([T_best[None], C]),
                            {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
+    T_best, cov, jinfo = final_step(obs, T_best, C, use_corners, range_sigma_m=range_sigma_m,
+                                    corner_sigma_px=corner_sigma_px, loss=loss)
+    warnings = jinfo.pop("warnings", []) + degeneracy_warnings(obs, T_best) + \
+        ([deg.message()] if len(deg.directions) else [])
+    return T_best, C, {**info, "covariance": cov, "conditioning": conditioning(obs, T_best), "warnings": warnings,
+                       **jinfo}
+
+
+def final_step(obs: Observations, T: np.ndarray, C: np.ndarray, use_corners: bool, *, range_sigma_m, corner_sigma_px,
+               loss: str) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The answer and its covariance: the joint ML over corners and ranges (``calib_core.joint``) when every board
+    carries image corners, else the range model's covariance at ``T`` (it ignores the camera's noise)."""
+    why = None
+    if use_corners and obs.has_corners:
+        try:
+            return joint_step(obs, T, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss)
+        except (JointError, UncertaintyError) as err:
+            why = f"joint refinement failed ({err}); covariance of the range model only"
     try:
-        cov = refinement_covariance(obs.scan_data, T_best, "range", range_sigma_m)
+        cov = refinement_covariance(obs.scan_data, T, "range", range_sigma_m)
     except UncertaintyError as err:
         raise SolveFailure(f"lidarcam: {err}", C) from None
-    warnings = degeneracy_warnings(obs, T_best) + ([deg.message()] if len(deg.directions) else [])
-    return T_best, C, {**info, "covariance": cov, "conditioning": conditioning(obs, T_best), "warnings": warnings}
+    return T, cov, {"covariance_model": RANGE_ONLY_MODEL, **({"warnings": [why]} if why else {})}
 
 
 def _solve(obs: Observations, sopts: dict, ropts: dict, solver_options: dict):

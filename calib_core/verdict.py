@@ -1,0 +1,238 @@
+"""The consistency verdict: is an answer ``T_lidar_cam`` contradicted by the data under the noise model?
+
+Every answer of ``calibrate`` is tested against its observations, whatever the method:
+
+- range residuals of every board's scan points against its plane (lidar frame, metres), in units of the noise
+  std: a clipped chi-square per board (each point contributes ``min(z^2, c^2)``, so a few stray points cannot
+  condemn a board) against its expectation under Gaussian noise, with room for a quarter of the points to be
+  outliers; the noise std is estimated robustly from the scan lines alone (median absolute deviation, no
+  extrinsic), plus a floor ``POSE_FLOOR_M`` for the camera-side board poses;
+- the board outline: scan points mapped into their board's frame must lie on the board (at most a quarter of a
+  board's inlier points outside it by more than the tolerance);
+- boards in front of both sensors: every board's centre in front of the camera (its pose alone), and under the
+  answer every board's scan in front of the camera; scan points away from the lidar origin.
+
+A board that fails any test contradicts the answer. ``calib_core.diagnose.judge`` then looks for a likely cause
+(units, mispaired or mirrored scans, scaled board poses). Frames and units as in ``calib_core.observations``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import norm
+
+from .lines import tls_line
+from .observations import Observations, ScanData
+from .residuals import outside_outline, points_in_boards, range_residuals
+
+CLIP_Z = 3.0
+"""Residuals beyond this many noise stds count as ``CLIP_Z^2`` in the clipped chi-square."""
+OUTLIER_ALLOWANCE = 0.25
+"""Fraction of a board's points that may be outliers before its clipped chi-square contradicts the answer."""
+CHI2_SIGMAS = 5.0
+"""Standard deviations of the clipped chi-square above its mean at which a board contradicts the answer."""
+POSE_FLOOR_M = 0.01
+"""Spread (metres) added in quadrature to the range noise for errors of the camera-side board planes."""
+OUTLINE_TOL_SIGMAS = 4.0
+"""A point is off its board when outside the outline by more than this many noise stds plus ``POSE_FLOOR_M``."""
+MIN_RANGE_M = 1e-3
+"""Scan points closer than this to the lidar origin are not measurements (left out, and warned about)."""
+MIN_DEPTH_M = 0.05
+"""A board whose centre is not this far in front of the camera is not in view."""
+
+
+def _clipped_chi2_moments(c: float) -> tuple[float, float]:
+    """Mean and variance of ``min(z^2, c^2)`` for standard normal ``z``."""
+    p_in, phi, tail = 2 * norm.cdf(c) - 1, norm.pdf(c), 2 * norm.sf(c)
+    m1 = p_in - 2 * c * phi + c**2 * tail
+    m2 = 3 * p_in - 2 * (c**3 + 3 * c) * phi + c**4 * tail
+    return m1, m2 - m1**2
+
+
+CHI2_MEAN, CHI2_VAR = _clipped_chi2_moments(CLIP_Z)
+
+
+def line_noise_estimate(obs: Observations) -> float:
+    """Range-noise std (metres) from the scan lines alone, robustly: each board's points (4 or more) are fitted
+    with a 2D line (refitted once without points beyond 3 MADs); the orthogonal residual ``d`` of a point on
+    beam ``b`` is its range error times ``|b . nu|``; the std is 1.4826 times the median of ``|d / (b . nu)|``
+    over all boards. NaN when no board has 4 points."""
+    ratios = []
+    for b in obs.boards:
+        P = b.scan[np.linalg.norm(b.scan, axis=1) > MIN_RANGE_M]
+        if len(P) < 4:
+            continue
+        c, u, d, _ = tls_line(P)
+        mad = 1.4826 * np.median(np.abs(d))
+        keep = np.abs(d) <= 3 * mad
+        if keep.sum() >= 4 and mad > 0:
+            c, u, _, _ = tls_line(P[keep])
+        nu = np.array([-u[1], u[0]])
+        cos = np.abs((P / np.linalg.norm(P, axis=1, keepdims=True)) @ nu)
+        ratios.append(np.abs((P - c) @ nu) / np.maximum(cos, 0.2) * np.sqrt(len(P) / (len(P) - 2)))
+    if not ratios:
+        return float("nan")
+    return float(1.4826 * np.median(np.concatenate(ratios)))
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The outcome of the consistency tests of one answer.
+
+    Attributes:
+        consistent: no board contradicts the answer.
+        reason: which boards and tests contradict it, by how much (None when consistent).
+        warnings: plain-language warnings (data oddities, likely causes of a contradiction).
+        causes: short names of the likely causes found (``units``, ``mispaired``, ``mirrored``, ``scale``).
+        sigma_m: the noise std used (metres; line estimate and pose floor in quadrature).
+        boards: per board, the test statistics (dicts of plain numbers).
+    """
+
+    consistent: bool
+    reason: str | None = None
+    warnings: tuple[str, ...] = ()
+    causes: tuple[str, ...] = ()
+    sigma_m: float = float("nan")
+    boards: tuple[dict, ...] = field(default_factory=tuple)
+
+    def to_dict(self) -> dict:
+        return {"consistent": bool(self.consistent), "reason": self.reason, "warnings": list(self.warnings),
+                "causes": list(self.causes), "sigma_m": float(self.sigma_m), "boards": list(self.boards)}
+
+
+def effective_sigma(obs: Observations, range_sigma_m: float | None = None) -> float:
+    """The spread (metres) the residuals are tested against: the range noise (given, or estimated from the scan
+    lines) and ``POSE_FLOOR_M`` in quadrature."""
+    s = line_noise_estimate(obs) if range_sigma_m is None else float(range_sigma_m)
+    return float(np.hypot(0.0 if not np.isfinite(s) else s, POSE_FLOOR_M))
+
+
+def measured_points(obs: Observations) -> ScanData:
+    """The scan data without points at the lidar origin (``MIN_RANGE_M``)."""
+    data = obs.scan_data
+    keep = np.linalg.norm(data.points, axis=1) > MIN_RANGE_M
+    return data if keep.all() else ScanData(data.points[keep], data.board[keep], data.normals, data.offsets)
+
+
+def board_depths(obs: Observations) -> np.ndarray:
+    """(N,) depth (metres) of each board's outline centroid in the camera frame (camera z)."""
+    out = []
+    for b in obs.boards:
+        c = b.outline.mean(axis=0)
+        out.append(float(b.T_cam_board[2, :2] @ c + b.T_cam_board[2, 3]))
+    return np.array(out)
+
+
+def board_tests(obs: Observations, T: np.ndarray, sigma: float) -> list[dict]:
+    """Per board, the statistics of the tests of ``T`` (see the module docstring); ``bad`` lists failed tests."""
+    T = np.asarray(T, float)
+    data = measured_points(obs)
+    z = range_residuals(T, data) / sigma
+    q = np.minimum(z**2, CLIP_Z**2)
+    N = obs.n_boards
+    K = np.bincount(data.board, minlength=N)
+    chi2 = np.bincount(data.board, weights=q, minlength=N)
+    limit = K * CHI2_MEAN + CHI2_SIGMAS * np.sqrt(K * CHI2_VAR) + OUTLIER_ALLOWANCE * K * (CLIP_Z**2 - CHI2_MEAN)
+    depth = board_depths(obs)
+    R, t = T[:3, :3], T[:3, 3]
+    tol = OUTLINE_TOL_SIGMAS * sigma + POSE_FLOOR_M
+    inb = points_in_boards(obs, T[None])
+    out = []
+    for i, b in enumerate(obs.boards):
+        sel = data.board == i
+        zi = z[sel]
+        st = {"board": i, "n_points": int(K[i]), "chi2": float(chi2[i]), "chi2_limit": float(limit[i]),
+              "median_abs_z": float(np.median(np.abs(zi))) if len(zi) else float("nan"),
+              "depth_m": float(depth[i]), "bad": []}
+        if K[i] and chi2[i] > limit[i]:
+            st["bad"].append(f"range residuals {st['median_abs_z']:.1f} sigma (median; sigma {1000 * sigma:.0f} mm, "
+                             f"clipped chi-square {chi2[i]:.0f} > {limit[i]:.0f} over {K[i]} points)")
+        pts = inb[i][0]
+        keep = (np.linalg.norm(b.scan, axis=1) > MIN_RANGE_M)
+        inl = np.abs(zi) < CLIP_Z
+        if inl.sum():
+            off = outside_outline(pts[keep][inl, :2], b.outline)
+            frac = float(np.mean(off > tol))
+            st["off_outline_fraction"] = frac
+            if frac > OUTLIER_ALLOWANCE and (off > tol).sum() >= 2:
+                st["bad"].append(f"{100 * frac:.0f}% of its on-plane scan points lie off the board outline "
+                                 f"(up to {off.max():.2f} m, tolerance {tol:.3f} m)")
+        if depth[i] < MIN_DEPTH_M:
+            st["bad"].append(f"its pose puts it {depth[i]:.2f} m deep, not in front of the camera")
+        elif len(b.scan):
+            zc = (b.scan_3d.mean(axis=0) - t) @ R[:, 2]
+            if zc <= 0:
+                st["bad"].append(f"under this answer its scan lies behind the camera (depth {zc:.2f} m)")
+        out.append(st)
+    return out
+
+
+UNIT_RATIO = 50.0
+"""Two lengths that should agree but differ by more than this factor point to a unit mistake (mm for m)."""
+MAX_PLAUSIBLE_RANGE_M = 200.0
+"""Median scan range (metres) above which a 2D lidar's scan is taken to be in millimetres."""
+MAX_PLAUSIBLE_BOARD_M = 20.0
+"""Board outline diameter (metres) above which the outline is taken to be in millimetres."""
+def unit_causes(obs: Observations) -> list[tuple[str, str]]:
+    """Unit mistakes visible in the data alone."""
+    if not obs.n_boards:
+        return []
+    rng = np.median(np.concatenate([np.linalg.norm(b.scan, axis=1) for b in obs.boards]))
+    cam = np.median([np.linalg.norm(b.T_cam_board[:3, 3]) for b in obs.boards])
+    diam = np.median([np.ptp(b.outline, axis=0).max() for b in obs.boards])
+    seg = np.median([np.linalg.norm(b.scan[-1] - b.scan[0]) for b in obs.boards])
+    out = []
+    scans_big = rng > MAX_PLAUSIBLE_RANGE_M or (rng > UNIT_RATIO * cam and seg > UNIT_RATIO * diam)
+    poses_big = cam > MAX_PLAUSIBLE_RANGE_M or cam > UNIT_RATIO * rng
+    if scans_big:
+        out.append(("units", f"units: the scans look ~1000x too large (median range {rng:.4g} m, board distance "
+                             f"{cam:.3g} m from the camera): millimetres written as metres?"))
+    if poses_big:
+        out.append(("units", f"units: the board poses look ~1000x too large (median board distance {cam:.4g} m from "
+                             f"the camera, scan range {rng:.3g} m): millimetres written as metres?"))
+    if diam > MAX_PLAUSIBLE_BOARD_M or (diam > UNIT_RATIO * seg and not scans_big):
+        out.append(("units", f"units: the board outlines look ~1000x too large (diameter {diam:.4g} m, scan "
+                             f"segments {seg:.3g} m): millimetres written as metres?"))
+    return out
+
+
+def data_warnings(obs: Observations) -> list[str]:
+    """Warnings about the data alone: units (``unit_causes``)."""
+    return [msg for _, msg in unit_causes(obs)]
+
+
+def orientation_warnings(T: np.ndarray) -> list[tuple[str, str]]:
+    """An answer with the lidar upside down against the camera: its z axis (up, the scan plane's normal) along
+    the camera's +y (down). A lidar may be mounted so; more often its scans are mirrored (angle direction
+    reversed), which a 2D scan cannot tell from an upside-down mount."""
+    up = float(np.asarray(T, float)[2, 1])      # lidar z in camera coordinates, its y component
+    if up > 0.5:
+        return [("mirrored", "the answer has the lidar upside down against the camera (lidar z along the camera's "
+                             "+y, down): if the lidar is mounted upright, its scans are mirrored (angle direction "
+                             "reversed)")]
+    return []
+
+
+def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | None = None) -> Verdict:
+    """The verdict on ``T_lidar_cam`` for ``obs`` (no explanation: ``diagnose.judge`` adds the likely causes).
+    ``range_sigma_m``: the range-noise std, default estimated from the scan lines."""
+    sigma = effective_sigma(obs, range_sigma_m)
+    stats = board_tests(obs, T_lidar_cam, sigma)
+    found = unit_causes(obs) + orientation_warnings(T_lidar_cam)
+    warnings = [msg for _, msg in found]
+    names = tuple(dict.fromkeys(n for n, _ in found))
+    bad = [s for s in stats if s["bad"]]
+    if not bad:
+        return Verdict(True, None, tuple(warnings), names, sigma, tuple(stats))
+    reason = "; ".join(f"board {s['board']}: " + ", ".join(s["bad"]) for s in bad[:4])
+    if len(bad) > 4:
+        reason += f"; and {len(bad) - 4} more boards"
+    return Verdict(False, f"{len(bad)} of {obs.n_boards} boards contradict the answer: {reason}", tuple(warnings),
+                   names, sigma, tuple(stats))
+
+
+def is_consistent(obs: Observations, T_lidar_cam: np.ndarray, sigma: float) -> bool:
+    """True when no board's tests contradict ``T_lidar_cam`` at noise ``sigma`` (metres)."""
+    return not any(s["bad"] for s in board_tests(obs, T_lidar_cam, sigma))

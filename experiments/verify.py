@@ -1,0 +1,36 @@
+"""Check a results store: every chunk file parses in full (see ``experiments.runner.verify_store``).
+
+    python -m experiments.verify [results_dir] [--sweep NAME]
+
+Prints one line per problem and exits 1 when there is any (0 when the store is sound). A rerun of the sweep
+recomputes the trials of a damaged chunk.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from .runner import verify_store
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m experiments.verify", description=__doc__.splitlines()[0])
+    ap.add_argument("results_dir", nargs="?", default="results")
+    ap.add_argument("--sweep", default=None, help="one sweep (default: all)")
+    args = ap.parse_args(argv)
+    if not Path(args.results_dir).is_dir():
+        print(f"error: {args.results_dir}: not a folder", file=sys.stderr)
+        return 2
+    problems = verify_store(args.results_dir, args.sweep)
+    for p in problems:
+        print(p)
+    print(f"{len(problems)} problem(s) in {args.results_dir}" + (f" ({args.sweep})" if args.sweep else ""),
+          file=sys.stderr)
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
