@@ -25,15 +25,18 @@ def is_seed_method(name: str) -> bool:
     return "+" not in name and name.split("/")[0] in SEED_METHODS
 
 
-def _failure(obs: Observations, method: str, reason: str, candidates, t0: float, verdict: bool) -> CalibrationResult:
-    """``ok=False`` with ``reason``; with ``verdict``, what the data alone show (units, mispaired scans) is added to
-    the warnings and, as likely causes, to the reason."""
-    info: dict = {}
+def _failure(obs: Observations, method: str, reason: str, candidates, t0: float, verdict: bool,
+             extra: dict | None = None) -> CalibrationResult:
+    """``ok=False`` with ``reason`` and the method's ``extra`` info (e.g. the directions a degenerate board set
+    does not determine); with ``verdict``, what the data alone show (units, mispaired scans) is added to the
+    warnings and, as likely causes, to the reason."""
+    info: dict = dict(extra or {})
     if verdict:
-        warnings = data_warnings(obs)
+        warnings = list(info.get("warnings", []))
+        warnings += [w for w in data_warnings(obs) if w not in warnings]
         causes = data_causes(obs)
-        info = {"warnings": warnings, "verdict": {"consistent": None, "reason": None, "warnings": warnings,
-                                                  "causes": list(dict.fromkeys(n for n, _ in causes))}}
+        info.update(warnings=warnings, verdict={"consistent": None, "reason": None, "warnings": warnings,
+                                                "causes": list(dict.fromkeys(n for n, _ in causes))})
         reason += "".join(f"; likely cause: {msg}" for _, msg in causes)
     return CalibrationResult(method, False, reason=reason,
                              candidates=np.zeros((0, 4, 4)) if candidates is None else candidates,
@@ -59,7 +62,7 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
     try:
         T, cands, info = m.func(observations, **options)
     except SolveFailure as fail:
-        return _failure(observations, method, fail.reason, fail.candidates, t0, verdict)
+        return _failure(observations, method, fail.reason, fail.candidates, t0, verdict, fail.info)
     except UncertaintyError as err:
         return _failure(observations, method, f"{method}: {err}", None, t0, verdict)
     except TypeError as exc:

@@ -15,17 +15,24 @@ from .transforms import invert_T
 
 RESULT_SCHEMA = "lidarcam.result/1"
 
+JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note")
+"""Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
+directions a board set does not determine (``calib_core.degeneracy``), and a calibration with fixed parameters
+(``calib_core.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note)."""
+
 
 class SolveFailure(LidarcamError):
     """Raised inside a method when it cannot solve; ``calibrate`` turns it into ``ok=False`` with the reason.
 
-    ``candidates`` (M,4,4) are the candidates considered before failing, kept for the benchmark.
+    ``candidates`` (M,4,4) are the candidates considered before failing, kept for the benchmark; ``info``
+    diagnostics for the result (e.g. the directions a degenerate board set does not determine).
     """
 
-    def __init__(self, reason: str, candidates: np.ndarray | None = None) -> None:
+    def __init__(self, reason: str, candidates: np.ndarray | None = None, info: dict | None = None) -> None:
         super().__init__(reason)
         self.reason = reason
         self.candidates = np.zeros((0, 4, 4)) if candidates is None else np.asarray(candidates, float)
+        self.info = dict(info or {})
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,6 +99,9 @@ class CalibrationResult:
             d["warnings"] = [str(w) for w in self.info["warnings"]]
         if self.info.get("verdict") is not None:
             d["verdict"] = self.info["verdict"]
+        for k in JSON_INFO:
+            if k not in d and self.info.get(k) is not None:
+                d[k] = self.info[k]
         return d
 
     def save(self, path) -> None:

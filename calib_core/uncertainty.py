@@ -1,5 +1,6 @@
 """Uncertainty of the extrinsic: covariance at an optimum, Fisher information and CRLB of the range-noise model,
-a scale-free conditioning measure and degeneracy warnings for a board set.
+a scale-free conditioning measure and the spread of the board normals (the warnings built on them are in
+``calib_core.degeneracy``).
 
 Parameters are those of ``calib_core.residuals``: ``x = (w, dt)``, ``w`` a left rotation perturbation in the
 lidar frame (radians), ``dt`` the translation (metres). A 6x6 covariance is ordered rotation then translation.
@@ -139,35 +140,6 @@ def normal_spread_deg(obs: Observations) -> float:
     return float(np.degrees(np.arcsin(np.sqrt(np.clip(2 * lam[0], 0.0, 1.0)))))
 
 
-def degeneracy_warnings(obs: Observations, T_lidar_cam: np.ndarray | None = None, *, min_boards: int = 4,
-                        min_normal_spread_deg: float = 5.0, min_conditioning: float = 1e-3) -> list[str]:
-    """Plain-language warnings about a board set (empty when none): too few boards, board normals nearly in
-    one plane (near-parallel boards), poor conditioning of the extrinsic (needs ``T_lidar_cam`` or ground
-    truth; skipped when neither is given).
-
-    Args:
-        min_boards: fewer boards than this is flagged (with 3, the candidates of the minimal solver all fit
-            the scan lines exactly and cannot be told apart by the scan residuals).
-        min_normal_spread_deg: threshold on ``normal_spread_deg``.
-        min_conditioning: threshold on ``conditioning``.
-    """
-    out = []
-    if obs.n_boards < min_boards:
-        out.append(f"only {obs.n_boards} boards (fewer than {min_boards}): the solution may be ambiguous; "
-                   "add board poses")
-    if obs.n_boards:
-        spread = normal_spread_deg(obs)
-        if spread < min_normal_spread_deg:
-            out.append(f"board normals nearly in one plane (spread {spread:.1f} deg < {min_normal_spread_deg:g} "
-                       "deg): tilt the board in more different directions")
-    if T_lidar_cam is not None or obs.T_lidar_cam_true is not None:
-        c = conditioning(obs, T_lidar_cam)
-        if c < min_conditioning:
-            out.append(f"poorly conditioned board set (inverse condition number {c:.1e} < {min_conditioning:g}): "
-                       "some direction of the extrinsic is barely constrained")
-    return out
-
-
 def scan_noise_estimate(obs: Observations, *, floor_m: float = 1e-6) -> float:
     """Range-noise std (metres) estimated from the scan lines alone, without an extrinsic.
 
@@ -193,16 +165,21 @@ def scan_noise_estimate(obs: Observations, *, floor_m: float = 1e-6) -> float:
 
 
 def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str = "range",
-                          range_sigma_m: float | None = None) -> np.ndarray:
-    """Covariance (6x6) of the minimiser of the ``residual`` least squares at ``T_lidar_cam``, under range noise.
+                          range_sigma_m: float | None = None, basis: np.ndarray | None = None) -> np.ndarray:
+    """Covariance (6x6; kxk with ``basis``) of the minimiser of the ``residual`` least squares at ``T_lidar_cam``,
+    under range noise.
 
     ``"range"``: ``sigma^2 (J^T J)^-1`` (the ML estimate's covariance). ``"plane"``: the point-to-plane distance is
     the range residual times ``w = m . b``, so its noise is not identically distributed; the sandwich
     ``A^-1 J^T diag(sigma^2 w^2) J A^-1`` with ``A = J^T J`` of the plane residuals. ``range_sigma_m=None``: estimated
-    from the range residuals at ``T_lidar_cam`` (``K - 6`` degrees of freedom).
+    from the range residuals at ``T_lidar_cam`` (``K - 6`` degrees of freedom). ``basis``: (6,k), the covariance of
+    k parameters that move ``(w, dt)`` by ``basis`` (e.g. the free mounting parameters, ``calib_core.partial``;
+    then ``K - k`` degrees of freedom); default the six of ``calib_core.residuals``.
     """
     T = np.asarray(T_lidar_cam, float)
     e_r, J_r = range_residuals(T, data, jacobian=True)
+    B = np.eye(6) if basis is None else np.asarray(basis, float)
+    J_r = J_r @ B
     if residual == "range":
         return covariance(J_r, e_r, range_sigma_m)
     if residual != "plane":
@@ -210,12 +187,13 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
     from .residuals import plane_residuals
 
     if range_sigma_m is None:
-        if len(e_r) <= 6:
+        if len(e_r) <= B.shape[1]:
             raise UncertaintyError(f"{len(e_r)} residuals leave no degrees of freedom to estimate the noise")
-        sigma2 = float(e_r @ e_r) / (len(e_r) - 6)
+        sigma2 = float(e_r @ e_r) / (len(e_r) - B.shape[1])
     else:
         sigma2 = float(range_sigma_m) ** 2
     _, J_p = plane_residuals(T, data, jacobian=True)
+    J_p = J_p @ B
     m = (data.normals @ T[:3, :3].T)[data.board]
     w = np.einsum("kj,kj->k", m, data.points / np.linalg.norm(data.points, axis=1, keepdims=True))
     Ai = _inverse_information(J_p.T @ J_p, 1e-12)

@@ -105,11 +105,11 @@ def degeneracy_verdict(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: floa
     if _library_degeneracy is not None:
         d = _library_degeneracy(obs, T_lidar_cam, sigma_m)
         return d.message(), d.determined
-    from rig.report import normal_conditioning
+    from calib_core.degeneracy import pair_angle_deg
+    from calib_core.uncertainty import normal_spread_deg
 
-    ang, cond = normal_conditioning(obs)
-    return (f"not assessed by an information-matrix analysis here; board normals: largest pair angle {ang:.1f} deg, "
-            f"sigma3/sigma1 = {cond:.3f}"), None
+    return (f"not assessed by an information-matrix analysis here; board normals: largest pair angle "
+            f"{pair_angle_deg(obs):.1f} deg, spread {normal_spread_deg(obs):.1f} deg"), None
 
 
 def fmt(v, spec: str = ".2f", none: str = "-") -> str:

@@ -50,7 +50,8 @@ def _cmd_calibrate(args) -> int:
 
     frames = _frames(args)
     obs = load_observations(args.observations)
-    res = calibrate(obs, method=args.method)
+    options = {"fixed": parse_fix(args.fix)} if args.fix else {}
+    res = calibrate(obs, method=args.method, **options)
     if not res.ok:
         print(f"{args.method}: failed: {res.reason}")
     else:
@@ -62,6 +63,11 @@ def _cmd_calibrate(args) -> int:
             model = res.info.get("covariance_model")
             print(f"1-sigma: rotation {res.sigma_rot_deg:.3f} deg, translation {res.sigma_trans_mm:.1f} mm"
                   + (f" (covariance model: {model})" if model else ""))
+        if "mounting" in res.info:
+            print("mounting (camera pose in the lidar frame; degrees and metres):")
+            for k, v in res.info["mounting"].items():
+                s = res.info["mounting_sigma"].get(k)
+                print(f"  {k:>9} = {v: .4f}  " + ("(fixed, given)" if s is None else f"+- {s:.4f} (1-sigma)"))
         if "conditioning" in res.info:
             print(f"conditioning (inverse condition number, 1 = ideal, < 1e-3 poor): {res.info['conditioning']:.2e}")
         for w in res.info.get("warnings", []):
@@ -92,6 +98,33 @@ def _cmd_calibrate(args) -> int:
     return 0 if res.ok else 1
 
 
+FIX_HELP = ("hold mounting parameters at given values and calibrate the rest, e.g. z=0.12,roll=0,pitch=0 "
+            "(the camera's pose in the lidar frame: roll, pitch, yaw in degrees, Z-Y-X, of the camera body "
+            "frame x forward y left z up; x, y, z in metres, the camera centre; keys may carry their unit: "
+            "z_m, roll_deg); for lidarcam and X+ml / X+plane")
+
+
+def parse_fix(text: str) -> dict:
+    """``"z=0.12,roll=0"`` -> ``{"z_m": 0.12, "roll_deg": 0.0}`` (units: degrees for angles, metres for
+    offsets); CalibrationError naming a bad item."""
+    from calib_core.errors import CalibrationError
+    from calib_core.mounting import PARAMS, UNIT_NAMES
+
+    out = {}
+    for item in filter(None, (p.strip() for p in text.split(","))):
+        key, eq, value = item.partition("=")
+        key = key.strip()
+        name = UNIT_NAMES[PARAMS.index(key)] if key in PARAMS else key
+        if not eq or name not in UNIT_NAMES:
+            raise CalibrationError(f"--fix: bad item {item!r}; expected NAME=VALUE with NAME one of "
+                                   f"{', '.join(PARAMS)} (or {', '.join(UNIT_NAMES)})")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise CalibrationError(f"--fix: {key} must be a number, got {value.strip()!r}") from None
+    return out
+
+
 def _plugin_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plugin", action="append", default=[], metavar="MODULE",
                    help="import this module first: its methods join the registry (repeatable; installed "
@@ -120,6 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--method", default="lidarcam", choices=list(METHODS), help="method (default: %(default)s)")
     sp.add_argument("--out", help="write the result JSON (lidarcam.result/1) here")
     sp.add_argument("--yaml", help="write the extrinsic as YAML here")
+    sp.add_argument("--fix", metavar="NAME=VALUE,...", help=FIX_HELP)
     sp.add_argument("--parent-frame", help="ROS frame name of the parent sensor (the lidar unless --parent-sensor "
                     "camera): prints static_transform_publisher lines and a URDF joint, adds them to the YAML")
     sp.add_argument("--child-frame", help="ROS frame name of the other sensor (the camera by default)")

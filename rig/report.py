@@ -13,19 +13,18 @@ from pathlib import Path
 
 import numpy as np
 
+from calib_core.degeneracy import degeneracy_warnings, pair_angle_deg
 from calib_core.errors import LidarcamError
 from calib_core.io import extrinsic_yaml
 from calib_core.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
 from calib_core.observations import Observations, ScanData
 from calib_core.residuals import plane_residuals
-from calib_core.result import CalibrationResult
+from calib_core.result import JSON_INFO, CalibrationResult
 from calib_core.transforms import invert_T, quaternion_xyzw, transform_points
+from calib_core.uncertainty import normal_spread_deg
 
 from .dataset import CameraModel, Dataset
 
-MIN_POSES = 5
-PARALLEL_DEG = 15.0
-CONDITION_MIN = 0.1
 OUTLIER_FACTOR = 3.0
 OVERLAY_CMAP = "turbo"  # saturated everywhere (a diverging map is grey at 0 mm: invisible on the board)
 
@@ -50,10 +49,10 @@ def _as_result(result) -> dict:
     if isinstance(result, CalibrationResult):
         return {"method": result.method, "ok": result.ok, "reason": result.reason,
                 "T_lidar_cam": result.T_lidar_cam, "covariance": result.covariance,
-                "covariance_model": result.info.get("covariance_model")}
+                "covariance_model": result.info.get("covariance_model"), **{k: result.info.get(k) for k in JSON_INFO}}
     return {"method": result.get("method", "?"), "ok": bool(result.get("ok")), "reason": result.get("reason"),
             "T_lidar_cam": result.get("T_lidar_cam"), "covariance": result.get("covariance"),
-            "covariance_model": result.get("covariance_model")}
+            "covariance_model": result.get("covariance_model"), **{k: result.get(k) for k in JSON_INFO}}
 
 
 def board_plane_distances(T_cam_lidar: np.ndarray, T_cam_board: np.ndarray, scan: np.ndarray) -> np.ndarray:
@@ -92,35 +91,11 @@ def project_scan(camera: CameraModel, T_cam_lidar: np.ndarray, scan: np.ndarray,
     return uv, ok
 
 
-def normal_conditioning(observations: Observations) -> tuple[float, float]:
-    """(largest pairwise angle between board normals in degrees, sigma_3 / sigma_1 of the stacked normals).
-
-    Small values of either flag a degenerate board set: near-parallel boards, or normals close to one plane.
-    """
-    n, _ = observations.planes_cam()
-    if len(n) < 2:
-        return 0.0, 0.0
-    c = np.abs(np.clip(n @ n.T, -1, 1))
-    max_angle = float(np.degrees(np.arccos(c.min())))
-    s = np.linalg.svd(n, compute_uv=False)
-    return max_angle, float(s[-1] / s[0]) if len(s) == 3 else 0.0
-
-
-def report_warnings(observations: Observations, rms_mm: list[float]) -> list[str]:
-    """Warnings on a board set and its residuals: few poses, near-parallel normals, outlier boards."""
-    out = []
-    N = observations.n_boards
-    if N < MIN_POSES:
-        out.append(f"only {N} board poses (fewer than {MIN_POSES}): the extrinsic is poorly constrained; "
-                   "add poses with varied board orientations")
-    if N >= 2:
-        max_angle, cond = normal_conditioning(observations)
-        if max_angle < PARALLEL_DEG:
-            out.append(f"board normals are near-parallel (largest angle between two boards {max_angle:.1f} deg "
-                       f"< {PARALLEL_DEG:g} deg): tilt and turn the board more between poses")
-        elif N >= 3 and cond < CONDITION_MIN:
-            out.append(f"board normals lie close to one plane (sigma3/sigma1 = {cond:.3f} < {CONDITION_MIN:g}): "
-                       "tilt the board forwards/backwards as well as sideways")
+def report_warnings(observations: Observations, rms_mm: list[float], T_lidar_cam: np.ndarray | None = None
+                    ) -> list[str]:
+    """Warnings on a board set and its residuals: the library's board-set warnings
+    (``calib_core.degeneracy.degeneracy_warnings``, one set of thresholds) and outlier boards."""
+    out = degeneracy_warnings(observations, T_lidar_cam)
     finite = [r for r in rms_mm if math.isfinite(r)]
     if finite:
         med = float(np.median(finite))
@@ -129,6 +104,18 @@ def report_warnings(observations: Observations, rms_mm: list[float]) -> list[str
                 out.append(f"board {i}: residual RMS {r:.1f} mm > {OUTLIER_FACTOR:g} x the median ({med:.1f} mm); "
                            "check its scan segment and board detection")
     return out
+
+
+def _mounting_md(res: dict) -> list[str]:
+    """The mounting parameters of a calibration with fixed parameters (``calib_core.partial``), as a table."""
+    if not res.get("mounting"):
+        return []
+    sig, fixed = res.get("mounting_sigma") or {}, res.get("fixed") or {}
+    rows = [f"| {k} | {v:.4f} | {'given (fixed)' if k in fixed else f'{sig[k]:.4f}' if k in sig else '-'} |"
+            for k, v in res["mounting"].items()]
+    return ["### Mounting parameters", "", "The camera's pose in the lidar frame (`calib_core.mounting`: x, y, z "
+            "the camera centre; roll, pitch, yaw of its body frame, Z-Y-X). " + str(res.get("note") or ""), "",
+            "| parameter | value | 1-sigma |", "|---|---:|---:|"] + rows + [""]
 
 
 def _pose_name(observations: Observations, i: int) -> str:
@@ -261,6 +248,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
                f"- covariance model: {res.get('covariance_model') or 'not stated'}", ""]
     else:
         md += ["No covariance in the result: no 1-sigma figures.", ""]
+    md += _mounting_md(res)
     if observations.T_lidar_cam_true is not None:
         e_R, e_t = pose_errors(T, observations.T_lidar_cam_true)
         md += [f"Against the ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm.", ""]
@@ -308,12 +296,11 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
         md += [f"Median board RMS: {float(np.median(finite)):.1f} mm; all points: "
                f"{math.sqrt(np.mean(np.concatenate([(1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)) ** 2 for b in observations.boards]))):.1f} mm.", ""]  # noqa: E501
     if observations.n_boards >= 2:
-        ang, cond = normal_conditioning(observations)
-        md += [f"Board set: largest angle between two board normals {ang:.1f} deg; normal spread "
-               f"sigma3/sigma1 = {cond:.3f}.", ""]
+        md += [f"Board set: largest angle between two board normals {pair_angle_deg(observations):.1f} deg; "
+               f"normals {normal_spread_deg(observations):.1f} deg from one plane (spread).", ""]
     if skipped:
         md += ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""]
-    summary.warnings = report_warnings(observations, rms_mm) + summary.warnings
+    summary.warnings = report_warnings(observations, rms_mm, T) + summary.warnings
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
     summary.markdown.write_text("\n".join(md) + "\n")

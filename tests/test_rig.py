@@ -345,7 +345,9 @@ def test_keyed_xy_scans_plain_camera_and_jpg(tmp_path):
     ds = load_dataset(root)
     obs, diags = extract(ds, ExtractOptions(range_sigma_m=0.005))
     assert obs.n_boards == 4, format_diagnostics(diags)
-    assert "fewer than 5" in " ".join(__import__("rig.report", fromlist=["x"]).report_warnings(obs, [1.0] * 4))
+    warn = __import__("rig.report", fromlist=["x"]).report_warnings
+    assert "fewer than 4" in " ".join(warn(obs.subset([0, 1, 2]), [1.0] * 3))
+    assert "fewer than" not in " ".join(warn(obs, [1.0] * 4))
 
 
 def test_extracted_rig_carries_corners_and_lidarcam_uses_the_joint_model(rig):

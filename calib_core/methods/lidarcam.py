@@ -1,14 +1,25 @@
 """Our method, ``lidarcam``: minimal-solver (+ Zhang & Pless) candidates, an all-evidence likelihood to choose
-among them, maximum-likelihood refinement of the best few, covariance and degeneracy warnings."""
+among them, maximum-likelihood refinement of the best few, covariance, the directions a degenerate board set
+does not determine, and calibration of the rest with some mounting parameters fixed."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..degeneracy import (
+    MAX_SCALED_SIGMA,
+    NULL_CONDITIONING,
+    board_set_warnings,
+    degeneracy_warnings,
+    explain_failure,
+    undetermined_directions,
+)
 from ..joint import RANGE_ONLY_MODEL, JointError, joint_step
 from ..lines import fit_line
+from ..mounting import parse_fixed
 from ..observations import Observations, ScanData
+from ..partial import calibrate_fixed, fixed_starts
 from ..refine import refine
 from ..registry import Method
 from ..residuals import perturb
@@ -19,13 +30,7 @@ from ..solvers.candidates import minimal_candidates
 from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
 from ..solvers.zhang_pless import zhang_pless_linear
 from ..transforms import matrix_to_rotvec
-from ..uncertainty import (
-    UncertaintyError,
-    conditioning,
-    degeneracy_warnings,
-    refinement_covariance,
-    scan_noise_estimate,
-)
+from ..uncertainty import UncertaintyError, conditioning, refinement_covariance, scan_noise_estimate
 from .suffixes import F_SCALE_SIGMAS
 
 
@@ -101,13 +106,13 @@ def refine_start(obs: Observations, data: ScanData, T0: np.ndarray, sopts: dict,
     return final, r, T1, False
 
 
-def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine: int = 3, loss: str = "linear",
-             f_scale: float | None = None, edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
-             behind_penalty: float = np.inf, use_zhang_pless: bool = True, distinct_rot_deg: float = 1.0,
-             distinct_trans_m: float = 0.05, min_conditioning: float = 1e-6, warn_min_boards: int = 4,
-             warn_min_normal_spread_deg: float = 5.0, warn_min_conditioning: float = 1e-3, max_nfev: int = 100,
-             polish: bool = True, polish_threshold: float = 10.0, use_corners: bool = True,
-             corner_sigma_px: float | None = None, **solver_options):
+def lidarcam(obs: Observations, *, fixed: dict | None = None, range_sigma_m: float | None = None, n_refine: int = 3,
+             loss: str = "linear", f_scale: float | None = None, edge_sigma_m: float = EDGE_SIGMA_M,
+             outline_sigma_m: float = OUTLINE_SIGMA_M, behind_penalty: float = np.inf, use_zhang_pless: bool = True,
+             distinct_rot_deg: float = 1.0, distinct_trans_m: float = 0.05, min_conditioning: float = NULL_CONDITIONING,
+             max_scaled_sigma: float = MAX_SCALED_SIGMA, max_nfev: int = 100, polish: bool = True,
+             polish_threshold: float = 10.0, use_corners: bool = True, corner_sigma_px: float | None = None,
+             **solver_options):
     """Our method.
 
     1. Candidates (``candidate_pool``): the minimal solver on all board triples (``solver_options`` go to it),
@@ -119,42 +124,53 @@ def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine:
        whose refined pose scores least. With ``polish``, a refined pose whose endpoint and outline terms exceed
        ``polish_threshold`` (the range optimum puts scan points off the boards) is refined further on the whole
        ``selection.lidarcam`` cost (numerical Jacobian) and kept when that scores less.
-    4. When every board carries image corners (and ``use_corners``): the joint maximum likelihood over corners and
+    4. Degeneracy (``calib_core.degeneracy.undetermined_directions``, thresholds ``min_conditioning`` and
+       ``max_scaled_sigma``): directions the board geometry leaves free (e.g. roll, pitch and height z when every
+       board is vertical) are not presented as estimated: the result is ``ok=False``, its reason names them and
+       how to calibrate the rest, ``info["degeneracy"]`` holds the analysis and the candidates start with the
+       unconstrained optimum. Directions weak only for lack of data are named in ``info["warnings"]``.
+    5. When every board carries image corners (and ``use_corners``): the joint maximum likelihood over corners and
        ranges from that answer (``calib_core.joint``; noise stds ``corner_sigma_px``, ``range_sigma_m`` or
        estimated), with the extrinsic's covariance, board poses marginalised (``info["covariance_model"]`` "joint").
        Otherwise the range model's covariance ``sigma^2 (J^T J)^-1`` (``range_sigma_m`` or estimated from the final
        residuals; "range-only, ignores camera noise"); after a polish it is still that of the range model at the
        answer (it ignores the outline information: conservative). Conditioning and ``info["warnings"]``.
-       Fails with a reason when no candidate exists, none scores finite, or the refined pose's conditioning is
-       below ``min_conditioning``.
+       Fails with a reason when no candidate exists or none scores finite.
+
+    ``fixed``: calibrate only the other mounting parameters (``calib_core.mounting``: the camera's pose in the
+    lidar frame as roll, pitch, yaw and x, y, z), holding these at the given values, e.g.
+    ``{"z_m": 0.12, "roll_deg": 0.0, "pitch_deg": 0.0}``; maximum likelihood on the range residuals from a
+    closed-form start when roll, pitch and z are given (else from the full method's answer), with the covariance
+    of the free parameters (``calib_core.partial.calibrate_fixed``).
     """
-    C, reasons = candidate_pool(obs, use_zhang_pless, **solver_options)
-    if len(C) == 0:
-        raise SolveFailure("no candidate: " + "; ".join(reasons))
     sigma = range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs)
+    fs = f_scale if f_scale is not None else F_SCALE_SIGMAS * sigma
     sopts = {"range_sigma_m": sigma, "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m,
              "behind_penalty": behind_penalty}
-    starts = best_distinct(C, lidarcam_score(obs, C, **sopts), n_refine, distinct_rot_deg, distinct_trans_m)
-    if not starts:
-        raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
-    data = obs.scan_data
-    fs = f_scale if f_scale is not None else F_SCALE_SIGMAS * sigma
-    tries = [(*refine_start(obs, data, T0, sopts, loss=loss, f_scale=fs, max_nfev=max_nfev, do_polish=polish,
-                            polish_threshold=polish_threshold), T0) for T0 in starts]
-    final, r, T_best, polished, T0 = min(tries, key=lambda x: x[0])
-    cond = conditioning(obs, T_best)
-    if not cond >= min_conditioning:
-        raise SolveFailure(f"lidarcam: degenerate board set, the extrinsic is not determined (inverse condition "
-                           f"number {cond:.1e} < {min_conditioning:g})", C)
+    ropts = {"n_refine": n_refine, "loss": loss, "f_scale": fs, "use_zhang_pless": use_zhang_pless,
+             "distinct_rot_deg": distinct_rot_deg, "distinct_trans_m": distinct_trans_m, "max_nfev": max_nfev,
+             "polish": polish, "polish_threshold": polish_threshold}
+    if fixed is not None:
+        mask, values = parse_fixed(fixed)
+        starts = fixed_starts(obs, mask, values, lambda: _solve(obs, sopts, ropts, solver_options)[0])
+        T, info = calibrate_fixed(obs, mask, values, starts, loss=loss, f_scale=fs, range_sigma_m=range_sigma_m,
+                                  max_nfev=max_nfev)
+        return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "warnings": board_set_warnings(obs)}
+    try:
+        T_best, C, info = _solve(obs, sopts, ropts, solver_options)
+    except SolveFailure as fail:
+        raise explain_failure(obs, fail, range_sigma_m) from None
+    deg = undetermined_directions(obs, T_best, range_sigma_m, max_scaled_sigma=max_scaled_sigma,
+                                  null_conditioning=min_conditioning)
+    if not deg.determined:
+        raise SolveFailure(f"lidarcam: {deg.message()}", np.concatenate([T_best[None], C]),
+                           {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
     T_best, cov, jinfo = final_step(obs, T_best, C, use_corners, range_sigma_m=range_sigma_m,
                                     corner_sigma_px=corner_sigma_px, loss=loss)
-    warnings = jinfo.pop("warnings", []) + degeneracy_warnings(obs, T_best, min_boards=warn_min_boards,
-                                                               min_normal_spread_deg=warn_min_normal_spread_deg,
-                                                               min_conditioning=warn_min_conditioning)
-    start = float(lidarcam_score(obs, T0[None], **sopts)[0])
-    return T_best, C, {"cost": final, "polished": polished, "score_start": start, "n_refined": len(starts),
-                       "sigma_m_selection": sigma, "refine_cost": r.cost, "refine_nfev": r.nfev, "covariance": cov,
-                       "conditioning": cond, "warnings": warnings, **jinfo}
+    warnings = jinfo.pop("warnings", []) + degeneracy_warnings(obs, T_best) + \
+        ([deg.message()] if len(deg.directions) else [])
+    return T_best, C, {**info, "covariance": cov, "conditioning": conditioning(obs, T_best), "warnings": warnings,
+                       **jinfo}
 
 
 def final_step(obs: Observations, T: np.ndarray, C: np.ndarray, use_corners: bool, *, range_sigma_m, corner_sigma_px,
@@ -172,6 +188,24 @@ def final_step(obs: Observations, T: np.ndarray, C: np.ndarray, use_corners: boo
     except UncertaintyError as err:
         raise SolveFailure(f"lidarcam: {err}", C) from None
     return T, cov, {"covariance_model": RANGE_ONLY_MODEL, **({"warnings": [why]} if why else {})}
+
+
+def _solve(obs: Observations, sopts: dict, ropts: dict, solver_options: dict):
+    """Steps 1-3 of ``lidarcam``: (the best refined ``T_lidar_cam``, all candidates, info)."""
+    C, reasons = candidate_pool(obs, ropts["use_zhang_pless"], **solver_options)
+    if len(C) == 0:
+        raise SolveFailure("no candidate: " + "; ".join(reasons))
+    starts = best_distinct(C, lidarcam_score(obs, C, **sopts), ropts["n_refine"], ropts["distinct_rot_deg"],
+                           ropts["distinct_trans_m"])
+    if not starts:
+        raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
+    tries = [(*refine_start(obs, obs.scan_data, T0, sopts, loss=ropts["loss"], f_scale=ropts["f_scale"],
+                            max_nfev=ropts["max_nfev"], do_polish=ropts["polish"],
+                            polish_threshold=ropts["polish_threshold"]), T0) for T0 in starts]
+    final, r, T_best, polished, T0 = min(tries, key=lambda x: x[0])
+    start = float(lidarcam_score(obs, T0[None], **sopts)[0])
+    return T_best, C, {"cost": final, "polished": polished, "score_start": start, "n_refined": len(starts),
+                       "sigma_m_selection": sopts["range_sigma_m"], "refine_cost": r.cost, "refine_nfev": r.nfev}
 
 
 LIDARCAM = Method("lidarcam", lidarcam, 3, "this project (lidarcam)",

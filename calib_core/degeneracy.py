@@ -1,0 +1,314 @@
+"""What a board set cannot determine: the directions of the extrinsic that the range model's information leaves
+free, named in lidar-frame axes, and the one home of the plain-language warnings about a board set (used by the
+methods and by the rig report, with one set of thresholds).
+
+Axes: a small rigid motion of the camera about the lidar's origin, in lidar axes: ``T_lidar_cam ->
+[exp(w) | dt] T_lidar_cam``, ``w = (roll, pitch, yaw)`` rotations about the lidar's x, y, z axes (radians) and
+``dt = (x, y, z)`` translations along them (metres). Equivalently the lidar turns about its own axes and shifts
+along them relative to the camera. In these axes a vertical-board rig is degenerate along exactly roll, pitch
+and z. (``calib_core.residuals`` turns the rotation about the camera's centre instead; ``origin_jacobian``
+converts.) Translations are scaled by the typical range ``L`` so that radians and metres compare: a unit scaled
+direction moves scan points by about the same distance whatever it mixes.
+
+A direction is *weak* when its 1-sigma in scaled units exceeds ``MAX_SCALED_SIGMA`` (0.1: 5.7 deg of rotation,
+or 10 % of the typical range of translation) or when it carries no information at all (singular value below
+``NULL_CONDITIONING`` of the largest, whatever the noise). Weak directions are *not determined* (``geometric``:
+the methods refuse to present them, ``ok=False``) when the board geometry is their cause: no information at
+all, or boards standing vertical (normals within ``MIN_NORMAL_SPREAD_DEG`` of the scan plane, the rig of a ground
+robot), which leave roll, pitch and z not determined whatever their sigma: a lean that small is of the order of
+the board-pose and flatness errors the range model leaves out. Otherwise they are weak for lack of data (few
+boards, high noise, normals near one other plane): the answer stands and a warning names them with their sigma
+(on simulated sets of that kind, with exact board poses, the estimates are mostly still valid).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .observations import Observations
+from .partial import vertical_start
+from .residuals import range_residuals
+from .result import SolveFailure
+from .transforms import skew
+from .uncertainty import conditioning, normal_spread_deg, typical_range
+
+MIN_BOARDS = 4
+"""Fewer boards than this is warned about: with 3 the minimal solver's candidates all fit the scan lines exactly
+and cannot be told apart by the scan residuals."""
+
+MIN_PAIR_ANGLE_DEG = 15.0
+"""Largest angle between two board normals below this: the boards are near-parallel."""
+
+MIN_NORMAL_SPREAD_DEG = 5.0
+"""``uncertainty.normal_spread_deg`` below this: the board normals lie nearly in one plane."""
+
+MIN_CONDITIONING = 1e-3
+"""``uncertainty.conditioning`` below this: some direction of the extrinsic is barely constrained (warning)."""
+
+NULL_CONDITIONING = 1e-6
+"""A direction whose singular value is below this fraction of the largest (scaled Jacobian) carries no
+information whatever the noise: undetermined."""
+
+MAX_SCALED_SIGMA = 0.1
+"""A direction whose 1-sigma exceeds this in scaled units (radians; translation in units of the typical range)
+is undetermined: the data do not fix it."""
+
+ALIGNED_SHARE = 0.9
+"""Undetermined directions are named as lidar axes when each named axis lies this much (squared norm of its
+projection) inside the undetermined subspace."""
+
+VERTICAL_TOL_DEG = 10.0
+"""The normals' common perpendicular within this of the lidar z axis: the boards are called vertical."""
+
+VERTICAL_MISFIT_DEG = 2.5
+"""Or: one rotation turns every board normal onto its scan line's normal in the scan plane within this (RMS)."""
+
+AXES = ("roll", "pitch", "yaw", "x", "y", "z")
+AXIS_WORDS = {"roll": "roll (rotation about the lidar x axis)", "pitch": "pitch (about the lidar y axis)",
+              "yaw": "yaw (about the lidar z axis)", "x": "x (translation along the lidar x axis)",
+              "y": "y (along the lidar y axis)", "z": "z (height, along the lidar z axis)"}
+
+
+def origin_jacobian(J: np.ndarray, T_lidar_cam: np.ndarray) -> np.ndarray:
+    """A (K,6) residual Jacobian in the parameters of ``calib_core.residuals`` (rotation about the camera centre)
+    turned into the lidar-origin axes of this module: ``d_t(residuals) = w x t + dt``."""
+    J = np.asarray(J, float)
+    t = np.asarray(T_lidar_cam, float)[:3, 3]
+    return np.concatenate([J[:, :3] - J[:, 3:] @ skew(t), J[:, 3:]], axis=1)
+
+
+def _describe(v: np.ndarray, min_share: float = 0.1) -> str:
+    """``0.71 roll - 0.70 y`` of a unit 6-vector (components whose square is at least ``min_share``)."""
+    keep = [j for j in np.argsort(-np.abs(v)) if v[j] ** 2 >= min_share] or [int(np.argmax(np.abs(v)))]
+    return " ".join(f"{'-' if v[j] < 0 else '+'} {abs(v[j]):.2f} {AXES[j]}" for j in keep).lstrip("+ ")
+
+
+def _join(words: list[str]) -> str:
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
+
+
+@dataclass(frozen=True, eq=False)
+class Degeneracy:
+    """The weak directions of a board set at an extrinsic.
+
+    Attributes:
+        directions: (k,6) unit vectors spanning the weak subspace, in the scaled lidar-origin axes (roll, pitch,
+            yaw in radians; x, y, z in units of ``scale_m``); k = 0 when everything is well determined.
+        sigmas: (k,) their 1-sigma in scaled units (inf where the information is numerically zero).
+        axes: the fewest lidar axes (names from ``AXES``) whose span holds every weak direction to at least
+            ``ALIGNED_SHARE`` (squared norm): fixing them removes the weak subspace. ``aligned``: there are as many
+            of them as weak directions (then exactly these axes are weak; otherwise combinations of them are).
+        geometric: the board geometry leaves them free (no information, or vertical boards): they are *not
+            determined* and a method must not present them as estimated.
+        cause: why, in words (e.g. "every board stands vertical (normals 0.0 deg RMS from the scan plane)").
+        scale_m: the typical range used to scale translations; range_sigma_m: the noise std used.
+    """
+
+    directions: np.ndarray
+    sigmas: np.ndarray
+    axes: tuple[str, ...]
+    aligned: bool
+    geometric: bool
+    cause: str
+    scale_m: float
+    range_sigma_m: float
+
+    @property
+    def determined(self) -> bool:
+        """No direction is left free by the geometry (weak ones for lack of data may remain)."""
+        return not (len(self.directions) and self.geometric)
+
+    def _what(self) -> str:
+        words = _join([AXIS_WORDS[a] for a in self.axes])
+        if self.aligned:
+            return words
+        k = len(self.directions)
+        return (f"{'a combination' if k == 1 else f'{k} combinations'} of {words} "
+                f"({'; '.join(_describe(v) for v in self.directions)}; translations in units of {self.scale_m:.2f} m)")
+
+    def _sigma_words(self) -> str:
+        out = []
+        for v, s in zip(self.directions, self.sigmas, strict=True):
+            rot = float(v[:3] @ v[:3]) >= 0.5
+            out.append("inf" if not np.isfinite(s) else f"{np.degrees(s):.1f} deg" if rot
+                       else f"{1000 * s * self.scale_m:.0f} mm")
+        return ", ".join(out)
+
+    def message(self) -> str:
+        """One sentence: what is not (or poorly) determined and why; for the former, how to calibrate the rest."""
+        if not len(self.directions):
+            return "every direction of the extrinsic is determined"
+        verb = "is" if len(self.directions) == 1 else "are"
+        if not self.geometric:
+            return (f"{self._what()} {verb} poorly determined (1-sigma {self._sigma_words()}): {self.cause}; "
+                    "add board poses")
+        keys = ", ".join(f"{fixed_key(a)!r}: ..." for a in self.axes)
+        lean = "" if not np.all(np.isfinite(self.sigmas)) else \
+            f" (the range model alone would give 1-sigma {self._sigma_words()}, leaving out board-pose errors)"
+        return (f"{self._what()} {verb} not determined by these boards: {self.cause}{lean}; give their values "
+                f"and calibrate the rest with fixed={{{keys}}}")
+
+    def to_dict(self) -> dict:
+        """JSON-able summary: axes, aligned, geometric, cause, message, directions, sigmas (None for infinite)."""
+        return {"axes": list(self.axes), "aligned": bool(self.aligned), "geometric": bool(self.geometric),
+                "cause": self.cause, "message": self.message(), "directions": np.round(self.directions, 6).tolist(),
+                "sigmas_scaled": [None if not np.isfinite(s) else float(s) for s in self.sigmas],
+                "scale_m": self.scale_m, "range_sigma_m": self.range_sigma_m}
+
+
+def fixed_key(axis: str) -> str:
+    """The ``calibrate(..., fixed=...)`` key of a lidar axis name (``"z"`` -> ``"z_m"``)."""
+    return f"{axis}_deg" if axis in AXES[:3] else f"{axis}_m"
+
+
+def board_set_cause(obs: Observations, T_lidar_cam: np.ndarray) -> str:
+    """Why a board set is weak, in words: vertical boards, normals near one plane, or few boards."""
+    m = obs.planes_cam()[0] @ np.asarray(T_lidar_cam, float)[:3, :3].T      # normals in the lidar frame
+    a = np.linalg.eigh(m.T @ m)[1][:, 0]                                     # their common perpendicular
+    tilt = float(np.degrees(np.arcsin(np.clip(np.max(np.abs(m @ a)), 0.0, 1.0))))
+    if tilt < VERTICAL_TOL_DEG:
+        return (f"every board normal lies within {tilt:.1f} deg of the plane perpendicular to "
+                f"({a[0]:+.2f}, {a[1]:+.2f}, {a[2]:+.2f}) in the lidar frame")
+    if obs.n_boards < 3:
+        return f"only {obs.n_boards} boards"
+    return f"too little data for the range noise ({obs.n_boards} boards)"
+
+
+VERTICAL_AXES = ("roll", "pitch", "z")
+"""What a rig of vertical boards leaves free, exactly, in the lidar-origin axes."""
+
+
+def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> float | None:
+    """How far (RMS, degrees) the boards lean from vertical when they stand (nearly) vertical, else None.
+
+    Vertical: normals within ``MIN_NORMAL_SPREAD_DEG`` (spread) of one plane, and that plane is the lidar's
+    horizontal: its perpendicular within ``VERTICAL_TOL_DEG`` of the lidar z axis at ``T_lidar_cam``, or, since an
+    extrinsic estimated from such boards may itself be tilted, one rotation turns every normal onto its scan
+    line's normal in the scan plane within ``VERTICAL_MISFIT_DEG`` (``partial.vertical_start``, no extrinsic;
+    from ``MIN_BOARDS`` boards on: three normals turn onto three scan lines too easily to tell).
+    """
+    if obs.n_boards < 2 or normal_spread_deg(obs) >= MIN_NORMAL_SPREAD_DEG:
+        return None
+    try:
+        misfit = vertical_start(obs)[1]
+    except (SolveFailure, ValueError, np.linalg.LinAlgError):
+        misfit = np.inf
+    m = obs.planes_cam()[0] @ np.asarray(T_lidar_cam, float)[:3, :3].T
+    a = np.linalg.eigh(m.T @ m)[1][:, 0]
+    if np.degrees(np.arccos(min(abs(a[2]), 1.0))) < VERTICAL_TOL_DEG:
+        return float(min(misfit, np.degrees(np.arcsin(np.sqrt(np.mean(m[:, 2] ** 2))))))
+    return float(misfit) if misfit < VERTICAL_MISFIT_DEG and obs.n_boards >= MIN_BOARDS else None
+
+
+def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float | None = None, *,
+                            max_scaled_sigma: float = MAX_SCALED_SIGMA,
+                            null_conditioning: float = NULL_CONDITIONING) -> Degeneracy:
+    """The weak and the not determined directions of the extrinsic at ``T_lidar_cam`` (module docstring).
+
+    Eigen-decomposition of the range model's Fisher information in the scaled lidar-origin axes.
+    ``range_sigma_m``: the range noise std (metres); ``None`` estimates it from the range residuals at
+    ``T_lidar_cam`` (``K - 6`` degrees of freedom), as the methods' covariance does.
+
+    Vertical boards (``vertical_boards``) leave roll, pitch and z free exactly; boards that lean by less than
+    ``MIN_NORMAL_SPREAD_DEG`` fix them only through that lean, which is of the order of the board-pose and
+    board-flatness errors the range model leaves out: these three are then not determined whatever their
+    sigma under the range model (reported as ``sigmas``).
+    """
+    T = np.asarray(T_lidar_cam, float)
+    e, J = range_residuals(T, obs.scan_data, jacobian=True)
+    L = typical_range(obs)
+    Js = origin_jacobian(J, T) * np.r_[np.ones(3), np.full(3, L)]
+    sigma = float(np.sqrt(e @ e / max(len(e) - 6, 1))) if range_sigma_m is None else float(range_sigma_m)
+    F = Js.T @ Js
+    lam, V = np.linalg.eigh(F)
+    null = lam <= (null_conditioning**2) * lam[-1]
+    sig = np.where(null, np.inf, sigma / np.sqrt(np.where(null, 1.0, lam)))
+    weak = null | (sig > max_scaled_sigma)
+    U, sig_u = V[:, weak].T, sig[weak]
+    lean = vertical_boards(obs, T)
+    vertical = lean is not None
+    if vertical:
+        E = np.eye(6)[[AXES.index(a) for a in VERTICAL_AXES]]
+        other = np.sum((U @ E.T) ** 2, axis=1) < 0.5
+        U, sig_u = np.concatenate([E, U[other]]), np.r_[_marginal_sigmas(F, E, sigma, null_conditioning),
+                                                        sig_u[other]]
+    k = len(U)
+    order = np.argsort(-np.sum(U**2, axis=0), kind="stable")
+    n_axes = next((n for n in range(k, 6) if np.all(np.sum(U[:, order[:n]] ** 2, axis=1) >= ALIGNED_SHARE)), 6)
+    geometric = bool(k and (vertical or null.any()))
+    cause = "" if not k else board_set_cause(obs, T) if lean is None else \
+        f"every board stands vertical (normals {lean:.1f} deg RMS from the scan plane)"
+    return Degeneracy(U, sig_u, tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
+                      cause, L, sigma)
+
+
+def _marginal_sigmas(F: np.ndarray, E: np.ndarray, sigma: float, null_conditioning: float) -> np.ndarray:
+    """1-sigma (scaled) of the unit directions ``E`` (k,6) under information ``F / sigma^2``; inf if singular."""
+    lam, V = np.linalg.eigh(F)
+    if lam[0] <= (null_conditioning**2) * lam[-1]:
+        return np.full(len(E), np.inf)
+    return sigma * np.sqrt(np.einsum("ij,jk,ik->i", E, (V / lam) @ V.T, E))
+
+
+def pair_angle_deg(obs: Observations) -> float:
+    """Largest angle between two board normals, in degrees (0 with fewer than 2 boards)."""
+    n, _ = obs.planes_cam()
+    if len(n) < 2:
+        return 0.0
+    return float(np.degrees(np.arccos(np.clip(np.abs(n @ n.T), 0.0, 1.0).min())))
+
+
+def board_set_warnings(obs: Observations) -> list[str]:
+    """Warnings about the board set alone (no extrinsic), with this module's thresholds: fewer than
+    ``MIN_BOARDS`` boards; near-parallel boards (``MIN_PAIR_ANGLE_DEG``) or else normals nearly in one plane
+    (``MIN_NORMAL_SPREAD_DEG``)."""
+    out = []
+    N = obs.n_boards
+    if N < MIN_BOARDS:
+        out.append(f"only {N} boards (fewer than {MIN_BOARDS}): the solution may be ambiguous; add board poses "
+                   "with varied orientations")
+    if N >= 2 and (ang := pair_angle_deg(obs)) < MIN_PAIR_ANGLE_DEG:
+        out.append(f"board normals are near-parallel (largest angle between two boards {ang:.1f} deg < "
+                   f"{MIN_PAIR_ANGLE_DEG:g} deg): tilt and turn the board more between poses")
+    elif N >= 3 and (spread := normal_spread_deg(obs)) < MIN_NORMAL_SPREAD_DEG:
+        out.append(f"board normals nearly in one plane (spread {spread:.1f} deg < {MIN_NORMAL_SPREAD_DEG:g} deg): "
+                   "tilt the board forwards/backwards as well as sideways")
+    return out
+
+
+def degeneracy_warnings(obs: Observations, T_lidar_cam: np.ndarray | None = None) -> list[str]:
+    """``board_set_warnings`` and, given ``T_lidar_cam`` (or the ground truth), poor conditioning of the full
+    extrinsic (``MIN_CONDITIONING``) naming the weakest direction in lidar axes."""
+    out = board_set_warnings(obs)
+    T = T_lidar_cam if T_lidar_cam is not None else obs.T_lidar_cam_true
+    if T is not None and obs.n_boards:
+        c = conditioning(obs, T)
+        if c < MIN_CONDITIONING:
+            _, J = range_residuals(np.asarray(T, float), obs.scan_data, jacobian=True)
+            Js = origin_jacobian(J, T) * np.r_[np.ones(3), np.full(3, typical_range(obs))]
+            v = np.linalg.eigh(Js.T @ Js)[1][:, 0]
+            out.append(f"poorly conditioned board set (inverse condition number {c:.1e} < {MIN_CONDITIONING:g}): "
+                       f"the weakest direction is {_describe(v * np.sign(v[np.argmax(np.abs(v))]))} "
+                       "(lidar axes, translation in units of the typical range)")
+    return out
+
+
+def explain_failure(obs: Observations, fail: SolveFailure, range_sigma_m: float | None = None) -> SolveFailure:
+    """``fail`` with the directions the board set does not determine added to its reason and info, when the
+    boards' normals lie nearly in one plane and the rig reads as vertical boards (``partial.vertical_start``
+    aligns the normals with the scan lines within ``VERTICAL_TOL_DEG``); ``fail`` itself otherwise."""
+    if obs.n_boards < 2 or normal_spread_deg(obs) >= MIN_NORMAL_SPREAD_DEG:
+        return fail
+    try:
+        T0, misalign_deg = vertical_start(obs)
+    except (SolveFailure, ValueError, np.linalg.LinAlgError):
+        return fail
+    if misalign_deg > VERTICAL_TOL_DEG:
+        return fail
+    deg = undetermined_directions(obs, T0, range_sigma_m)
+    if deg.determined:
+        return fail
+    return SolveFailure(f"{deg.message()} (the solvers: {fail.reason})", np.concatenate([T0[None], fail.candidates]),
+                        {**fail.info, "degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
