@@ -6,10 +6,11 @@
 Runs ``conf/experiment/boards.yaml`` and ``noise.yaml`` with ``preset=<preset>`` (``conf/preset/``) and the
 paper's four methods (``methods=seed``: the claims compare only those), writes tables and figures into
 ``<results>/<preset>/``; then, unless ``--compare-trials 0``, the same sweeps under the default preset into
-``<results>/<preset>/default/`` (seeded as ``make reproduce-paper``: the same simulated trials, so its first
-100 trials give the default report's valid rates). ``REPORT.md`` judges every claim under both with paired 95% bootstrap intervals
-(``experiments.claim_stats``) and reads the search's tables (``<results>/search/``) for the sensitivity.
-Re-running resumes; ``timings.json`` keeps the measured wall times of each part.
+``<results>/<preset>/default/`` (seeded as ``make reproduce-paper``: the same simulated
+trials, so its first 100 trials give the default report's valid rates). ``REPORT.md`` judges every claim under
+both with paired 95% bootstrap intervals (``experiments.claim_stats``) and reads the search's tables
+(``<results>/search/``) for the sensitivity. Re-running resumes; ``timings.json`` keeps the measured wall
+times of each part.
 """
 
 from __future__ import annotations
