@@ -18,17 +18,19 @@ from .report import FRANCISCO, OURS, Claim
 BOOT_SEED = 20220101
 
 
-def _arrays(g: pd.DataFrame, methods: list[str]) -> dict[str, dict[str, np.ndarray]]:
-    """Per method: ``valid`` (0/1), ``e_R`` (deg, NaN where it returned nothing), ``e_t`` (m), by trial."""
-    def col(name: str, m: str) -> np.ndarray:
-        return g[g["method"] == m].set_index("trial")[name].reindex(trials).astype(float).to_numpy()
-
-    trials = np.unique(g["trial"].to_numpy())
+def sweep_arrays(trials: pd.DataFrame, x: str) -> dict:
+    """Per setting of ``x`` and method: ``valid`` (0/1), ``e_R`` (deg, NaN where it returned nothing), ``e_t``
+    (m), aligned by trial. Computed once per sweep and shared by every claim on it."""
     out = {}
-    for m in methods:
-        ok = np.nan_to_num(col("ok", m)) > 0
-        out[m] = {"valid": np.nan_to_num(col("valid", m)),
-                  "e_R": np.where(ok, col("e_R_deg", m), np.nan), "e_t": np.where(ok, col("e_t_m", m), np.nan)}
+    for xv, g in trials.groupby(x, sort=True):
+        w = g.pivot(index="trial", columns="method", values=["valid", "e_R_deg", "e_t_m", "ok"])
+        per = {}
+        for m in w["valid"].columns:
+            ok = w["ok"][m].astype(float).fillna(0.0).to_numpy() > 0
+            per[m] = {"valid": w["valid"][m].astype(float).fillna(0.0).to_numpy(),
+                      "e_R": np.where(ok, w["e_R_deg"][m].astype(float).to_numpy(), np.nan),
+                      "e_t": np.where(ok, w["e_t_m"][m].astype(float).to_numpy(), np.nan)}
+        out[xv] = per
     return out
 
 
@@ -57,16 +59,16 @@ def claim_statistic(kind: str, ours: dict, other: dict | None, idx: np.ndarray, 
     return scale * (_nanmean(other[key][idx]) - _nanmean(ours[key][idx]))
 
 
-def claim_values(trials: pd.DataFrame, claim: Claim, x: str, n_boot: int = 0, smooth: float = 0.0,
-                 seed: int = BOOT_SEED) -> pd.DataFrame:
+def claim_values(trials: pd.DataFrame | None, claim: Claim, x: str, n_boot: int = 0, smooth: float = 0.0,
+                 seed: int = BOOT_SEED, arrays: dict | None = None) -> pd.DataFrame:
     """Our value of ``claim`` per setting of ``x``: ``value`` and, with ``n_boot`` resamples, the 95% paired
-    percentile interval ``lo95``, ``hi95`` (NaN without resamples); ``n_trials`` per setting."""
-    methods = [OURS] + ([claim.other] if claim.other else [])
+    percentile interval ``lo95``, ``hi95`` (NaN without resamples); ``n_trials`` per setting. ``arrays``:
+    ``sweep_arrays(trials, x)`` when already computed."""
+    arrays = sweep_arrays(trials, x) if arrays is None else arrays
     rows = []
-    for xv, g in trials[trials["method"].isin(methods)].groupby(x, sort=True):
+    for xv, arr in arrays.items():
         if claim.at is not None and not np.isclose(float(xv), claim.at):
             continue
-        arr = _arrays(g, methods)
         n = len(arr[OURS]["valid"])
         other = arr.get(claim.other) if claim.other else None
         value = float(claim_statistic(claim.kind, arr[OURS], other, np.arange(n)[None], smooth)[0])

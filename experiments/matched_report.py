@@ -19,7 +19,7 @@ import pandas as pd
 
 from .aggregate import load_summary, load_trials
 from .catalog import method_label
-from .claim_stats import claim_values, interval_verdict, term_name
+from .claim_stats import claim_values, interval_verdict, sweep_arrays, term_name
 from .figures import PAPER_SWEEPS
 from .objective import load_search_conf, objective_lines, score
 from .report import _fmt, _valid_table, paper_claims
@@ -34,12 +34,13 @@ def claims_table(tables: dict[str, Path]) -> pd.DataFrame:
     """Per preset, claim and setting: our value with its paired 95% interval, and the claim's verdict."""
     rows = []
     for preset, folder in tables.items():
-        trials = {s: load_trials(folder, s) for s in PAPER_SWEEPS if (folder / f"trials_{s}.csv").exists()}
+        trials = {s: sweep_arrays(load_trials(folder, s), PAPER_SWEEPS[s].x) for s in PAPER_SWEEPS
+                  if (folder / f"trials_{s}.csv").exists()}
         for i, claim in enumerate(paper_claims(), 1):
             if claim.sweep not in trials:
                 continue
             x = PAPER_SWEEPS[claim.sweep].x
-            v = claim_values(trials[claim.sweep], claim, x, n_boot=N_BOOT)
+            v = claim_values(None, claim, x, n_boot=N_BOOT, arrays=trials[claim.sweep])
             verdict = interval_verdict(claim, v["value"], v["lo95"], v["hi95"])
             rows += [{"preset": preset, "claim": i, "term": term_name(claim), "x": r[x], "n_trials": r["n_trials"],
                       "value": r["value"], "lo95": r["lo95"], "hi95": r["hi95"], "verdict": verdict}

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
-from .claim_stats import claim_values, term_name
+from .claim_stats import claim_values, sweep_arrays, term_name
 from .figures import PAPER_SWEEPS
 from .report import Claim, paper_claims
 
@@ -48,6 +48,7 @@ def score(trials: dict[str, pd.DataFrame], obj: DictConfig) -> pd.DataFrame:
     ``trials``: the runner's rows of the ``boards`` and ``noise`` sweeps (point values, no resampling).
     """
     weights = dict(obj.weights)
+    arrays = {s: sweep_arrays(t, PAPER_SWEEPS[s].x) for s, t in trials.items()}
     rows = []
     for zhang in obj.zhang:
         terms = {}
@@ -57,8 +58,8 @@ def score(trials: dict[str, pd.DataFrame], obj: DictConfig) -> pd.DataFrame:
                 continue
             if name not in weights:
                 raise KeyError(f"conf/search: no weight for the term {name!r}")
-            vals = claim_values(trials[claim.sweep], claim, PAPER_SWEEPS[claim.sweep].x,
-                                smooth=float(obj.smooth_trials))
+            vals = claim_values(None, claim, PAPER_SWEEPS[claim.sweep].x, smooth=float(obj.smooth_trials),
+                                arrays=arrays[claim.sweep])
             terms[name] = float(np.mean(miss(claim, vals["value"].to_numpy(), obj)))
         total = sum(weights[k] * v for k, v in terms.items()) / sum(weights[k] for k in terms)
         rows.append({"zhang": zhang, "objective": total, **terms})

@@ -30,7 +30,7 @@ from scipy.stats import qmc
 
 from simulate import SimOptions
 
-from .claim_stats import claim_values, point_verdict
+from .claim_stats import claim_values, point_verdict, sweep_arrays
 from .figures import PAPER_SWEEPS
 from .objective import load_search_conf, score
 from .report import paper_claims
@@ -112,8 +112,9 @@ def evaluate_points(points: list[dict], per_point: list[dict], conf, stage: str)
                      "objective": best["objective"],
                      **{f"objective_{z}": float(sc.loc[sc["zhang"] == z, "objective"].iloc[0]) for z in sc["zhang"]},
                      **{k: best[k] for k in sc.columns if ":" in k and pd.notna(best[k])}})
+        arrays = {e: sweep_arrays(t, PAPER_SWEEPS[e].x) for e, t in trials.items()}
         for i, claim in enumerate(claims, 1):
-            vals = claim_values(trials[claim.sweep], claim, PAPER_SWEEPS[claim.sweep].x)
+            vals = claim_values(None, claim, PAPER_SWEEPS[claim.sweep].x, arrays=arrays[claim.sweep])
             verdicts.append({"stage": stage, "point": p["point"], **{k: p[k] for k in SPACE_KEYS}, "claim": i,
                              "verdict": point_verdict(claim, vals["value"].to_numpy())})
     table = pd.DataFrame(rows).sort_values("objective").reset_index(drop=True)
