@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ObservationError
+from .metrics import sigma_rot_deg, sigma_trans_m
 from .observations import BoardObservation, Observations
 from .transforms import invert_T, quaternion_xyzw
 
@@ -102,8 +103,8 @@ def extrinsic_yaml(T_lidar_cam: np.ndarray, extra: dict | None = None, covarianc
     extra = dict(extra or {})
     if covariance is not None:
         cov = np.asarray(covariance, float)
-        extra.setdefault("sigma_rot_deg", float(np.degrees(np.sqrt(np.trace(cov[:3, :3])))))
-        extra.setdefault("sigma_trans_mm", float(1000 * np.sqrt(np.trace(cov[3:, 3:]))))
+        extra.setdefault("sigma_rot_deg", sigma_rot_deg(cov))
+        extra.setdefault("sigma_trans_mm", 1000 * sigma_trans_m(cov))
     T = np.asarray(T_lidar_cam, float)
     Ti = invert_T(T)
     lines = ["# lidarcam extrinsic calibration. Units: metres. T_a_b maps points of frame b into frame a.",

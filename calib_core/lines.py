@@ -31,6 +31,16 @@ class ScanLine:
     n_points: int
 
 
+def tls_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Total-least-squares 2D line of (K,2) points: centroid (2,), unit direction (2,), signed orthogonal
+    residuals (K,) (metres, along the left normal of the direction) and the two singular values (2,)."""
+    P = np.asarray(points, float)
+    c = P.mean(axis=0)
+    _, s, Vt = np.linalg.svd(P - c, full_matrices=False)
+    u = Vt[0]
+    return c, u, (P - c) @ np.array([-u[1], u[0]]), s
+
+
 def fit_line(points: np.ndarray, *, min_points: int = MIN_LINE_POINTS, min_aspect: float = 3.0) -> ScanLine:
     """Fit a line to (K,2) ordered points by SVD; refuses fewer than ``min_points`` points or a point cloud
     that is not line-like (spread along the line less than ``min_aspect`` times the spread across it).
@@ -41,9 +51,7 @@ def fit_line(points: np.ndarray, *, min_points: int = MIN_LINE_POINTS, min_aspec
     P = np.asarray(points, float)
     if len(P) < min_points:
         raise SolveFailure(f"{len(P)} scan points, at least {min_points} are needed to fit a line")
-    c = P.mean(axis=0)
-    _, s, Vt = np.linalg.svd(P - c, full_matrices=False)
-    u = Vt[0]
+    c, u, _, s = tls_line(P)
     if s[0] <= 0 or (s[1] > 0 and s[0] < min_aspect * s[1]):
         raise SolveFailure("scan points are not line-like (collinear-degenerate or scattered)")
     if (P[-1] - P[0]) @ u < 0:

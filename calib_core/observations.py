@@ -1,12 +1,13 @@
 """The data model: one board view (camera pose of the board + lidar scan on it) and a set of them.
 
-Frames (see METHOD.md): ``{L}`` lidar, scan plane z = 0; ``{C}`` camera (z optical axis, y down);
+Frames (see docs/METHOD.md): ``{L}`` lidar, scan plane z = 0; ``{C}`` camera (z optical axis, y down);
 ``{W}_i`` board i, board plane z = 0. Units: metres, radians. ``T_a_b`` maps points of b into a.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -120,6 +121,30 @@ class BoardObservation:
 
 
 @dataclass(frozen=True, eq=False)
+class ScanData:
+    """All scan points of a problem, flattened, with the plane of the board each lies on.
+
+    Attributes:
+        points: (K,3) lidar-frame points, z = 0 (metres).
+        board: (K,) board index of each point.
+        normals: (N,3) board unit normals in the camera frame; offsets: (N,) plane offsets (metres).
+    """
+
+    points: np.ndarray
+    board: np.ndarray
+    normals: np.ndarray
+    offsets: np.ndarray
+
+    @classmethod
+    def from_observations(cls, obs: Observations) -> ScanData:
+        """Flatten the scans of ``obs`` (use ``obs.scan_data``: built once per Observations)."""
+        pts = np.concatenate([b.scan_3d for b in obs.boards])
+        idx = np.concatenate([np.full(len(b.scan), i) for i, b in enumerate(obs.boards)])
+        n, d = obs.planes_cam()
+        return cls(pts, idx, n, d)
+
+
+@dataclass(frozen=True, eq=False)
 class Observations:
     """The boards of one calibration problem, with optional ground truth.
 
@@ -162,3 +187,8 @@ class Observations:
         n = np.array([b.normal_cam for b in self.boards]).reshape(-1, 3)
         d = np.array([b.offset_cam for b in self.boards])
         return n, d
+
+    @cached_property
+    def scan_data(self) -> ScanData:
+        """All scan points flattened with their boards' planes (built once)."""
+        return ScanData.from_observations(self)

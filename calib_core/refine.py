@@ -8,7 +8,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .errors import CalibrationError
-from .residuals import RESIDUALS, ScanData, perturb
+from .observations import ScanData
+from .residuals import RESIDUALS, perturb
 from .transforms import skew
 
 

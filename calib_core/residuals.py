@@ -1,4 +1,6 @@
-"""Scan residuals of an extrinsic against the board planes, with analytic Jacobians.
+"""The one home of the residuals of an extrinsic against the boards: range and point-to-plane residuals of every
+scan point (batched over candidate extrinsics, and with analytic Jacobians at one extrinsic), the endpoint-to-edge
+errors of each board's scan and the distances of scan points outside the board outline.
 
 Parameterisation: ``T_lidar_cam = (exp([w]x) R0, t0 + dt)``, a left perturbation of the rotation in the
 lidar frame; the 6 parameters are ``x = (w, dt)`` (radians, metres). Board planes are given in the camera
@@ -7,35 +9,10 @@ frame (``n . p_C = d``); in the lidar frame the plane of board i is ``m . p_L = 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from .observations import Observations
+from .observations import Observations, ScanData
 from .transforms import rotvec_to_matrix
-
-
-@dataclass(frozen=True, eq=False)
-class ScanData:
-    """All scan points of a problem, flattened, with the plane of the board each lies on.
-
-    Attributes:
-        points: (K,3) lidar-frame points, z = 0 (metres).
-        board: (K,) board index of each point.
-        normals: (N,3) board unit normals in the camera frame; offsets: (N,) plane offsets (metres).
-    """
-
-    points: np.ndarray
-    board: np.ndarray
-    normals: np.ndarray
-    offsets: np.ndarray
-
-    @classmethod
-    def from_observations(cls, obs: Observations) -> ScanData:
-        pts = np.concatenate([b.scan_3d for b in obs.boards])
-        idx = np.concatenate([np.full(len(b.scan), i) for i, b in enumerate(obs.boards)])
-        n, d = obs.planes_cam()
-        return cls(pts, idx, n, d)
 
 
 def perturb(T0: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -46,41 +23,51 @@ def perturb(T0: np.ndarray, x: np.ndarray) -> np.ndarray:
     return T
 
 
+MIN_BEAM_INCIDENCE = 1e-6
+"""|cos| of the angle between a beam and its board's normal below which the range residual is clamped: beams
+nearly parallel to a candidate's plane get residuals of a kilometre or more rather than inf."""
+
+
+def _planes_lidar(T: np.ndarray, data: ScanData):
+    """Per point, the board normal ``m = R n`` (...,K,3) and plane offset ``d + m . t`` (...,K) in the lidar frame;
+    ``T`` is one (4,4) or a batch (M,4,4) of ``T_lidar_cam``."""
+    R, t = T[..., :3, :3], T[..., :3, 3]
+    m = np.einsum("...ab,nb->...na", R, data.normals)                        # (...,N,3)
+    c = data.offsets + np.einsum("...na,...a->...n", m, t)                    # (...,N)
+    return m[..., data.board, :], c[..., data.board]
+
+
 def plane_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     """Signed point-to-plane distances (metres) of every scan point to its board plane, in the lidar frame.
 
-    ``e_k = m_i . (p_k - t) - d_i`` with ``m_i = R n_i``. With ``jacobian``, also (K,6) de/d(w, dt) at ``T``.
+    ``e_k = m_i . (p_k - t) - d_i`` with ``m_i = R n_i``. ``T``: one (4,4) ``T_lidar_cam`` -> (K,), or a batch
+    (M,4,4) -> (M,K). With ``jacobian`` (one ``T`` only), also (K,6) de/d(w, dt) at ``T``.
     """
-    R, t = T[:3, :3], T[:3, 3]
-    m = data.normals @ R.T                                  # (N,3) normals in the lidar frame
-    mk = m[data.board]
-    q = data.points - t
-    e = np.einsum("kj,kj->k", mk, q) - data.offsets[data.board]
+    mk, c = _planes_lidar(T, data)
+    e = np.einsum("...kj,kj->...k", mk, data.points) - c
     if not jacobian:
         return e
-    J = np.empty((len(e), 6))
-    J[:, :3] = np.cross(mk, q)
-    J[:, 3:] = -mk
-    return e, J
+    q = data.points - T[:3, 3]
+    return e, np.concatenate([np.cross(mk, q), -mk], axis=1)
 
 
 def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     """Range residuals (metres): measured range minus the range at which the beam meets its board plane.
 
     The lidar noise is along each beam, so this is the likelihood's residual. Beam ``b = p/|p|``, measured
-    range ``r = |p|``, predicted ``r* = (d_i + m_i . t) / (m_i . b)``; ``e = r - r*``. With ``jacobian``,
-    also (K,6) de/d(w, dt). Beams nearly parallel to their plane give large residuals, as they should.
+    range ``r = |p|``, predicted ``r* = (d_i + m_i . t) / (m_i . b)``; ``e = r - r*`` (``m . b`` clamped at
+    ``MIN_BEAM_INCIDENCE``). ``T``: one (4,4) -> (K,), or a batch (M,4,4) -> (M,K). With ``jacobian`` (one ``T``
+    only), also (K,6) de/d(w, dt).
     """
-    R, t = T[:3, :3], T[:3, 3]
-    m = data.normals @ R.T
-    mk = m[data.board]
+    mk, num = _planes_lidar(T, data)
     r = np.linalg.norm(data.points, axis=1)
     b = data.points / r[:, None]
-    mb = np.einsum("kj,kj->k", mk, b)
-    num = data.offsets[data.board] + mk @ t
+    mb = np.einsum("...kj,kj->...k", mk, b)
+    mb = np.where(np.abs(mb) < MIN_BEAM_INCIDENCE, np.copysign(MIN_BEAM_INCIDENCE, mb), mb)
     e = r - num / mb
     if not jacobian:
         return e
+    t = T[:3, 3]
     J = np.empty((len(e), 6))
     # d(num)/dw = m x t, d(mb)/dw = m x b  (from dm = w x m)
     J[:, :3] = -(np.cross(mk, t) * mb[:, None] - np.cross(mk, b) * num[:, None]) / (mb**2)[:, None]
@@ -89,3 +76,80 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
 
 
 RESIDUALS = {"plane": plane_residuals, "range": range_residuals}
+
+
+def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
+    """(M,N,2,3) first and last scan point of each board in that board's frame, per candidate.
+
+    ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (docs/METHOD.md eq. 7), metres.
+    """
+    ends = np.array([[b.scan_3d[0], b.scan_3d[-1]] for b in obs.boards])   # (N,2,3) lidar frame
+    T_cb = np.array([b.T_cam_board for b in obs.boards])                    # (N,4,4)
+    R, t = candidates[:, :3, :3], candidates[:, :3, 3]
+    p_C = np.einsum("mba,mnkb->mnka", R, ends[None] - t[:, None, None, :])  # R^T (p - t)
+    return np.einsum("nba,mnkb->mnka", T_cb[:, :3, :3], p_C - T_cb[None, :, None, :3, 3])
+
+
+def point_line_errors(obs: Observations, candidates: np.ndarray) -> np.ndarray:
+    """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (docs/METHOD.md eq. 8-12).
+
+    Each endpoint is paired with the board edge nearest to it (point-to-line distance), the two endpoints
+    with different edges (the pair of distinct edges with the least summed distance). The error of an
+    endpoint ``p`` against edge ``q_k q_{k+1}`` is ``|p - q_k| + |p - q_{k+1}| - |q_{k+1} - q_k|``, zero
+    exactly when ``p`` lies on the edge segment. Boards of different outlines are handled one outline
+    shape at a time (vectorised over candidates and boards that share a vertex count).
+    """
+    P = endpoints_in_board(obs, candidates)                                 # (M,N,2,3)
+    M, N = P.shape[:2]
+    out = np.empty((M, N, 2))
+    counts = np.array([len(b.outline) for b in obs.boards])
+    for V in np.unique(counts):
+        idx = np.flatnonzero(counts == V)
+        a = np.array([obs.boards[i].outline for i in idx])                  # (n,V,2) vertices q_k, z = 0
+        edge = np.roll(a, -1, axis=1) - a                                    # q_{k+1} - q_k
+        L = np.linalg.norm(edge, axis=-1)                                    # (n,V)
+        nrm = np.stack([-edge[..., 1], edge[..., 0]], axis=-1) / L[..., None]  # in-plane edge normals
+        Pi = P[:, idx]
+        xy, z2 = Pi[..., :2], Pi[..., 2:3] ** 2                               # (M,n,2,2), (M,n,2,1)
+        # |p - q_k| from the expansion |xy|^2 - 2 xy.q_k + |q_k|^2 + z^2; |p - q_{k+1}| is its roll
+        d2 = (np.sum(xy**2, axis=-1)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a)
+              + np.sum(a**2, axis=-1)[None, :, None, :] + z2)
+        da = np.sqrt(np.maximum(d2, 0.0))                                    # (M,n,2,V)
+        err = da + np.roll(da, -1, axis=-1) - L[None, :, None, :]
+        perp = np.einsum("mnkc,nvc->mnkv", xy, nrm) - np.sum(a * nrm, axis=-1)[None, :, None, :]
+        dist = np.sqrt(perp**2 + z2)                                         # point-to-line distances
+        pair = dist[:, :, 0, :, None] + dist[:, :, 1, None, :]              # (M,n,V,V)
+        pair[..., np.arange(V), np.arange(V)] = np.inf                       # the two edges differ
+        best = np.argmin(pair.reshape(M, len(idx), V * V), axis=-1)
+        k0, k1 = np.divmod(best, V)
+        mm, nn = np.meshgrid(np.arange(M), np.arange(len(idx)), indexing="ij")
+        out[:, idx, 0] = err[mm, nn, 0, k0]
+        out[:, idx, 1] = err[mm, nn, 1, k1]
+    return out
+
+
+def points_in_boards(obs: Observations, candidates: np.ndarray) -> list[np.ndarray]:
+    """Per board, (M,K_i,3) its scan points in the board frame under every candidate (as ``endpoints_in_board``)."""
+    R, t = candidates[:, :3, :3], candidates[:, :3, 3]
+    out = []
+    for b in obs.boards:
+        p_C = np.einsum("mba,mkb->mka", R, b.scan_3d[None] - t[:, None, :])
+        out.append(np.einsum("ba,mkb->mka", b.T_cam_board[:3, :3], p_C - b.T_cam_board[:3, 3]))
+    return out
+
+
+def outside_outline(xy: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """Distance (metres) of 2D points ``xy`` (...,2) outside the simple polygon ``outline`` (V,2); 0 inside."""
+    a, b = outline, np.roll(outline, -1, axis=0)                                # edges a_k -> b_k
+    ab = b - a
+    w = xy[..., None, :] - a                                                    # (...,V,2)
+    s = np.clip(np.einsum("...vc,vc->...v", w, ab) / np.sum(ab**2, axis=1), 0.0, 1.0)
+    dist = np.linalg.norm(w - s[..., None] * ab, axis=-1).min(axis=-1)
+    x, y = xy[..., 0, None], xy[..., 1, None]                                   # even-odd rule
+    crosses = (a[:, 1] > y) != (b[:, 1] > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_at = a[:, 0] + (y - a[:, 1]) * ab[:, 0] / ab[:, 1]
+    inside = np.sum(crosses & (x < x_at), axis=-1) % 2 == 1
+    return np.where(inside, 0.0, dist)
+
+

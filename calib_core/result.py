@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from .errors import LidarcamError
+from .metrics import sigma_rot_deg, sigma_trans_m
 from .transforms import invert_T
 
 RESULT_SCHEMA = "lidarcam.result/1"
@@ -66,14 +67,14 @@ class CalibrationResult:
         """1-sigma rotation uncertainty in degrees (root of the trace of the rotation block), or None."""
         if self.covariance is None:
             return None
-        return float(np.degrees(np.sqrt(np.trace(self.covariance[:3, :3]))))
+        return sigma_rot_deg(self.covariance)
 
     @property
     def sigma_trans_mm(self) -> float | None:
         """1-sigma translation uncertainty in millimetres (root of the trace of the translation block), or None."""
         if self.covariance is None:
             return None
-        return float(1000.0 * np.sqrt(np.trace(self.covariance[3:, 3:])))
+        return 1000.0 * sigma_trans_m(self.covariance)
 
     def to_dict(self) -> dict:
         """JSON form under schema ``lidarcam.result/1``."""

@@ -15,8 +15,9 @@ import numpy as np
 
 from .errors import LidarcamError
 from .lines import fit_line
-from .observations import Observations
-from .residuals import ScanData, range_residuals
+from .metrics import sigma_rot_deg, sigma_trans_m
+from .observations import Observations, ScanData
+from .residuals import range_residuals
 
 
 class UncertaintyError(LidarcamError):
@@ -36,26 +37,26 @@ def _inverse_information(A: np.ndarray, rcond: float) -> np.ndarray:
     return (V / lam) @ V.T / np.outer(s, s)
 
 
-def covariance(jacobian: np.ndarray, residuals: np.ndarray, sigma_m: float | None = None, *,
+def covariance(jacobian: np.ndarray, residuals: np.ndarray, range_sigma_m: float | None = None, *,
                rcond: float = 1e-12) -> np.ndarray:
     """Gauss-Newton covariance ``sigma^2 (J^T J)^-1`` (6x6, rotation then translation) of a least-squares optimum.
 
     Args:
         jacobian: (K,6) residual Jacobian at the optimum (parameters as in ``calib_core.residuals``).
         residuals: (K,) residuals at the optimum (metres).
-        sigma_m: the residuals' noise std (metres); ``None`` estimates it as ``sqrt(|e|^2 / (K - 6))``.
+        range_sigma_m: the residuals' noise std (metres); ``None`` estimates it as ``sqrt(|e|^2 / (K - 6))``.
     Raises:
-        UncertaintyError: fewer than 7 residuals with ``sigma_m=None``, or a singular ``J^T J``.
+        UncertaintyError: fewer than 7 residuals with ``range_sigma_m=None``, or a singular ``J^T J``.
     """
     J = np.asarray(jacobian, float)
     e = np.asarray(residuals, float)
-    if sigma_m is None:
+    if range_sigma_m is None:
         dof = len(e) - J.shape[1]
         if dof <= 0:
             raise UncertaintyError(f"{len(e)} residuals leave no degrees of freedom to estimate the noise")
         sigma2 = float(e @ e) / dof
     else:
-        sigma2 = float(sigma_m) ** 2
+        sigma2 = float(range_sigma_m) ** 2
     return sigma2 * _inverse_information(J.T @ J, rcond)
 
 
@@ -67,14 +68,14 @@ def _extrinsic(obs: Observations, T_lidar_cam) -> np.ndarray:
     return obs.T_lidar_cam_true
 
 
-def fisher_information(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: float) -> np.ndarray:
+def fisher_information(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float) -> np.ndarray:
     """Fisher information (6x6) of the range-noise model at ``T_lidar_cam``: ``J^T J / sigma^2``.
 
     ``J`` is the (K,6) Jacobian of the range residuals. It depends on the beam directions, the board planes and
     the extrinsic only, not on the measured ranges, so noisy scans give the exact information of their beams.
     """
-    _, J = range_residuals(np.asarray(T_lidar_cam, float), ScanData.from_observations(obs), jacobian=True)
-    return J.T @ J / float(sigma_m) ** 2
+    _, J = range_residuals(np.asarray(T_lidar_cam, float), obs.scan_data, jacobian=True)
+    return J.T @ J / float(range_sigma_m) ** 2
 
 
 @dataclass(frozen=True)
@@ -83,7 +84,7 @@ class Crlb:
 
     Attributes:
         rot_rms_deg: ``sqrt(trace(cov[:3,:3]))`` in degrees: the bound on the RMS of the norm of the rotation-vector
-            error ``log(R R_true^T)``, i.e. the RMS of the geodesic angle, which is exactly ``e_R`` of METHOD.md
+            error ``log(R R_true^T)``, i.e. the RMS of the geodesic angle, which is exactly ``e_R`` of docs/METHOD.md
             eq. 13. Compare it with ``sqrt(mean(e_R^2))`` over trials, not with ``mean(e_R)``: for a Gaussian
             error with isotropic covariance, ``mean(e_R)`` is about 0.92 times the RMS.
         trans_rms_m: ``sqrt(trace(cov[3:,3:]))``: the bound on the RMS of ``e_t = |t - t_true|`` (metres).
@@ -95,13 +96,13 @@ class Crlb:
     cov: np.ndarray
 
 
-def crlb(obs: Observations, sigma_m: float, T_lidar_cam: np.ndarray | None = None) -> Crlb:
-    """CRLB of the extrinsic for range noise of std ``sigma_m`` (metres), at ``T_lidar_cam`` (default: the truth).
+def crlb(obs: Observations, range_sigma_m: float, T_lidar_cam: np.ndarray | None = None) -> Crlb:
+    """CRLB of the extrinsic for range noise of std ``range_sigma_m`` (metres), at ``T_lidar_cam`` (default: the truth).
 
     Raises UncertaintyError for a singular Fisher information or a missing extrinsic.
     """
-    cov = _inverse_information(fisher_information(obs, _extrinsic(obs, T_lidar_cam), sigma_m), 1e-12)
-    return Crlb(float(np.degrees(np.sqrt(np.trace(cov[:3, :3])))), float(np.sqrt(np.trace(cov[3:, 3:]))), cov)
+    cov = _inverse_information(fisher_information(obs, _extrinsic(obs, T_lidar_cam), range_sigma_m), 1e-12)
+    return Crlb(sigma_rot_deg(cov), sigma_trans_m(cov), cov)
 
 
 def typical_range(obs: Observations) -> float:
@@ -120,7 +121,7 @@ def conditioning(obs: Observations, T_lidar_cam: np.ndarray | None = None, *, sc
     6 boards at 3-6 m give about 1e-2; below 1e-3 the extrinsic is poorly determined along one direction.
     """
     T = _extrinsic(obs, T_lidar_cam)
-    _, J = range_residuals(T, ScanData.from_observations(obs), jacobian=True)
+    _, J = range_residuals(T, obs.scan_data, jacobian=True)
     L = typical_range(obs) if scale_m is None else float(scale_m)
     s = np.linalg.svd(J * np.r_[np.ones(3), np.full(3, L)], compute_uv=False)
     return float(s[-1] / s[0]) if s[0] > 0 else 0.0
@@ -192,28 +193,28 @@ def scan_noise_estimate(obs: Observations, *, floor_m: float = 1e-6) -> float:
 
 
 def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str = "range",
-                          sigma_m: float | None = None) -> np.ndarray:
+                          range_sigma_m: float | None = None) -> np.ndarray:
     """Covariance (6x6) of the minimiser of the ``residual`` least squares at ``T_lidar_cam``, under range noise.
 
     ``"range"``: ``sigma^2 (J^T J)^-1`` (the ML estimate's covariance). ``"plane"``: the point-to-plane distance is
     the range residual times ``w = m . b``, so its noise is not identically distributed; the sandwich
-    ``A^-1 J^T diag(sigma^2 w^2) J A^-1`` with ``A = J^T J`` of the plane residuals. ``sigma_m=None``: estimated
+    ``A^-1 J^T diag(sigma^2 w^2) J A^-1`` with ``A = J^T J`` of the plane residuals. ``range_sigma_m=None``: estimated
     from the range residuals at ``T_lidar_cam`` (``K - 6`` degrees of freedom).
     """
     T = np.asarray(T_lidar_cam, float)
     e_r, J_r = range_residuals(T, data, jacobian=True)
     if residual == "range":
-        return covariance(J_r, e_r, sigma_m)
+        return covariance(J_r, e_r, range_sigma_m)
     if residual != "plane":
         raise UncertaintyError(f"unknown residual {residual!r}; 'range' or 'plane'")
     from .residuals import plane_residuals
 
-    if sigma_m is None:
+    if range_sigma_m is None:
         if len(e_r) <= 6:
             raise UncertaintyError(f"{len(e_r)} residuals leave no degrees of freedom to estimate the noise")
         sigma2 = float(e_r @ e_r) / (len(e_r) - 6)
     else:
-        sigma2 = float(sigma_m) ** 2
+        sigma2 = float(range_sigma_m) ** 2
     _, J_p = plane_residuals(T, data, jacobian=True)
     m = (data.normals @ T[:3, :3].T)[data.board]
     w = np.einsum("kj,kj->k", m, data.points / np.linalg.norm(data.points, axis=1, keepdims=True))

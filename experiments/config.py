@@ -18,6 +18,7 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
+from calib_core.metrics import TRUTH_MAX_ROT_DEG, TRUTH_MAX_TRANS_M, VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
 from simulate import SimOptions
 
 from .catalog import PAPER_METHODS
@@ -55,13 +56,11 @@ NoiseConf = _group_schema("noise")
 class MethodsConf:
     """Which registered methods run on every trial (all on the same simulated data).
 
-    ``names`` must be registered (an unknown name is a config error); ``optional`` ones run only when
-    registered (e.g. the issue-5 methods); ``options`` maps a method name to keyword options of
-    ``calib_core.calibrate``.
+    ``names`` must be registered (an unknown name is a config error); ``options`` maps a method name to keyword
+    options of ``calib_core.calibrate``.
     """
 
     names: list[str] = field(default_factory=lambda: list(PAPER_METHODS))
-    optional: list[str] = field(default_factory=list)
     options: dict[str, Any] = field(default_factory=dict)
 
 
@@ -71,14 +70,14 @@ class MetricsConf:
 
     A result is valid when ``e_R < max_rot_deg`` and ``e_t < max_trans_m`` (paper eq. 13-14: 8 deg, 0.8 m).
     The truth is among the candidates when some candidate has ``e_R < truth_rot_deg`` and
-    ``e_t < truth_trans_m``. ``uncertainty``: add the CRLB and conditioning columns when
-    ``calib_core.uncertainty`` exists; the CRLB uses ``crlb_sigma_mm`` or, when null, the trial's ``noise_mm``.
+    ``e_t < truth_trans_m``. ``uncertainty``: add the CRLB and conditioning columns; the CRLB uses
+    ``crlb_sigma_mm`` or, when null, the trial's ``noise_mm``.
     """
 
-    max_rot_deg: float = 8.0
-    max_trans_m: float = 0.8
-    truth_rot_deg: float = 1.0
-    truth_trans_m: float = 0.05
+    max_rot_deg: float = VALID_MAX_ROT_DEG
+    max_trans_m: float = VALID_MAX_TRANS_M
+    truth_rot_deg: float = TRUTH_MAX_ROT_DEG
+    truth_trans_m: float = TRUTH_MAX_TRANS_M
     uncertainty: bool = True
     crlb_sigma_mm: float | None = None
 
@@ -134,7 +133,7 @@ def cell_from_cfg(cfg: DictConfig):
     from .runner import Cell, resolve_methods
 
     sim = dataclasses.asdict(sim_options(cfg))
-    methods = resolve_methods(cfg.methods.names, cfg.methods.optional)
+    methods = resolve_methods(cfg.methods.names)
     options = OmegaConf.to_container(cfg.methods.options, resolve=True) or {}
     return Cell(sweep=str(cfg.sweep), sim=sim, seed=int(cfg.seed), n_trials=int(cfg.n_trials), methods=methods,
                 method_options={m: dict(options[m]) for m in methods if options.get(m)},

@@ -21,6 +21,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from calib_core.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M  # noqa: E402
+
 from .aggregate import load_summary, load_trials  # noqa: E402
 from .catalog import method_colour, method_label, method_order  # noqa: E402
 
@@ -42,7 +44,7 @@ PAPER_SWEEPS = {
     "noise": SweepFigures("noise_mm", "Range noise std (mm)", "fig3b_valid_vs_noise", "fig6_mean_error_vs_noise",
                           "fig7_error_distribution_vs_noise"),
 }
-VALID_MAX_ROT_DEG, VALID_MAX_TRANS_MM = 8.0, 800.0
+VALID_MAX_TRANS_MM = 1000 * VALID_MAX_TRANS_M
 
 
 def sweep_figures(sweep: str, summary: pd.DataFrame) -> SweepFigures:

@@ -22,11 +22,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from calib_core.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
+
 from .aggregate import load_settings, load_summary
 from .catalog import method_label, method_order
 from .figures import PAPER_SWEEPS
 
-OURS = "peng2022"
+PAPER = "peng2022"  # the method whose claims this report checks
 FRANCISCO = "vasconcelos"
 ZHANGS = ("zhang_pless_linear", "zhang_pless")
 
@@ -51,7 +53,7 @@ class Claim:
 
 
 def paper_claims() -> list[Claim]:
-    """METHOD.md "The paper's claims" and the error claims of the paper's Section 3.1 text (Fig. 4, 6)."""
+    """docs/METHOD.md "The paper's claims" and the error claims of the paper's Section 3.1 text (Fig. 4, 6)."""
     claims = [Claim("boards", "valid-solution probability +2 to +20 points vs Francisco (3-8 boards)",
                     "abstract, Fig. 3a", "points", FRANCISCO, 2, 20)]
     claims += [Claim("boards", "valid-solution probability +30% to +260% vs Zhang (relative, 3-8 boards)",
@@ -99,15 +101,15 @@ def _series(summary: pd.DataFrame, x: str, method: str, col: str) -> pd.Series:
 def improvement(summary: pd.DataFrame, x: str, claim: Claim) -> pd.Series:
     """Our improvement over ``claim.other`` per setting, in the claim's unit."""
     if claim.kind == "at_least":
-        return 100 * _series(summary, x, OURS, "valid_rate")
+        return 100 * _series(summary, x, PAPER, "valid_rate")
     if claim.kind in ("points", "relative"):
-        ours, other = _series(summary, x, OURS, "valid_rate"), _series(summary, x, claim.other, "valid_rate")
+        ours, other = _series(summary, x, PAPER, "valid_rate"), _series(summary, x, claim.other, "valid_rate")
         if claim.kind == "points":
             return 100 * (ours - other)
         with np.errstate(divide="ignore", invalid="ignore"):
             return pd.Series(100 * (ours.to_numpy() / other.reindex(ours.index).to_numpy() - 1), index=ours.index)
     col, scale = ("mean_e_R_deg", 1.0) if claim.kind == "err_deg" else ("mean_e_t_m", 1000.0)
-    return scale * (_series(summary, x, claim.other, col) - _series(summary, x, OURS, col))
+    return scale * (_series(summary, x, claim.other, col) - _series(summary, x, PAPER, col))
 
 
 def judge(claim: Claim, values: np.ndarray) -> str:
@@ -133,7 +135,7 @@ def check_claims(tables: Path, sweeps: dict[str, pd.DataFrame]) -> list[Verdict]
     for claim in paper_claims():
         summary = sweeps.get(claim.sweep)
         methods = set() if summary is None else set(summary["method"])
-        if summary is None or OURS not in methods or (claim.other and claim.other not in methods):
+        if summary is None or PAPER not in methods or (claim.other and claim.other not in methods):
             out.append(Verdict(claim, (), (), "not run"))
             continue
         x = PAPER_SWEEPS[claim.sweep].x
@@ -168,39 +170,28 @@ def _claim_rows(verdicts: list[Verdict]) -> list[str]:
     return lines
 
 
-def _valid_table(summary: pd.DataFrame, x: str) -> list[str]:
+def _method_table(summary: pd.DataFrame, x: str, cell) -> list[str]:
+    """A markdown table: one row per value of ``x``, one column per method, ``cell(summary row)`` in each (``-``
+    where the method has no row, or ``cell`` returns None)."""
     methods = method_order(summary["method"].unique())
     lines = [f"| {x} | " + " | ".join(method_label(m) for m in methods) + " |",
              "|---|" + "---|" * len(methods)]
     for xv, g in summary.groupby(x, sort=True):
-        cells = []
-        for m in methods:
-            r = g[g["method"] == m]
-            if r.empty:
-                cells.append("-")
-                continue
-            r = r.iloc[0]
-            cells.append(f"{100 * r.valid_rate:.0f}% [{100 * r.valid_lo95:.0f}, {100 * r.valid_hi95:.0f}]")
+        rows = [g[g["method"] == m] for m in methods]
+        cells = [(cell(r.iloc[0]) if not r.empty else None) or "-" for r in rows]
         lines.append(f"| {xv:g} | " + " | ".join(cells) + " |")
     return lines
 
 
-def _error_table(summary: pd.DataFrame, x: str) -> list[str]:
-    methods = method_order(summary["method"].unique())
-    lines = [f"| {x} | " + " | ".join(method_label(m) for m in methods) + " |",
-             "|---|" + "---|" * len(methods)]
-    for xv, g in summary.groupby(x, sort=True):
-        cells = []
-        for m in methods:
-            r = g[g["method"] == m]
-            if r.empty or r.iloc[0].n_ok == 0:
-                cells.append("-")
-                continue
-            r = r.iloc[0]
-            cells.append(f"{r.mean_e_R_deg:.2f} / {1000 * r.mean_e_t_m:.0f} (med {r.median_e_R_deg:.2f} / "
-                         f"{1000 * r.median_e_t_m:.0f})")
-        lines.append(f"| {xv:g} | " + " | ".join(cells) + " |")
-    return lines
+def _valid_cell(r) -> str:
+    return f"{100 * r.valid_rate:.0f}% [{100 * r.valid_lo95:.0f}, {100 * r.valid_hi95:.0f}]"
+
+
+def _error_cell(r) -> str | None:
+    if r.n_ok == 0:
+        return None
+    return (f"{r.mean_e_R_deg:.2f} / {1000 * r.mean_e_t_m:.0f} (med {r.median_e_R_deg:.2f} / "
+            f"{1000 * r.median_e_t_m:.0f})")
 
 
 def _mean_rate(summary: pd.DataFrame, method: str, col: str, mask=None) -> float:
@@ -238,11 +229,11 @@ def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verd
         paras.append(txt)
     # 2. Where selection loses: the truth among the candidates vs the candidate picked.
     for name, summary in (("boards", boards), ("noise", noise)):
-        if summary is None or not {OURS, FRANCISCO} <= set(summary["method"]):
+        if summary is None or not {PAPER, FRANCISCO} <= set(summary["method"]):
             continue
         cand = _mean_rate(summary, FRANCISCO, "some_candidate_valid_rate")
         truth = _mean_rate(summary, FRANCISCO, "truth_among_rate")
-        pv, fv = _mean_rate(summary, OURS, "valid_rate"), _mean_rate(summary, FRANCISCO, "valid_rate")
+        pv, fv = _mean_rate(summary, PAPER, "valid_rate"), _mean_rate(summary, FRANCISCO, "valid_rate")
         gap = 100 * (pv - fv)
         verdict = ("selection makes no difference here" if abs(gap) < 0.5 else
                    f"the {'gain' if gap > 0 else 'loss'} of {abs(gap):.0f} points for Peng 2022 is all selection")
@@ -318,7 +309,8 @@ def build_report(tables: str | Path) -> str:
              "(`summary_<sweep>.csv`, `trials_<sweep>.csv`); do not edit by hand.", "",
              f"- Trials per point: {', '.join(map(str, n_trials))}; methods: "
              f"{', '.join(f'`{m}`' for m in methods)}.",
-             "- Valid: e_R < 8 deg and e_t < 0.8 m; a method that returned nothing counts as invalid.",
+             f"- Valid: e_R < {VALID_MAX_ROT_DEG:g} deg and e_t < {VALID_MAX_TRANS_M:g} m; a method that returned "
+             "nothing counts as invalid.",
              "- Verdict summary: " + ", ".join(f"{k}: {v}" for k, v in counts.items()) + ".", "",
              "## The paper's claims, one by one", "",
              "Improvements are Peng 2022 over the named method (positive = Peng 2022 better). Verdict rules are in "
@@ -330,10 +322,10 @@ def build_report(tables: str | Path) -> str:
         spec = PAPER_SWEEPS[sweep]
         fig3 = spec.valid.split("_")[0]
         lines += ["", f"## Sweep {sweep}: valid-solution probability ({fig3}), % [95% Wilson interval]", ""]
-        lines += _valid_table(summary, spec.x)
+        lines += _method_table(summary, spec.x, _valid_cell)
         lines += ["", f"## Sweep {sweep}: mean / median errors, e_R deg / e_t mm "
                   f"({spec.mean.split('_')[0]}, {spec.box.split('_')[0]})", ""]
-        lines += _error_table(summary, spec.x)
+        lines += _method_table(summary, spec.x, _error_cell)
         lines += ["", f"Figures: `figures/{spec.valid}.png`, `figures/{spec.mean}.png`, `figures/{spec.box}.png` "
                   "(and PDF)."]
     lines += ["", "## Where and why we differ", ""]

@@ -15,7 +15,6 @@ and the reason (a ``CalibrationError`` -- unknown method or option -- is a confi
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import math
 import os
@@ -29,8 +28,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from calib_core import METHODS, CalibrationError, calibrate, get_method
-from calib_core.metrics import is_valid, pose_errors
+from calib_core import CalibrationError, calibrate, get_method
+from calib_core.metrics import (
+    TRUTH_MAX_ROT_DEG,
+    TRUTH_MAX_TRANS_M,
+    VALID_MAX_ROT_DEG,
+    VALID_MAX_TRANS_M,
+    is_valid,
+    nees,
+    pose_errors,
+)
+from calib_core.uncertainty import conditioning, crlb
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -38,7 +46,7 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 RESULT_COLUMNS = (
     "trial", "method", "ok", "reason", "e_R_deg", "e_t_m", "valid", "n_candidates", "true_among_candidates",
     "some_candidate_valid", "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds",
-    "crlb_rot_deg", "crlb_trans_mm", "conditioning",
+    "crlb_rot_deg", "crlb_trans_mm", "conditioning", "nees", "sigma_rot_deg", "sigma_trans_mm",
 )
 # Columns that legitimately differ between two runs of the same settings (wall time).
 TIMING_COLUMNS = ("seconds",)
@@ -49,7 +57,8 @@ class RunnerError(RuntimeError):
 
 
 def _default_metrics() -> dict[str, Any]:
-    return {"max_rot_deg": 8.0, "max_trans_m": 0.8, "truth_rot_deg": 1.0, "truth_trans_m": 0.05,
+    return {"max_rot_deg": VALID_MAX_ROT_DEG, "max_trans_m": VALID_MAX_TRANS_M, "truth_rot_deg": TRUTH_MAX_ROT_DEG,
+            "truth_trans_m": TRUTH_MAX_TRANS_M,
             "uncertainty": True, "crlb_sigma_mm": None}
 
 
@@ -96,10 +105,9 @@ class Cell:
         return dict(self.method_options.get(method, {}))
 
 
-def resolve_methods(names: Iterable[str], optional: Iterable[str] = ()) -> tuple[str, ...]:
-    """``names`` (each must be registered: CalibrationError otherwise) plus the registered ``optional`` ones."""
+def resolve_methods(names: Iterable[str]) -> tuple[str, ...]:
+    """``names``, each registered or derivable (``X+ml``): CalibrationError otherwise."""
     out = [get_method(n).name for n in names]
-    out += [n for n in optional if n in METHODS and n not in out]
     if not out:
         raise RunnerError("no method to run")
     return tuple(out)
@@ -110,7 +118,8 @@ def resolve_methods(names: Iterable[str], optional: Iterable[str] = ()) -> tuple
 def _failure_row(base: dict, method: str, reason: str) -> dict:
     return {**base, "method": method, "ok": False, "reason": reason, "e_R_deg": np.nan, "e_t_m": np.nan,
             "valid": False, "n_candidates": 0, "true_among_candidates": False, "some_candidate_valid": False,
-            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan}
+            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan,
+            "nees": np.nan, "sigma_rot_deg": np.nan, "sigma_trans_mm": np.nan}
 
 
 def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, Any]:
@@ -118,11 +127,15 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     row: dict[str, Any] = {"ok": bool(result.ok), "reason": result.reason or "", "seconds": float(result.seconds),
                            "n_candidates": result.n_candidates, "e_R_deg": np.nan, "e_t_m": np.nan,
                            "valid": False, "true_among_candidates": False, "some_candidate_valid": False,
-                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan}
+                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan,
+                           "nees": np.nan, "sigma_rot_deg": np.nan, "sigma_trans_mm": np.nan}
     if result.ok:
         e_R, e_t = pose_errors(result.T_lidar_cam, T_true)
         row.update(e_R_deg=float(e_R), e_t_m=float(e_t),
                    valid=bool(is_valid(e_R, e_t, metrics["max_rot_deg"], metrics["max_trans_m"])))
+        if result.covariance is not None:
+            row.update(nees=nees(result.T_lidar_cam, T_true, result.covariance),
+                       sigma_rot_deg=result.sigma_rot_deg, sigma_trans_mm=result.sigma_trans_mm)
     if result.n_candidates:
         cR, ct = pose_errors(result.candidates, T_true)
         best = int(np.nanargmin(cR)) if np.isfinite(cR).any() else 0
@@ -134,27 +147,21 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     return row
 
 
-def have_uncertainty() -> bool:
-    """True when the issue-5 module ``calib_core.uncertainty`` (CRLB, conditioning) is installed."""
-    return importlib.util.find_spec("calib_core.uncertainty") is not None
-
-
 def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
     """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number."""
     out = {"crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan, "conditioning": np.nan}
-    if not (cell.metrics.get("uncertainty", True) and have_uncertainty()):
+    if not cell.metrics.get("uncertainty", True):
         return out
-    from calib_core import uncertainty
 
     sigma_mm = cell.metrics.get("crlb_sigma_mm")
     sigma_mm = cell.sim.get("noise_mm", 0.0) if sigma_mm is None else sigma_mm
     try:
-        bound = uncertainty.crlb(obs, sigma_m=float(sigma_mm) / 1000.0)
+        bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
         out.update(crlb_rot_deg=float(bound.rot_rms_deg), crlb_trans_mm=1000.0 * float(bound.trans_rms_m))
     except Exception:  # noqa: BLE001 -- a degenerate board set has no bound: NaN, not a dead cell
         pass
     try:
-        out["conditioning"] = float(uncertainty.conditioning(obs))
+        out["conditioning"] = float(conditioning(obs))
     except Exception:  # noqa: BLE001
         pass
     return out
@@ -248,7 +255,7 @@ def _write_atomic(df: pd.DataFrame, path: Path) -> None:
 def _write_chunk(cell: Cell, trials: Sequence[int], methods: Sequence[str], rows: list[dict]) -> None:
     cols = list(cell.columns()) + list(RESULT_COLUMNS)
     df = pd.DataFrame(rows)
-    df = df[cols + [c for c in df.columns if c not in cols]]
+    df = df.reindex(columns=cols + [c for c in df.columns if c not in cols])  # a trial_fn may omit metric columns
     tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
     _write_atomic(df, cell.dir / f"chunk-{min(trials):05d}-{max(trials):05d}-{tag}.csv")
 

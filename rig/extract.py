@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from calib_core.errors import LidarcamError
+from calib_core.lines import tls_line
 from calib_core.observations import BoardObservation, Observations
 from calib_core.transforms import make_T, transform_points
 
@@ -170,15 +171,6 @@ def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags:
 
 
 # --------------------------------------------------------------------------------------------------- scan side
-def fit_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Total-least-squares 2D line: (centroid (2,), unit direction (2,), signed residuals (K,))."""
-    c = points.mean(axis=0)
-    _, _, Vt = np.linalg.svd(points - c, full_matrices=False)
-    u = Vt[0]
-    n = np.array([-u[1], u[0]])
-    return c, u, (points - c) @ n
-
-
 def breakpoints(scan: Scan, range_sigma_m: float = 0.02, lambda_deg: float = 10.0) -> np.ndarray:
     """Indices i where the sweep breaks between point i and i+1 (Borges & Aldon's adaptive threshold:
     ``r_i sin(dtheta) / sin(lambda - dtheta) + 3 sigma``)."""
@@ -227,7 +219,7 @@ def _merge(P: np.ndarray, segs: list[tuple[int, int]], tol: float) -> list[tuple
         best, best_err = None, tol
         for k in range(len(segs) - 1):
             i0, i1 = segs[k][0], segs[k + 1][1]
-            err = float(np.max(np.abs(fit_line(P[i0:i1])[2])))
+            err = float(np.max(np.abs(tls_line(P[i0:i1])[2])))
             if err <= best_err:
                 best, best_err = k, err
         if best is not None:
@@ -326,7 +318,7 @@ class _Segment:
 
 def _describe(scan: Scan, idx: np.ndarray) -> tuple[float, float, float]:
     P = scan.points[idx]
-    c, u, res = fit_line(P)
+    c, u, res, _ = tls_line(P)
     s = (P - c) @ u
     return float(s.max() - s.min()), float(np.linalg.norm(c)), float(np.sqrt(np.mean(res ** 2)))
 

@@ -15,8 +15,9 @@ import numpy as np
 
 from calib_core.errors import LidarcamError
 from calib_core.io import extrinsic_yaml
-from calib_core.metrics import pose_errors
-from calib_core.observations import Observations
+from calib_core.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
+from calib_core.observations import Observations, ScanData
+from calib_core.residuals import plane_residuals
 from calib_core.result import CalibrationResult
 from calib_core.transforms import invert_T, quaternion_xyzw, transform_points
 
@@ -53,11 +54,13 @@ def _as_result(result) -> dict:
             "T_lidar_cam": result.get("T_lidar_cam"), "covariance": result.get("covariance")}
 
 
-def plane_distances(T_cam_lidar: np.ndarray, T_cam_board: np.ndarray, scan: np.ndarray) -> np.ndarray:
-    """Signed distances (m) of lidar points ``scan`` (K,2) to the board plane, along the board's +z."""
-    P = transform_points(T_cam_lidar, np.column_stack([scan, np.zeros(len(scan))]))
+def board_plane_distances(T_cam_lidar: np.ndarray, T_cam_board: np.ndarray, scan: np.ndarray) -> np.ndarray:
+    """Signed distances (m) of lidar points ``scan`` (K,2) to the board plane, along the board's +z
+    (``calib_core.residuals.plane_residuals`` of one board)."""
     n = T_cam_board[:3, 2]
-    return P @ n - float(n @ T_cam_board[:3, 3])
+    data = ScanData(np.column_stack([scan, np.zeros(len(scan))]), np.zeros(len(scan), int), n[None],
+                    np.array([n @ T_cam_board[:3, 3]]))
+    return plane_residuals(invert_T(T_cam_lidar), data)
 
 
 def project_scan(camera: CameraModel, T_cam_lidar: np.ndarray, scan: np.ndarray, min_depth_m: float = 0.05
@@ -164,7 +167,7 @@ def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_c
         uv, ok = project_scan(camera, T_cam_lidar, pts)
         if not ok.any():
             continue
-        dist = 1000 * plane_distances(T_cam_lidar, T_cam_board, pts[ok])
+        dist = 1000 * board_plane_distances(T_cam_lidar, T_cam_board, pts[ok])
         sc = ax.scatter(uv[ok, 0], uv[ok, 1], c=np.clip(dist, -clim_mm, clim_mm), cmap=OVERLAY_CMAP, norm=norm,
                         s=size, edgecolors=edge, linewidths=0.4)
     ax.text(4, 4, title, color="white", fontsize=8, va="top", ha="left",
@@ -232,12 +235,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     T = np.asarray(res["T_lidar_cam"], float)
     Ti = invert_T(T)
     cov = res.get("covariance")
-    extra = {"method": res["method"]}
-    if cov is not None:
-        cov = np.asarray(cov, float)
-        extra["sigma_rot_deg"] = float(np.degrees(np.sqrt(np.trace(cov[:3, :3]))))
-        extra["sigma_trans_mm"] = float(1000 * np.sqrt(np.trace(cov[3:, 3:])))
-    (out / "extrinsic.yaml").write_text(extrinsic_yaml(T, extra))
+    (out / "extrinsic.yaml").write_text(extrinsic_yaml(T, {"method": res["method"]}, covariance=cov))
 
     md += ["## Extrinsic", "", "`T_a_b` maps points of frame b into frame a; metres. Lidar: scan plane z = 0, "
            "x forward. Camera: z optical axis, y down.", ""]
@@ -250,12 +248,13 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
                f"- rotation angle: {math.degrees(math.acos(np.clip((np.trace(M[:3, :3]) - 1) / 2, -1, 1))):.3f} deg,"
                f" |t| = {np.linalg.norm(M[:3, 3]):.4f} m", ""]
     if cov is not None:
+        cov = np.asarray(cov, float)
         sr = np.degrees(np.sqrt(np.diag(cov)[:3]))
         st = 1000 * np.sqrt(np.diag(cov)[3:])
         md += ["### Uncertainty (1 sigma)", "",
-               f"- rotation: {extra['sigma_rot_deg']:.3f} deg overall; per axis (lidar frame, x y z): "
+               f"- rotation: {sigma_rot_deg(cov):.3f} deg overall; per axis (lidar frame, x y z): "
                f"{', '.join(f'{v:.3f}' for v in sr)} deg",
-               f"- translation of T_lidar_cam: {extra['sigma_trans_mm']:.1f} mm overall; per axis (x y z): "
+               f"- translation of T_lidar_cam: {1000 * sigma_trans_m(cov):.1f} mm overall; per axis (x y z): "
                f"{', '.join(f'{v:.1f}' for v in st)} mm", ""]
     else:
         md += ["No covariance in the result: no 1-sigma figures.", ""]
@@ -265,7 +264,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
 
     rms_mm, mean_mm = [], []
     for b in observations.boards:
-        d = 1000 * plane_distances(Ti, b.T_cam_board, b.scan)
+        d = 1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)
         rms_mm.append(float(np.sqrt(np.mean(d ** 2))))
         mean_mm.append(float(np.mean(d)))
     summary.board_rms_mm = rms_mm
@@ -278,7 +277,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     for i, b in enumerate(observations.boards):
         name = _pose_name(observations, i)
         bearing = np.degrees(np.arctan2(b.scan[:, 1], b.scan[:, 0]))
-        d = 1000 * plane_distances(Ti, b.T_cam_board, b.scan)
+        d = 1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)
         rp = out / f"residual_{name}.png"
         _residual_plot(rp, bearing, d, f"pose {name} (board {i}): {len(d)} points")
         summary.residual_plots.append(rp)
@@ -304,7 +303,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
            "|---:|---|---:|---:|---:|---:|---|"] + rows + [""]
     if finite:
         md += [f"Median board RMS: {float(np.median(finite)):.1f} mm; all points: "
-               f"{math.sqrt(np.mean(np.concatenate([(1000 * plane_distances(Ti, b.T_cam_board, b.scan)) ** 2 for b in observations.boards]))):.1f} mm.", ""]  # noqa: E501
+               f"{math.sqrt(np.mean(np.concatenate([(1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)) ** 2 for b in observations.boards]))):.1f} mm.", ""]  # noqa: E501
     if observations.n_boards >= 2:
         ang, cond = normal_conditioning(observations)
         md += [f"Board set: largest angle between two board normals {ang:.1f} deg; normal spread "

@@ -1,6 +1,6 @@
 """The benchmark's problem generator: simulated 2D-lidar + camera board views with their ground truth.
 
-``generate(options, seed, trial)`` draws one problem (``calib_core.Observations``) following METHOD.md's
+``generate(options, seed, trial)`` draws one problem (``calib_core.Observations``) following docs/METHOD.md's
 simulation protocol; every assumption is a field of ``SimOptions``.
 """
 
@@ -13,7 +13,7 @@ from calib_core.transforms import invert_T
 
 from .camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners, observe_board_pose, render_board_image
 from .lidar import beam_bearings, cast_scan
-from .options import SimConfig, SimOptions, settings_hash
+from .options import SimOptions, settings_hash
 from .scene import Scene, SceneError, sample_scene
 
 GENERATOR = "lidarcam.simulate/1"
@@ -88,6 +88,6 @@ def generate(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | N
 
 
 __all__ = [
-    "BoardSpec", "CameraError", "GENERATOR", "Scene", "SceneError", "SimConfig", "SimOptions", "camera_matrix",
+    "BoardSpec", "CameraError", "GENERATOR", "Scene", "SceneError", "SimOptions", "camera_matrix",
     "checkerboard_corners", "generate", "render_board_image", "settings_hash", "simulate_trial", "trial_rngs",
 ]

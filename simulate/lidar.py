@@ -85,21 +85,21 @@ def nearest_hits(ranges: np.ndarray, max_range_m: float) -> tuple[np.ndarray, np
 
 
 def cast_scan(bearings: np.ndarray, T_lidar_board: np.ndarray, outline: np.ndarray, max_range_m: float,
-              noise_std_m: float = 0.0, rng: np.random.Generator | None = None) -> list[np.ndarray]:
+              range_sigma_m: float = 0.0, rng: np.random.Generator | None = None) -> list[np.ndarray]:
     """One scan over all boards at once: per board the (K_m,2) points in ``{L}`` (z = 0), ordered by bearing.
 
     Nearest hit wins where boards overlap; each hit range gets zero-mean Gaussian noise of standard
-    deviation ``noise_std_m`` along its beam (drawn from ``rng``, in bearing order, only for hits).
+    deviation ``range_sigma_m`` along its beam (drawn from ``rng``, in bearing order, only for hits).
     """
     bearings = np.asarray(bearings, float)
     M = np.asarray(T_lidar_board).reshape(-1, 4, 4).shape[0]
     owner, r = nearest_hits(board_ranges(bearings, T_lidar_board, outline), max_range_m)
     hit = owner >= 0
-    if noise_std_m > 0:
+    if range_sigma_m > 0:
         if rng is None:
-            raise ValueError("cast_scan: noise_std_m > 0 needs an rng")
+            raise ValueError("cast_scan: range_sigma_m > 0 needs an rng")
         r = r.copy()
-        r[hit] += rng.normal(0.0, noise_std_m, int(hit.sum()))
+        r[hit] += rng.normal(0.0, range_sigma_m, int(hit.sum()))
     pts = np.where(hit, r, 0.0)[:, None] * beam_directions(bearings)[:, :2]
     return [pts[owner == m] for m in range(M)]
 

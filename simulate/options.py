@@ -7,14 +7,14 @@ from __future__ import annotations
 
 import json
 import zlib
-from dataclasses import asdict, dataclass, field, fields, make_dataclass
+from dataclasses import asdict, dataclass, fields
 
 POSE_MODES = ("exact", "pixel", "image")
 
 
 @dataclass(frozen=True)
 class SimOptions:
-    """Every assumption of the simulated calibration scene (METHOD.md, Section 3.1), one primitive per field.
+    """Every assumption of the simulated calibration scene (docs/METHOD.md), one primitive per field.
 
     Scene: boards are separate captures of one board moved to ``n_boards`` poses (``shared_scan=False``,
     so boards never occlude each other), or all in one scan (``shared_scan=True``: their bearing intervals
@@ -149,16 +149,3 @@ def settings_hash(options: SimOptions) -> int:
     """Stable 32-bit hash of the options: CRC32 of their canonical JSON (sorted keys, repr floats)."""
     text = json.dumps(options.to_dict(), sort_keys=True, separators=(",", ":"))
     return zlib.crc32(text.encode("utf-8"))
-
-
-def _schema_twin():
-    """A mutable dataclass with SimOptions' fields, types and defaults (same order)."""
-    types = {"int": int, "float": float, "str": str, "bool": bool}
-    return make_dataclass("SimConfig", [(f.name, types[f.type], field(default=f.default)) for f in fields(SimOptions)],
-                          namespace={"__doc__": "Hydra/OmegaConf schema of SimOptions (mutable twin, same fields); "
-                                                "turn a composed node into options with SimOptions.from_dict."})
-
-
-# Hydra cannot apply command-line overrides to a frozen dataclass node (it marks it read-only), so configs
-# register this generated twin; SimOptions stays frozen and does the validation.
-SimConfig = _schema_twin()

@@ -48,7 +48,7 @@ def scan_board(T_lidar_board, res_deg=0.25):
     return r[hit], u[hit]
 
 
-def make_observations(rng, n_boards=6, noise_m=0.02, T_lidar_cam=None, poses=None, min_points=15) -> Observations:
+def make_observations(rng, n_boards=6, range_sigma_m=0.02, T_lidar_cam=None, poses=None, min_points=15) -> Observations:
     """Observations with ground truth; ``poses`` (list of T_lidar_board) overrides the random boards."""
     T = random_extrinsic(rng) if T_lidar_cam is None else T_lidar_cam
     T_cam_lidar = invert_T(T)
@@ -61,6 +61,6 @@ def make_observations(rng, n_boards=6, noise_m=0.02, T_lidar_cam=None, poses=Non
             if poses is not None:
                 raise ValueError("a given pose is not seen")
             continue
-        P = (r + rng.normal(scale=noise_m, size=len(r)))[:, None] * u
+        P = (r + rng.normal(scale=range_sigma_m, size=len(r)))[:, None] * u
         boards.append(BoardObservation(T_cam_board, OUTLINE, P[:, :2]))
     return Observations(tuple(boards), T)

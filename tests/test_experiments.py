@@ -255,7 +255,7 @@ def test_notebook_executes(tmp_path):
 
 def test_hydra_multirun_sweep(tmp_path):
     cmd = [sys.executable, "-m", "experiments.run", "-m", "experiment=boards", "scene.n_boards=3,5", "n_trials=3",
-           f"results_dir={tmp_path}", "methods.names=[zhang_pless_linear,vasconcelos]", "methods.optional=[]",
+           f"results_dir={tmp_path}", "methods.names=[zhang_pless_linear,vasconcelos]",
            "n_jobs=1", "progress=false"]
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
@@ -270,7 +270,7 @@ def test_hydra_multirun_sweep(tmp_path):
 
 def test_reproduce_small(tmp_path):
     r = reproduce(trials=2, results_dir=str(tmp_path), n_jobs=1, progress=False,
-                  overrides=["methods.names=[zhang_pless_linear,vasconcelos]", "methods.optional=[]"])
+                  overrides=["methods.names=[zhang_pless_linear,vasconcelos]"])
     assert r["cells"] == 12 and r["trials"] == 24
     assert (tmp_path / "paper" / "REPORT.md").exists()
     assert (tmp_path / "paper" / "figures" / "fig7_error_distribution_vs_noise.pdf").exists()

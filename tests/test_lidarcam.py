@@ -12,7 +12,7 @@ from calib_core.errors import CalibrationError
 from calib_core.io import save_observations
 from calib_core.metrics import pose_errors
 from calib_core.refine import robust_cost
-from calib_core.residuals import ScanData, range_residuals
+from calib_core.residuals import range_residuals
 from calib_core.transforms import make_T
 from lidarcam_cli import main
 
@@ -63,10 +63,10 @@ def test_ml_suffix_refines_without_raising_the_cost_and_reports_a_covariance(rng
 
 def test_suffix_options_go_to_the_right_place(rng):
     obs = make_observations(rng, 6, 0.02)
-    r = calibrate(obs, "peng2022+ml", loss="cauchy", f_scale=0.05, sigma_m=0.02, delta_m=0.04)
+    r = calibrate(obs, "peng2022+ml", loss="cauchy", f_scale=0.05, range_sigma_m=0.02, delta_m=0.04)
     assert r.ok and r.info["refine_loss"] == "cauchy"
-    P = calibrate(obs, "peng2022+ml", sigma_m=0.02).covariance
-    P2 = calibrate(obs, "peng2022+ml", sigma_m=0.04).covariance
+    P = calibrate(obs, "peng2022+ml", range_sigma_m=0.02).covariance
+    P2 = calibrate(obs, "peng2022+ml", range_sigma_m=0.04).covariance
     np.testing.assert_allclose(P2, 4 * P, rtol=1e-6)
     with pytest.raises(CalibrationError):
         calibrate(obs, "peng2022+ml", bogus=1)
@@ -88,7 +88,7 @@ def test_lidarcam_final_cost_is_no_more_than_at_its_start(rng):
         r = calibrate(obs, "lidarcam")
         assert r.ok
         assert r.info["cost"] <= r.info["score_start"] + 1e-9
-        data = ScanData.from_observations(obs)
+        data = obs.scan_data
         # the answer is a stationary point of the range likelihood: no step of the 6 parameters lowers it
         e, J = range_residuals(r.T_lidar_cam, data, jacobian=True)
         assert np.linalg.norm(J.T @ e) < 1e-6 * np.linalg.norm(J, axis=0).max() * np.linalg.norm(e)
@@ -119,7 +119,7 @@ def test_lidarcam_fails_with_a_reason_on_two_boards_and_degenerate_sets(rng):
     P0 = vertical_board_poses(1)[0]
     poses = [P0 @ make_T(np.eye(3), [dx, 0.0, dz]) for dx, dz in ((-1.5, 0.0), (0.0, 0.5), (1.5, -0.3),
                                                                   (-3.0, 1.0), (3.0, 1.5))]
-    par = make_observations(rng, noise_m=0.02, T_lidar_cam=T, poses=poses)
+    par = make_observations(rng, range_sigma_m=0.02, T_lidar_cam=T, poses=poses)
     r = calibrate(par, "lidarcam")
     assert not r.ok and "no candidate" in r.reason
 

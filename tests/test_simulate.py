@@ -306,19 +306,3 @@ def test_cli_writes_a_valid_observation_file(tmp_path):
     assert np.array_equal(obs.T_lidar_cam_true, generate(
         SimOptions(n_boards=3, max_tilt_deg=30.0, pose_mode="pixel"), seed=1).T_lidar_cam_true)
     assert main(["simulate", "--max-tilt-deg", "100", "--out", str(tmp_path / "bad.json")]) == 2
-
-
-def test_hydra_schema_twin_composes_with_overrides():
-    from hydra import compose, initialize
-    from hydra.core.config_store import ConfigStore
-    from omegaconf import OmegaConf
-
-    from simulate import SimConfig
-
-    assert [f.name for f in fields(SimConfig)] == [f.name for f in fields(SimOptions)]
-    ConfigStore.instance().store(name="test_sim_schema", node=SimConfig)
-    with initialize(version_base=None, config_path=None):
-        cfg = compose("test_sim_schema", overrides=["noise_mm=5", "n_boards=3", "pose_mode=pixel"])
-    opts = SimOptions.from_dict(OmegaConf.to_container(cfg))
-    assert opts == SimOptions(noise_mm=5.0, n_boards=3, pose_mode="pixel")
-    assert settings_hash(opts) == settings_hash(SimOptions(noise_mm=5, n_boards=3, pose_mode="pixel"))

@@ -6,9 +6,8 @@ from scenes import OUTLINE, make_observations, random_extrinsic
 
 from calib_core.io import extrinsic_yaml
 from calib_core.refine import refine
-from calib_core.residuals import ScanData, perturb, range_residuals
+from calib_core.residuals import outside_outline, perturb, range_residuals
 from calib_core.selection import lidarcam as lidarcam_score
-from calib_core.selection import outside_outline
 from calib_core.transforms import make_T, matrix_to_rotvec, rotvec_to_matrix
 from calib_core.uncertainty import (
     UncertaintyError,
@@ -69,8 +68,8 @@ def test_covariance_refuses_singular_information_and_no_dof(rng):
 
 
 def test_crlb_is_the_inverse_of_a_numerical_fisher_information(rng):
-    obs = make_observations(rng, n_boards=6, noise_m=0.02)
-    data = ScanData.from_observations(obs)
+    obs = make_observations(rng, n_boards=6, range_sigma_m=0.02)
+    data = obs.scan_data
     T = obs.T_lidar_cam_true
     h = 1e-6
     J_fd = np.column_stack([(range_residuals(perturb(T, h * e), data) - range_residuals(perturb(T, -h * e), data))
@@ -91,9 +90,9 @@ def test_ml_estimate_reaches_the_crlb_and_its_nees_is_six(rng):
     poses = [T @ b.T_cam_board for b in make_observations(rng, 8, 0.0, T_lidar_cam=T).boards]
     errs, nees = [], []
     for _ in range(60):   # one scene, fresh noise
-        obs = make_observations(rng, noise_m=0.02, T_lidar_cam=T, poses=poses)
-        r = refine(ScanData.from_observations(obs), T)
-        P = refinement_covariance(ScanData.from_observations(obs), r.T_lidar_cam)
+        obs = make_observations(rng, range_sigma_m=0.02, T_lidar_cam=T, poses=poses)
+        r = refine(obs.scan_data, T)
+        P = refinement_covariance(obs.scan_data, r.T_lidar_cam)
         e = error_vector(r.T_lidar_cam, T)
         nees.append(e @ np.linalg.solve(P, e))
         errs.append(e)
@@ -109,7 +108,7 @@ def test_plane_refinement_covariance_is_consistent(rng):
     nees = []
     for _ in range(60):   # a new scene each time
         obs = make_observations(rng, 8, 0.02, T_lidar_cam=T)
-        data = ScanData.from_observations(obs)
+        data = obs.scan_data
         r = refine(data, T, residual="plane")
         P = refinement_covariance(data, r.T_lidar_cam, "plane", 0.02)
         e = error_vector(r.T_lidar_cam, T)
@@ -166,18 +165,18 @@ def test_lidarcam_scorer_prefers_the_truth_and_is_half_k_there(rng):
     K = sum(len(b.scan) for b in obs.boards)
     C = np.array([T] + [perturb(T, np.r_[rng.normal(scale=0.05, size=3), rng.normal(scale=0.1, size=3)])
                         for _ in range(30)])
-    cost, parts = lidarcam_score(obs, C, sigma_m=0.02, return_details=True)
+    cost, parts = lidarcam_score(obs, C, range_sigma_m=0.02, return_details=True)
     assert np.argmin(cost) == 0
     assert parts["range"][0] == pytest.approx(K / 2, rel=0.3)
     # a candidate that puts the boards behind the camera is never chosen
     flip = C[0].copy()
     flip[:3, :3] = flip[:3, :3] @ np.diag([-1.0, 1.0, -1.0])
-    assert not np.isfinite(lidarcam_score(obs, flip[None], sigma_m=0.02)[0])
+    assert not np.isfinite(lidarcam_score(obs, flip[None], range_sigma_m=0.02)[0])
 
 
 def test_yaml_carries_the_one_sigma(rng):
     obs = make_observations(rng, 6, 0.02)
-    data = ScanData.from_observations(obs)
+    data = obs.scan_data
     P = refinement_covariance(data, obs.T_lidar_cam_true)
     text = extrinsic_yaml(obs.T_lidar_cam_true, {"method": "x"}, covariance=P)
     assert f"sigma_rot_deg: {np.degrees(np.sqrt(np.trace(P[:3, :3])))}" in text

@@ -8,7 +8,6 @@ import numpy as np
 from ..observations import Observations
 from ..refine import refine
 from ..registry import Method
-from ..residuals import ScanData
 from ..result import SolveFailure
 from ..selection import PENG2022_OPTIONS, SCORERS
 from ..solvers.candidates import minimal_candidates
@@ -41,7 +40,7 @@ def zhang_pless_linear(obs: Observations, *, weighting: str = "paper"):
 
 def zhang_pless(obs: Observations, *, weighting: str = "paper", residual: str = "plane", loss: str = "linear"):
     T0 = _zp_linear(obs, weighting=weighting)
-    r = refine(ScanData.from_observations(obs), T0, residual=residual, loss=loss)
+    r = refine(obs.scan_data, T0, residual=residual, loss=loss)
     return r.T_lidar_cam, T0[None], {"cost": r.cost, "initial_cost": r.initial_cost, "nfev": r.nfev}
 
 

@@ -7,10 +7,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..lines import fit_line
-from ..observations import Observations
+from ..observations import Observations, ScanData
 from ..refine import refine
 from ..registry import Method
-from ..residuals import ScanData, perturb
+from ..residuals import perturb
 from ..result import SolveFailure
 from ..selection import EDGE_SIGMA_M, OUTLINE_SIGMA_M, lidarcam_residuals
 from ..selection import lidarcam as lidarcam_score
@@ -92,7 +92,7 @@ def refine_start(obs: Observations, data: ScanData, T0: np.ndarray, sopts: dict,
     final = float(final[0])
     if do_polish and parts["edge"][0] + parts["outline"][0] > polish_threshold:
         # the range optimum disagrees with the board outlines: minimise the whole evidence from there
-        score_opts = {k: sopts[k] for k in ("sigma_m", "edge_sigma_m", "outline_sigma_m")}
+        score_opts = {k: sopts[k] for k in ("range_sigma_m", "edge_sigma_m", "outline_sigma_m")}
         T2 = polish(obs, T1, max_nfev, **score_opts)
         f2 = float(lidarcam_score(obs, T2[None], **sopts)[0])
         if f2 < final:
@@ -100,7 +100,7 @@ def refine_start(obs: Observations, data: ScanData, T0: np.ndarray, sopts: dict,
     return final, r, T1, False
 
 
-def lidarcam(obs: Observations, *, sigma_m: float | None = None, n_refine: int = 3, loss: str = "linear",
+def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine: int = 3, loss: str = "linear",
              f_scale: float | None = None, edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
              behind_penalty: float = np.inf, use_zhang_pless: bool = True, distinct_rot_deg: float = 1.0,
              distinct_trans_m: float = 0.05, min_conditioning: float = 1e-6, warn_min_boards: int = 4,
@@ -111,13 +111,13 @@ def lidarcam(obs: Observations, *, sigma_m: float | None = None, n_refine: int =
     1. Candidates (``candidate_pool``): the minimal solver on all board triples (``solver_options`` go to it),
        plus the linear Zhang & Pless solution when there are >= 5 boards (``use_zhang_pless``).
     2. Score every candidate with ``selection.lidarcam`` (range residuals in units of the noise std
-       ``sigma_m``, default estimated from the scan lines; endpoint and outline terms; boards behind the camera).
+       ``range_sigma_m``, default estimated from the scan lines; endpoint and outline terms; boards behind the camera).
     3. Refine the ``n_refine`` best distinct candidates (differing by ``distinct_rot_deg`` or
        ``distinct_trans_m``) by maximum likelihood on the range residuals (``loss``, ``f_scale``); keep the one
        whose refined pose scores least. With ``polish``, a refined pose whose endpoint and outline terms exceed
        ``polish_threshold`` (the range optimum puts scan points off the boards) is refined further on the whole
        ``selection.lidarcam`` cost (numerical Jacobian) and kept when that scores less.
-    4. Covariance ``sigma^2 (J^T J)^-1`` (``sigma_m`` or estimated from the final residuals), conditioning and
+    4. Covariance ``sigma^2 (J^T J)^-1`` (``range_sigma_m`` or estimated from the final residuals), conditioning and
        ``info["warnings"]``; after a polish the covariance is still that of the range model at the answer
        (it ignores the outline information: conservative). Fails with a reason when no candidate
        exists, none scores finite, or the refined pose's conditioning is below ``min_conditioning``.
@@ -125,13 +125,13 @@ def lidarcam(obs: Observations, *, sigma_m: float | None = None, n_refine: int =
     C, reasons = candidate_pool(obs, use_zhang_pless, **solver_options)
     if len(C) == 0:
         raise SolveFailure("no candidate: " + "; ".join(reasons))
-    sigma = sigma_m if sigma_m is not None else scan_noise_estimate(obs)
-    sopts = {"sigma_m": sigma, "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m,
+    sigma = range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs)
+    sopts = {"range_sigma_m": sigma, "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m,
              "behind_penalty": behind_penalty}
     starts = best_distinct(C, lidarcam_score(obs, C, **sopts), n_refine, distinct_rot_deg, distinct_trans_m)
     if not starts:
         raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
-    data = ScanData.from_observations(obs)
+    data = obs.scan_data
     fs = f_scale if f_scale is not None else F_SCALE_SIGMAS * sigma
     tries = [(*refine_start(obs, data, T0, sopts, loss=loss, f_scale=fs, max_nfev=max_nfev, do_polish=polish,
                             polish_threshold=polish_threshold), T0) for T0 in starts]
@@ -141,7 +141,7 @@ def lidarcam(obs: Observations, *, sigma_m: float | None = None, n_refine: int =
         raise SolveFailure(f"lidarcam: degenerate board set, the extrinsic is not determined (inverse condition "
                            f"number {cond:.1e} < {min_conditioning:g})", C)
     try:
-        cov = refinement_covariance(data, T_best, "range", sigma_m)
+        cov = refinement_covariance(data, T_best, "range", range_sigma_m)
     except UncertaintyError as err:
         raise SolveFailure(f"lidarcam: {err}", C) from None
     warnings = degeneracy_warnings(obs, T_best, min_boards=warn_min_boards,

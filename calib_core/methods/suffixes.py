@@ -8,11 +8,10 @@ import numpy as np
 from ..observations import Observations
 from ..refine import refine
 from ..registry import Method, derived
-from ..residuals import ScanData
 from ..result import SolveFailure
 from ..uncertainty import UncertaintyError, conditioning, refinement_covariance, scan_noise_estimate
 
-REFINE_OPTIONS = ("loss", "f_scale", "sigma_m", "max_nfev")
+REFINE_OPTIONS = ("loss", "f_scale", "range_sigma_m", "max_nfev")
 """Options of an ``X+ml`` / ``X+plane`` method that go to the refinement; all others go to ``X``."""
 
 F_SCALE_SIGMAS = 2.5
@@ -20,14 +19,14 @@ F_SCALE_SIGMAS = 2.5
 
 
 def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: str = "linear",
-                     f_scale: float | None = None, sigma_m: float | None = None, max_nfev: int = 100):
+                     f_scale: float | None = None, range_sigma_m: float | None = None, max_nfev: int = 100):
     """Refine ``T0`` on ``residual`` and compute the covariance; returns (RefineResult, covariance, info)."""
-    data = ScanData.from_observations(obs)
+    data = obs.scan_data
     if f_scale is None:
-        f_scale = F_SCALE_SIGMAS * (sigma_m if sigma_m is not None else scan_noise_estimate(obs))
+        f_scale = F_SCALE_SIGMAS * (range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs))
     r = refine(data, T0, residual=residual, loss=loss, f_scale=f_scale, max_nfev=max_nfev)
     try:
-        cov = refinement_covariance(data, r.T_lidar_cam, residual, sigma_m)
+        cov = refinement_covariance(data, r.T_lidar_cam, residual, range_sigma_m)
     except UncertaintyError as err:
         raise SolveFailure(f"refinement: {err}", T0[None]) from None
     info = {"refine_cost": r.cost, "refine_initial_cost": r.initial_cost, "refine_nfev": r.nfev,
@@ -40,7 +39,7 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
     """The method ``base.name + "+" + suffix``: run ``base``, then refine its answer on ``residual``
     (``"range"``: maximum likelihood under range noise; ``"plane"``: point-to-plane distances), with the
     covariance of the refined extrinsic. Options ``loss``, ``f_scale`` (default ``F_SCALE_SIGMAS`` x the noise
-    std), ``sigma_m`` (default: estimated) and ``max_nfev`` go to the refinement, the rest to ``base``."""
+    std), ``range_sigma_m`` (default: estimated) and ``max_nfev`` go to the refinement, the rest to ``base``."""
     def func(obs: Observations, **options):
         ropts = {k: options.pop(k) for k in REFINE_OPTIONS if k in options}
         T0, cands, info = base.func(obs, **options)

@@ -45,6 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import LidarcamError
+from .orientation import abs_orientation_3pt, cross, cross2, dot, unit
+from .polynomial import newton_roots, quartic_roots_closed, quartic_roots_eig
 
 # Reasons (the ``reasons`` entries; ``None`` means solved).
 REASON_NONFINITE = "non-finite input"
@@ -55,11 +57,6 @@ REASON_QUARTIC = "degenerate quartic (roots at both 0 and infinity)"
 REASON_NO_REAL = "no real solution"
 
 MAX_SOLUTIONS = 8
-
-# Registry entry (name, minimum boards, maximum solutions per triple, citation).
-SOLVER_INFO = {"name": "vasconcelos2012", "min_boards": 3, "max_solutions": MAX_SOLUTIONS,
-               "citation": "F. Vasconcelos, J. P. Barreto, U. Nunes, A Minimal Solution for the Extrinsic Calibration "
-                           "of a Camera and a Laser-Rangefinder, IEEE TPAMI 34(11), 2012"}
 
 # Grunert point k (k = 1, 2, 3) -> original line index (0: v_12, 1: v_13, 2: v_23), chosen by the longest side.
 # Sides: 0 = |q12 q13|, 1 = |q12 q23|, 2 = |q13 q23|; Grunert's b is the side between points 1 and 3.
@@ -107,20 +104,6 @@ def board_triples(n_boards: int) -> np.ndarray:
 # Small vectorised helpers
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("...i,...i->...", a, b)
-
-
-def _cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
 def _sym3_min_eig(A: np.ndarray) -> np.ndarray:
     """Smallest eigenvalue of symmetric 3x3 matrices (...,3,3), closed form (trigonometric)."""
     a11, a22, a33 = A[..., 0, 0], A[..., 1, 1], A[..., 2, 2]
@@ -137,81 +120,6 @@ def _sym3_min_eig(A: np.ndarray) -> np.ndarray:
     phi = np.arccos(np.clip(detB / 2.0, -1.0, 1.0)) / 3.0
     lam_min = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
     return np.where(safe, lam_min, q)
-
-
-def _poly_eval(A: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Quartic (coefficients A (...,5), highest first) and its derivative at x (..., broadcast), Horner."""
-    a0, a1, a2, a3, a4 = (A[..., k, None] for k in range(5))
-    p = (((a0 * x + a1) * x + a2) * x + a3) * x + a4
-    dp = ((4.0 * a0 * x + 3.0 * a1) * x + 2.0 * a2) * x + a3
-    return p, dp
-
-
-def _cubic_root_largest(B: np.ndarray, C: np.ndarray, D: np.ndarray) -> np.ndarray:
-    """The largest-modulus root of the monic cubic m^3 + B m^2 + C m + D (complex arrays), Cardano."""
-    P = C - B * B / 3.0
-    Q = 2.0 * B**3 / 27.0 - B * C / 3.0 + D
-    S = np.sqrt(Q * Q / 4.0 + P**3 / 27.0)
-    w1, w2 = -Q / 2.0 + S, -Q / 2.0 - S
-    W = np.where(np.abs(w1) >= np.abs(w2), w1, w2)
-    U = W ** (1.0 / 3.0)
-    nz = np.abs(U) > 0
-    Us = np.where(nz, U, 1.0)
-    omega = np.exp(2j * np.pi / 3.0)
-    best = np.zeros_like(U)
-    best_abs = np.full(U.shape, -1.0)
-    for k in range(3):
-        Uk = Us * omega**k
-        t = np.where(nz, Uk - P / (3.0 * Uk), 0.0)
-        m = t - B / 3.0
-        am = np.abs(m)
-        better = am > best_abs
-        best = np.where(better, m, best)
-        best_abs = np.where(better, am, best_abs)
-    return best
-
-
-def _quartic_roots_closed(A: np.ndarray) -> np.ndarray:
-    """All 4 complex roots (K,4) of quartics A (K,5) (highest first, A[:,0] != 0), Ferrari in complex arithmetic."""
-    a = (A[:, 1] / A[:, 0]).astype(complex)
-    b = (A[:, 2] / A[:, 0]).astype(complex)
-    c = (A[:, 3] / A[:, 0]).astype(complex)
-    e = (A[:, 4] / A[:, 0]).astype(complex)
-    a2 = a * a
-    p = b - 3.0 * a2 / 8.0
-    q = c - a * b / 2.0 + a2 * a / 8.0
-    r = e - a * c / 4.0 + a2 * b / 16.0 - 3.0 * a2 * a2 / 256.0
-    # Resolvent: m^3 + p m^2 + (p^2/4 - r) m - q^2/8 = 0; the largest root keeps sqrt(2m) away from 0.
-    m = _cubic_root_largest(p, p * p / 4.0 - r, -q * q / 8.0)
-    w = np.sqrt(2.0 * m)
-    nz = np.abs(w) > 0
-    qw = np.where(nz, 2.0 * q / np.where(nz, w, 1.0), 0.0)
-    roots = np.empty(A.shape[:1] + (4,), dtype=complex)
-    k = 0
-    for s1 in (1.0, -1.0):
-        disc = np.sqrt(-(2.0 * p + 2.0 * m + s1 * qw))
-        for s2 in (1.0, -1.0):
-            roots[:, k] = (s1 * w + s2 * disc) / 2.0 - a / 4.0
-            k += 1
-    return roots
-
-
-def _quartic_roots_eig(A: np.ndarray) -> np.ndarray:
-    """All 4 complex roots (K,4) of quartics A (K,5) as eigenvalues of batched companion matrices."""
-    K = A.shape[0]
-    Cm = np.zeros((K, 4, 4))
-    Cm[:, 0, :] = -A[:, 1:] / A[:, :1]
-    Cm[:, 1, 0] = Cm[:, 2, 1] = Cm[:, 3, 2] = 1.0
-    return np.linalg.eigvals(Cm).astype(complex)
-
-
-def _newton_roots(A: np.ndarray, x: np.ndarray, iters: int) -> np.ndarray:
-    """``iters`` Newton steps on quartics A (K,5) at roots x (K,R) (real or complex); a step is skipped at p' = 0."""
-    for _ in range(iters):
-        p, dp = _poly_eval(A, x)
-        ok = np.abs(dp) > 0
-        x = x - np.where(ok, p / np.where(ok, dp, 1.0), 0.0)
-    return x
 
 
 def _grunert_quartic(aa, bb, cc, ca, cb, cg) -> np.ndarray:
@@ -252,8 +160,8 @@ def _polish_lambdas(s, aa, bb, cc, ca, cb, cg, iters: int) -> np.ndarray:
                       np.stack([z, 2 * (s2 - ca * s3), 2 * (s3 - ca * s2)], -1)], axis=1)
         # Cramer: J^-1 = adj(J) / det(J), adj rows from cross products of J's columns.
         c0, c1, c2 = J[:, :, 0], J[:, :, 1], J[:, :, 2]
-        adj = np.stack([_cross(c1, c2), _cross(c2, c0), _cross(c0, c1)], axis=1)
-        det = _dot(c0, adj[:, 0])
+        adj = np.stack([cross(c1, c2), cross(c2, c0), cross(c0, c1)], axis=1)
+        det = dot(c0, adj[:, 0])
         ok = np.abs(det) > 1e-300
         step = -np.einsum("kij,kj->ki", adj, f) / np.where(ok, det, 1.0)[:, None]
         s_new = s + np.where(ok[:, None], step, 0.0)
@@ -266,60 +174,117 @@ def _polish_lambdas(s, aa, bb, cc, ca, cb, cg, iters: int) -> np.ndarray:
     return s
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
-def _abs_orientation_3pt(P: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """R (K,3,3), t (K,3) with ``[q, 0] ~ R P + t`` for camera triangles P (K,3,3) and scan-plane triangles q (K,3,2).
-
-    Closed form: align the triangles' oriented planes, then take the least-squares in-plane angle.  Equal to
-    Kabsch/SVD (det +1) for congruent triangles and to first order for nearly congruent ones.  The scan
-    triangle lies in z = 0, so its frame is the identity up to the sign of its orientation.
-    """
-    cP = P.mean(axis=1)
-    Y = P - cP[:, None, :]
-    a = P[:, 1] - P[:, 0]
-    e1 = a / np.sqrt(np.einsum("ki,ki->k", a, a))[:, None]
-    nrm = _cross(a, P[:, 2] - P[:, 0])
-    nrm /= np.sqrt(np.einsum("ki,ki->k", nrm, nrm))[:, None]
-    e2 = _cross(nrm, e1)
-    xp = np.einsum("kni,ki->kn", Y, e1)
-    yp = np.einsum("kni,ki->kn", Y, e2)
-    cq = q.mean(axis=1)
-    xq, yq = q[:, :, 0] - cq[:, :1], q[:, :, 1] - cq[:, 1:]
-    sgn = np.where(_cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]) >= 0, 1.0, -1.0)
-    yq = yq * sgn[:, None]  # coordinates in the frame (x, sgn y, sgn z), whose third axis is the normal
-    sn = np.einsum("kn,kn->k", xp, yq) - np.einsum("kn,kn->k", yp, xq)
-    cs = np.einsum("kn,kn->k", xp, xq) + np.einsum("kn,kn->k", yp, yq)
-    h = np.hypot(sn, cs)
-    h = np.where(h > 0, h, 1.0)
-    co, si = (cs / h)[:, None], (sn / h)[:, None]
-    R = np.empty(P.shape[:1] + (3, 3))
-    R[:, 0] = co * e1 - si * e2
-    R[:, 1] = sgn[:, None] * (si * e1 + co * e2)
-    R[:, 2] = sgn[:, None] * nrm
-    t = -np.einsum("kij,kj->ki", R, cP)
-    t[:, :2] += cq
-    return R, t
-
-
-def kabsch(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Reference absolute orientation by SVD (det fixed +1): R (K,3,3), t (K,3) minimising sum |Q - (R P + t)|^2.
-
-    ``P, Q`` (K,n,3) corresponding point sets.  The solver uses the faster closed form for three points.
-    """
-    cP, cQ = P.mean(axis=1), Q.mean(axis=1)
-    H = np.einsum("kni,knj->kij", P - cP[:, None], Q - cQ[:, None])
-    U, _, Vt = np.linalg.svd(H)
-    D = np.ones(U.shape[:-1])
-    D[:, -1] = np.sign(np.linalg.det(Vt.transpose(0, 2, 1) @ U.transpose(0, 2, 1)))
-    R = (Vt.transpose(0, 2, 1) * D[:, None, :]) @ U.transpose(0, 2, 1)
-    return R, cQ - np.einsum("kij,kj->ki", R, cP)
-
-
 # ----------------------------------------------------------------------------------------------------------
 # The solver
+
+
+def _checked(n, d, p, u, quartic: str):
+    """Inputs as float arrays of shapes (B,3,3), (B,3), (B,3,2), (B,3,2); MinimalSolverError otherwise."""
+    n, d, p, u = (np.asarray(a, dtype=float) for a in (n, d, p, u))
+    if n.ndim != 3 or n.shape[1:] != (3, 3):
+        raise MinimalSolverError(f"n must be (B,3,3), got {n.shape}")
+    B = n.shape[0]
+    if d.shape != (B, 3) or p.shape != (B, 3, 2) or u.shape != (B, 3, 2):
+        raise MinimalSolverError(f"expected d (B,3), p and u (B,3,2) with B={B}; got {d.shape}, {p.shape}, {u.shape}")
+    if quartic not in ("closed", "eig"):
+        raise MinimalSolverError(f"quartic must be 'closed' or 'eig', got {quartic!r}")
+    return n, d, p, u
+
+
+def _finite_normalised(n, d, p, u, reasons):
+    """Triples with finite, non-zero input (others get ``REASON_NONFINITE``): their indices and the input with
+    unit normals (offsets scaled with them) and unit line directions."""
+    finite = (np.isfinite(n).all(axis=(1, 2)) & np.isfinite(d).all(axis=1) & np.isfinite(p).all(axis=(1, 2))
+              & np.isfinite(u).all(axis=(1, 2)))
+    nn = np.linalg.norm(n, axis=2)
+    un = np.linalg.norm(u, axis=2)
+    finite &= (nn > 0).all(axis=1) & (un > 0).all(axis=1)
+    reasons[~finite] = REASON_NONFINITE
+    idx = np.flatnonzero(finite)
+    return idx, n[idx] / nn[idx][:, :, None], d[idx] / nn[idx], p[idx], u[idx] / un[idx][:, :, None]
+
+
+def _degeneracy(n, p, u, idx, reasons, *, min_plane_sv, min_line_sin, min_triangle, min_side):
+    """Step 1, the degeneracy tests (reasons set in place): the solvable mask (K,), the scan lines' meeting
+    points q (K,3,2) (q_12, q_13, q_23) and the squared sides of the scan triangle (K,3)."""
+    sv_min = np.sqrt(np.maximum(_sym3_min_eig(np.swapaxes(n, 1, 2) @ n), 0.0))
+    bad_planes = ~(sv_min >= min_plane_sv)
+    ui, uj = u[:, _PAIRS[:, 0]], u[:, _PAIRS[:, 1]]
+    pi, pj = p[:, _PAIRS[:, 0]], p[:, _PAIRS[:, 1]]
+    sin_ij = cross2(ui, uj)  # (K,3)
+    bad_lines = ~(np.abs(sin_ij).min(axis=1) >= min_line_sin)
+    s_ij = cross2(pj - pi, uj) / np.where(bad_lines[:, None], 1.0, sin_ij)
+    q = pi + s_ij[..., None] * ui
+    sides2 = np.stack([np.sum((q[:, 0] - q[:, 1]) ** 2, -1), np.sum((q[:, 0] - q[:, 2]) ** 2, -1),
+                       np.sum((q[:, 1] - q[:, 2]) ** 2, -1)], axis=-1)
+    longest2 = sides2.max(axis=1)
+    area2 = np.abs(cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]))
+    bad_tri = ~(area2 >= min_triangle * longest2) | ~(longest2 >= min_side**2)
+    bad_tri &= ~bad_lines
+    reasons[idx[bad_tri]] = REASON_TRIANGLE
+    reasons[idx[bad_lines]] = REASON_SCAN_LINES
+    reasons[idx[bad_planes]] = REASON_PLANES
+    return ~(bad_planes | bad_lines | bad_tri), q, sides2
+
+
+def _grunert_setup(n, d, q, sides2):
+    """Step 2: the planes' common point O (K,3), the line directions and scan points relabelled for Grunert
+    (side b = |P1 P3| the longest) (K,3,3), (K,3,2), and Grunert's (aa, bb, cc, ca, cb, cg), each (K,)."""
+    n1, n2, n3 = n[:, 0], n[:, 1], n[:, 2]
+    c23, c31, c12 = cross(n2, n3), cross(n3, n1), cross(n1, n2)
+    detN = dot(n1, c23)
+    O = (d[:, 0, None] * c23 + d[:, 1, None] * c31 + d[:, 2, None] * c12) / detN[:, None]
+    V = unit(np.stack([c12, -c31, c23], axis=1))  # v_12, v_13, v_23
+    perm = _PERM_BY_LONGEST[np.argmax(sides2, axis=1)]  # (K,3)
+    rows = np.arange(len(n))[:, None]
+    Vg = V[rows, perm]
+    Qg = q[rows, perm]
+    cg = dot(Vg[:, 0], Vg[:, 1])
+    cb = dot(Vg[:, 0], Vg[:, 2])
+    ca = dot(Vg[:, 1], Vg[:, 2])
+    aa = np.sum((Qg[:, 1] - Qg[:, 2]) ** 2, -1)
+    bb = np.sum((Qg[:, 0] - Qg[:, 2]) ** 2, -1)
+    cc = np.sum((Qg[:, 0] - Qg[:, 1]) ** 2, -1)
+    return O, Vg, Qg, (aa, bb, cc, ca, cb, cg)
+
+
+def _kept_roots(A, quartic: str, root_newton_iters: int, imag_tol: float, near_real_tol: float | None):
+    """The quartics' real roots (and near-real pairs with ``near_real_tol``), polished: for each kept root its
+    quartic's index (row-major, grouped by quartic), its real part and whether it is near-real."""
+    roots = quartic_roots_closed(A) if quartic == "closed" else quartic_roots_eig(A)
+    roots = newton_roots(A, roots, root_newton_iters)
+    im_scale = 1.0 + np.abs(roots)
+    is_real = np.abs(roots.imag) <= imag_tol * im_scale
+    near = np.zeros_like(is_real)
+    if near_real_tol is not None:
+        near = ~is_real & (roots.imag > 0) & (roots.imag <= near_real_tol * im_scale)
+    k_tr, k_slot = np.nonzero(is_real | near)
+    return k_tr, roots.real[k_tr, k_slot], near[k_tr, k_slot]
+
+
+def _lambdas(x, rev, g, iters: int) -> np.ndarray:
+    """Step 4: the three lambdas (M,3) of each root ``x`` (M,), without Grunert's unstable division, polished.
+
+    ``z`` in [-1, 1] is lambda_3/lambda_1 ("v mode") or lambda_1/lambda_3; ``rev`` (M,) says whether the
+    quartic was reversed; ``g`` = (aa, bb, cc, ca, cb, cg), each (M,).
+    """
+    aa, bb, cc, ca, cb, cg = g
+    big = np.abs(x) > 1.0
+    z = np.where(big, 1.0 / np.where(big, x, 1.0), x)
+    v_mode = rev == big
+    lead = np.sqrt(bb / (1.0 + z * z - 2.0 * z * cb))
+    s1 = np.where(v_mode, lead, z * lead)
+    s3 = np.where(v_mode, z * lead, lead)
+    # lambda_2: common root of  s2^2 - 2 cg s1 s2 + s1^2 - cc = 0  and  s2^2 - 2 ca s3 s2 + s3^2 - aa = 0.
+    r1 = np.sqrt(np.maximum(cc - s1 * s1 * (1.0 - cg * cg), 0.0))
+    r3 = np.sqrt(np.maximum(aa - s3 * s3 * (1.0 - ca * ca), 0.0))
+    cand1 = (s1 * cg)[:, None] + np.stack([r1, -r1], -1)
+    cand3 = (s3 * ca)[:, None] + np.stack([r3, -r3], -1)
+    diff = np.abs(cand1[:, :, None] - cand3[:, None, :]).reshape(-1, 4)
+    best = np.argmin(diff, axis=1)
+    rr = np.arange(best.size)
+    s2 = 0.5 * (cand1[rr, best // 2] + cand3[rr, best % 2])
+    return _polish_lambdas(np.stack([s1, s2, s3], axis=-1), aa, bb, cc, ca, cb, cg, iters)
 
 
 def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
@@ -357,71 +322,17 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     Returns:
         ``MinimalSolutions``; at most 8 candidates per triple (4 roots, each with its mirror through ``O``).
     """
-    n = np.asarray(n, dtype=float)
-    d = np.asarray(d, dtype=float)
-    p = np.asarray(p, dtype=float)
-    u = np.asarray(u, dtype=float)
-    if n.ndim != 3 or n.shape[1:] != (3, 3):
-        raise MinimalSolverError(f"n must be (B,3,3), got {n.shape}")
+    n, d, p, u = _checked(n, d, p, u, quartic)
     B = n.shape[0]
-    if d.shape != (B, 3) or p.shape != (B, 3, 2) or u.shape != (B, 3, 2):
-        raise MinimalSolverError(f"expected d (B,3), p and u (B,3,2) with B={B}; got {d.shape}, {p.shape}, {u.shape}")
-    if quartic not in ("closed", "eig"):
-        raise MinimalSolverError(f"quartic must be 'closed' or 'eig', got {quartic!r}")
-
     reasons = np.full(B, None, dtype=object)
-    finite = (np.isfinite(n).all(axis=(1, 2)) & np.isfinite(d).all(axis=1) & np.isfinite(p).all(axis=(1, 2))
-              & np.isfinite(u).all(axis=(1, 2)))
-    nn = np.linalg.norm(n, axis=2)
-    un = np.linalg.norm(u, axis=2)
-    finite &= (nn > 0).all(axis=1) & (un > 0).all(axis=1)
-    reasons[~finite] = REASON_NONFINITE
-    idx = np.flatnonzero(finite)
-    n, d, p, u = n[idx], d[idx], p[idx], u[idx]
-    d = d / nn[idx]
-    n = n / nn[idx][:, :, None]
-    u = u / un[idx][:, :, None]
-
-    # 1. Degeneracy tests.
-    sv_min = np.sqrt(np.maximum(_sym3_min_eig(np.swapaxes(n, 1, 2) @ n), 0.0))
-    bad_planes = ~(sv_min >= min_plane_sv)
-    ui, uj = u[:, _PAIRS[:, 0]], u[:, _PAIRS[:, 1]]
-    pi, pj = p[:, _PAIRS[:, 0]], p[:, _PAIRS[:, 1]]
-    sin_ij = _cross2(ui, uj)  # (K,3)
-    bad_lines = ~(np.abs(sin_ij).min(axis=1) >= min_line_sin)
-    s_ij = _cross2(pj - pi, uj) / np.where(bad_lines[:, None], 1.0, sin_ij)
-    q = pi + s_ij[..., None] * ui  # (K,3,2): q_12, q_13, q_23
-    sides2 = np.stack([np.sum((q[:, 0] - q[:, 1]) ** 2, -1), np.sum((q[:, 0] - q[:, 2]) ** 2, -1),
-                       np.sum((q[:, 1] - q[:, 2]) ** 2, -1)], axis=-1)
-    longest2 = sides2.max(axis=1)
-    area2 = np.abs(_cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]))
-    bad_tri = ~(area2 >= min_triangle * longest2) | ~(longest2 >= min_side**2)
-    bad_tri &= ~bad_lines
-    reasons[idx[bad_tri]] = REASON_TRIANGLE
-    reasons[idx[bad_lines]] = REASON_SCAN_LINES
-    reasons[idx[bad_planes]] = REASON_PLANES
-    ok = ~(bad_planes | bad_lines | bad_tri)
+    idx, n, d, p, u = _finite_normalised(n, d, p, u, reasons)
+    ok, q, sides2 = _degeneracy(n, p, u, idx, reasons, min_plane_sv=min_plane_sv, min_line_sin=min_line_sin,
+                                min_triangle=min_triangle, min_side=min_side)
     idx, n, d, q, sides2 = idx[ok], n[ok], d[ok], q[ok], sides2[ok]
-
-    # 2. Geometry: O, line directions, Grunert relabelling (side b = |P1 P3| the longest).
-    n1, n2, n3 = n[:, 0], n[:, 1], n[:, 2]
-    c23, c31, c12 = _cross(n2, n3), _cross(n3, n1), _cross(n1, n2)
-    detN = _dot(n1, c23)
-    O = (d[:, 0, None] * c23 + d[:, 1, None] * c31 + d[:, 2, None] * c12) / detN[:, None]
-    V = _unit(np.stack([c12, -c31, c23], axis=1))  # v_12, v_13, v_23
-    perm = _PERM_BY_LONGEST[np.argmax(sides2, axis=1)]  # (K,3)
-    rows = np.arange(idx.size)[:, None]
-    Vg = V[rows, perm]
-    Qg = q[rows, perm]
-    cg = _dot(Vg[:, 0], Vg[:, 1])
-    cb = _dot(Vg[:, 0], Vg[:, 2])
-    ca = _dot(Vg[:, 1], Vg[:, 2])
-    aa = np.sum((Qg[:, 1] - Qg[:, 2]) ** 2, -1)
-    bb = np.sum((Qg[:, 0] - Qg[:, 2]) ** 2, -1)
-    cc = np.sum((Qg[:, 0] - Qg[:, 1]) ** 2, -1)
+    O, Vg, Qg, g = _grunert_setup(n, d, q, sides2)
 
     # 3. Quartic, normalised; reversed where the constant term dominates.
-    A = _grunert_quartic(aa, bb, cc, ca, cb, cg)
+    A = _grunert_quartic(*g)
     A = A / np.abs(A).max(axis=1, keepdims=True)
     rev = np.abs(A[:, 4]) > np.abs(A[:, 0])
     A = np.where(rev[:, None], A[:, ::-1], A)
@@ -429,46 +340,17 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     reasons[idx[bad_q]] = REASON_QUARTIC
     keep = ~bad_q
     idx, O, Vg, Qg, A, rev = idx[keep], O[keep], Vg[keep], Qg[keep], A[keep], rev[keep]
-    aa, bb, cc, ca, cb, cg = aa[keep], bb[keep], cc[keep], ca[keep], cb[keep], cg[keep]
-    roots = _quartic_roots_closed(A) if quartic == "closed" else _quartic_roots_eig(A)
-    roots = _newton_roots(A, roots, root_newton_iters)
-    im_scale = 1.0 + np.abs(roots)
-    is_real = np.abs(roots.imag) <= imag_tol * im_scale
-    near = np.zeros_like(is_real)
-    if near_real_tol is not None:
-        near = ~is_real & (roots.imag > 0) & (roots.imag <= near_real_tol * im_scale)
-    sel = is_real | near
-    k_tr, k_slot = np.nonzero(sel)  # row-major: grouped by triple
-    x = roots.real[k_tr, k_slot]
-    near_k = near[k_tr, k_slot]
+    g = tuple(v[keep] for v in g)
+    k_tr, x, near_k = _kept_roots(A, quartic, root_newton_iters, imag_tol, near_real_tol)
 
-    # 4. Lambdas from each root.  z in [-1, 1] is lambda_3/lambda_1 ("v mode") or lambda_1/lambda_3.
-    big = np.abs(x) > 1.0
-    z = np.where(big, 1.0 / np.where(big, x, 1.0), x)
-    v_mode = rev[k_tr] == big
-    aa, bb, cc, ca, cb, cg = aa[k_tr], bb[k_tr], cc[k_tr], ca[k_tr], cb[k_tr], cg[k_tr]
-    lead = np.sqrt(bb / (1.0 + z * z - 2.0 * z * cb))
-    s1 = np.where(v_mode, lead, z * lead)
-    s3 = np.where(v_mode, z * lead, lead)
-    # lambda_2: common root of  s2^2 - 2 cg s1 s2 + s1^2 - cc = 0  and  s2^2 - 2 ca s3 s2 + s3^2 - aa = 0.
-    r1 = np.sqrt(np.maximum(cc - s1 * s1 * (1.0 - cg * cg), 0.0))
-    r3 = np.sqrt(np.maximum(aa - s3 * s3 * (1.0 - ca * ca), 0.0))
-    cand1 = (s1 * cg)[:, None] + np.stack([r1, -r1], -1)
-    cand3 = (s3 * ca)[:, None] + np.stack([r3, -r3], -1)
-    diff = np.abs(cand1[:, :, None] - cand3[:, None, :]).reshape(-1, 4)
-    best = np.argmin(diff, axis=1)
-    rr = np.arange(best.size)
-    s2 = 0.5 * (cand1[rr, best // 2] + cand3[rr, best % 2])
-    s = np.stack([s1, s2, s3], axis=-1)
-    s = _polish_lambdas(s, aa, bb, cc, ca, cb, cg, lambda_newton_iters)
-
+    s = _lambdas(x, rev[k_tr], tuple(v[k_tr] for v in g), lambda_newton_iters)
     # Lines, not rays: each root and its mirror through O.
     s = np.stack([s, -s], axis=1).reshape(-1, 3)
     k_tr2 = np.repeat(k_tr, 2)
     P = O[k_tr2, None, :] + s[:, :, None] * Vg[k_tr2]
 
     # 5. Absolute orientation: lidar = R camera + t.
-    R, t = _abs_orientation_3pt(P, Qg[k_tr2])
+    R, t = abs_orientation_3pt(P, Qg[k_tr2])
     T = np.zeros((R.shape[0], 4, 4))
     T[:, :3, :3] = R
     T[:, :3, 3] = t
