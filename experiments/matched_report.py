@@ -22,7 +22,7 @@ from .catalog import method_label
 from .claim_stats import claim_values, interval_verdict, sweep_arrays, term_name
 from .figures import PAPER_SWEEPS
 from .objective import load_search_conf, objective_lines, score
-from .report import _fmt, _valid_table, paper_claims
+from .report import _fmt, _method_table, _valid_cell, paper_claims
 from .search import SPACE_KEYS
 
 N_BOOT = 2000
@@ -179,7 +179,7 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
     for p, folder in folders.items():
         for sw, spec in PAPER_SWEEPS.items():
             lines += ["", f"## `{p}`, sweep {sw}: valid-solution probability, % [95% Wilson interval]", ""]
-            lines += _valid_table(load_summary(folder, sw), spec.x)
+            lines += _method_table(load_summary(folder, sw), spec.x, _valid_cell)
     lines += ["", f"Figures of `{preset}`: `figures/*.png` (the layout of the paper's Fig. 3-7)."]
     return "\n".join(lines).rstrip() + "\n"
 
