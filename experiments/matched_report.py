@@ -145,7 +145,9 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
         s = pd.concat([load_summary(folder, sw) for sw in PAPER_SWEEPS])
         half = 100 * float(((s["valid_hi95"] - s["valid_lo95"]) / 2).max())
         wall = timings.get(f"{p}_s")
-        lines.append(f"- `{p}`: {int(s['n_trials'].min())} trials per setting; widest 95% Wilson interval of a valid "
+        lo, hi = int(s["n_trials"].min()), int(s["n_trials"].max())
+        n = f"{lo}" if lo == hi else f"{lo}-{hi}"
+        lines.append(f"- `{p}`: {n} trials per setting; widest 95% Wilson interval of a valid "
                      f"rate +-{half:.1f} points" + (f"; measured wall time {wall:.0f} s" if wall else "") + ".")
     lines += ["", "## The presets", "", "`default`: conf/scene/paper.yaml and the simulator's defaults (board tilt <= "
               "45 deg, 1 m boards, bearings over 60 deg, exact camera poses). "
