@@ -59,7 +59,9 @@ def _sensitivity(verdicts: pd.DataFrame, claim: int) -> str:
     ok = v[v["verdict"] == "holds"]
     if ok.empty:
         return f"at none of {len(v)}"
-    spans = ", ".join(f"{k.split('_')[0]} {ok[k].min():g}-{ok[k].max():g}" for k in SPACE_KEYS)
+    short = {"max_tilt_deg": "tilt", "board_size_m": "board", "bearing_spread_deg": "spread",
+             "corner_noise_px": "px"}
+    spans = ", ".join(f"{short[k]} {ok[k].min():g}-{ok[k].max():g}" for k in SPACE_KEYS)
     return f"at {len(ok)} of {len(v)}: {spans}"
 
 
