@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..joint import RANGE_ONLY_MODEL, JointError, joint_step
 from ..lines import fit_line
 from ..observations import Observations, ScanData
 from ..refine import refine
@@ -105,7 +106,8 @@ def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine:
              behind_penalty: float = np.inf, use_zhang_pless: bool = True, distinct_rot_deg: float = 1.0,
              distinct_trans_m: float = 0.05, min_conditioning: float = 1e-6, warn_min_boards: int = 4,
              warn_min_normal_spread_deg: float = 5.0, warn_min_conditioning: float = 1e-3, max_nfev: int = 100,
-             polish: bool = True, polish_threshold: float = 10.0, **solver_options):
+             polish: bool = True, polish_threshold: float = 10.0, use_corners: bool = True,
+             corner_sigma_px: float | None = None, **solver_options):
     """Our method.
 
     1. Candidates (``candidate_pool``): the minimal solver on all board triples (``solver_options`` go to it),
@@ -117,10 +119,14 @@ def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine:
        whose refined pose scores least. With ``polish``, a refined pose whose endpoint and outline terms exceed
        ``polish_threshold`` (the range optimum puts scan points off the boards) is refined further on the whole
        ``selection.lidarcam`` cost (numerical Jacobian) and kept when that scores less.
-    4. Covariance ``sigma^2 (J^T J)^-1`` (``range_sigma_m`` or estimated from the final residuals), conditioning and
-       ``info["warnings"]``; after a polish the covariance is still that of the range model at the answer
-       (it ignores the outline information: conservative). Fails with a reason when no candidate
-       exists, none scores finite, or the refined pose's conditioning is below ``min_conditioning``.
+    4. When every board carries image corners (and ``use_corners``): the joint maximum likelihood over corners and
+       ranges from that answer (``calib_core.joint``; noise stds ``corner_sigma_px``, ``range_sigma_m`` or
+       estimated), with the extrinsic's covariance, board poses marginalised (``info["covariance_model"]`` "joint").
+       Otherwise the range model's covariance ``sigma^2 (J^T J)^-1`` (``range_sigma_m`` or estimated from the final
+       residuals; "range-only, ignores camera noise"); after a polish it is still that of the range model at the
+       answer (it ignores the outline information: conservative). Conditioning and ``info["warnings"]``.
+       Fails with a reason when no candidate exists, none scores finite, or the refined pose's conditioning is
+       below ``min_conditioning``.
     """
     C, reasons = candidate_pool(obs, use_zhang_pless, **solver_options)
     if len(C) == 0:
@@ -140,17 +146,32 @@ def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine:
     if not cond >= min_conditioning:
         raise SolveFailure(f"lidarcam: degenerate board set, the extrinsic is not determined (inverse condition "
                            f"number {cond:.1e} < {min_conditioning:g})", C)
-    try:
-        cov = refinement_covariance(data, T_best, "range", range_sigma_m)
-    except UncertaintyError as err:
-        raise SolveFailure(f"lidarcam: {err}", C) from None
-    warnings = degeneracy_warnings(obs, T_best, min_boards=warn_min_boards,
-                                   min_normal_spread_deg=warn_min_normal_spread_deg,
-                                   min_conditioning=warn_min_conditioning)
+    T_best, cov, jinfo = final_step(obs, T_best, C, use_corners, range_sigma_m=range_sigma_m,
+                                    corner_sigma_px=corner_sigma_px, loss=loss)
+    warnings = jinfo.pop("warnings", []) + degeneracy_warnings(obs, T_best, min_boards=warn_min_boards,
+                                                               min_normal_spread_deg=warn_min_normal_spread_deg,
+                                                               min_conditioning=warn_min_conditioning)
     start = float(lidarcam_score(obs, T0[None], **sopts)[0])
     return T_best, C, {"cost": final, "polished": polished, "score_start": start, "n_refined": len(starts),
                        "sigma_m_selection": sigma, "refine_cost": r.cost, "refine_nfev": r.nfev, "covariance": cov,
-                       "conditioning": cond, "warnings": warnings}
+                       "conditioning": cond, "warnings": warnings, **jinfo}
+
+
+def final_step(obs: Observations, T: np.ndarray, C: np.ndarray, use_corners: bool, *, range_sigma_m, corner_sigma_px,
+               loss: str) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The answer and its covariance: the joint ML over corners and ranges (``calib_core.joint``) when every board
+    carries image corners, else the range model's covariance at ``T`` (it ignores the camera's noise)."""
+    why = None
+    if use_corners and obs.has_corners:
+        try:
+            return joint_step(obs, T, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss)
+        except (JointError, UncertaintyError) as err:
+            why = f"joint refinement failed ({err}); covariance of the range model only"
+    try:
+        cov = refinement_covariance(obs.scan_data, T, "range", range_sigma_m)
+    except UncertaintyError as err:
+        raise SolveFailure(f"lidarcam: {err}", C) from None
+    return T, cov, {"covariance_model": RANGE_ONLY_MODEL, **({"warnings": [why]} if why else {})}
 
 
 LIDARCAM = Method("lidarcam", lidarcam, 3, "this project (lidarcam)",
