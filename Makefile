@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
 .DEFAULT_GOAL := help
-.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard verify-results clean
+.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard verify-results search-paper clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
@@ -34,8 +34,17 @@ lint: $(STAMP) ## ruff check
 bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughput
 	$(PY) -m experiments.bench
 
-reproduce-paper: $(STAMP) ## Run the paper's sweeps, write results/paper/ (tables, figures 3-7, REPORT.md)
+PRESET ?=
+TRIALS ?= 500
+reproduce-paper: $(STAMP) ## Paper's sweeps -> results/paper/; PRESET=paper-matched [TRIALS=500]: -> results/paper-matched/
+ifeq ($(strip $(PRESET)),)
 	$(PY) -m experiments.reproduce
+else
+	$(PY) -m experiments.matched --preset $(PRESET) --trials $(TRIALS) --compare-trials $(TRIALS)
+endif
+
+search-paper: $(STAMP) ## Search the paper's unstated settings (conf/search/paper.yaml), write results/search/ and the preset
+	$(PY) -m experiments.search --write-preset
 
 explain-paper: $(STAMP) ## Ablations of peng2022 + unstated-setting sweeps, write results/explain/ (< 10 min on 2 cores)
 	$(PY) -m experiments.explain

@@ -91,7 +91,8 @@ class ExperimentConfig:
 
     ``sweep`` names the results folder ``<results_dir>/<sweep>/``; ``n_trials`` trials ``0..n_trials-1`` per
     setting, data seeded by ``(seed, trial, settings)``; ``n_jobs`` joblib workers over trials (-1: all cores);
-    ``chunk_size`` trials per task and per results file (0: automatic).
+    ``chunk_size`` trials per task and per results file (0: automatic). ``crn_stream``: common random numbers
+    (the same draws per trial index in every setting, ``simulate.trial_rngs``); null: seeded by the settings.
     """
 
     scene: SceneConf = field(default_factory=SceneConf)  # type: ignore[valid-type]
@@ -107,6 +108,7 @@ class ExperimentConfig:
     chunk_size: int = 0
     results_dir: str = "results"
     progress: bool = True
+    crn_stream: int | None = None
 
 
 def register_configs() -> None:
@@ -150,4 +152,5 @@ def cell_from_cfg(cfg: DictConfig):
     methods = resolve_methods(cfg.methods.names)
     return Cell(sweep=str(cfg.sweep), sim=sim, seed=int(cfg.seed), n_trials=int(cfg.n_trials), methods=methods,
                 method_options={m: dict(options[m]) for m in methods if options.get(m)}, plugins=plugins,
-                metrics=OmegaConf.to_container(cfg.metrics, resolve=True), results_dir=str(cfg.results_dir))
+                metrics=OmegaConf.to_container(cfg.metrics, resolve=True), results_dir=str(cfg.results_dir),
+                crn_stream=None if cfg.crn_stream is None else int(cfg.crn_stream))

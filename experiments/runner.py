@@ -73,6 +73,8 @@ class Cell:
     ``sim`` holds ``simulate.SimOptions`` fields as plain values; ``method_options`` maps a method name to
     its ``calibrate`` keyword options; ``plugins`` are modules every worker imports before running (their
     methods join the registry; ``calib_core.plugins``). Neither the plugins nor the method list change the key.
+    ``crn_stream``: common random numbers -- trial ``t`` draws the same random numbers in every cell with the
+    same stream (``simulate.trial_rngs``); None: seeded by the settings.
     """
 
     sweep: str
@@ -84,12 +86,14 @@ class Cell:
     metrics: dict[str, Any] = field(default_factory=_default_metrics)
     results_dir: str = "results"
     plugins: tuple[str, ...] = ()
+    crn_stream: int | None = None
 
     @property
     def key(self) -> str:
         """Readable, stable folder name: board count, noise, and a hash of every setting that shapes a row."""
         payload = json.dumps({"sim": self.sim, "seed": self.seed, "metrics": self.metrics,
-                              "method_options": {m: self.method_options[m] for m in sorted(self.method_options)}},
+                              "method_options": {m: self.method_options[m] for m in sorted(self.method_options)},
+                              **({} if self.crn_stream is None else {"crn_stream": self.crn_stream})},
                              sort_keys=True, default=str)
         digest = hashlib.sha1(payload.encode()).hexdigest()[:10]
         parts = [f"nb{self.sim['n_boards']}" if "n_boards" in self.sim else "",
@@ -198,7 +202,7 @@ def simulate_trial(cell: Cell, trial: int, methods: Sequence[str]) -> list[dict[
     base = {**cell.columns(), "trial": int(trial), "crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan,
             "conditioning": np.nan}
     try:
-        obs = generate(SimOptions(**cell.sim), seed=cell.seed, trial=int(trial))
+        obs = generate(SimOptions(**cell.sim), seed=cell.seed, trial=int(trial), stream=cell.crn_stream)
     except Exception as exc:  # noqa: BLE001 -- a bad draw is a status, not a crash
         return [_failure_row(base, m, f"simulate: {type(exc).__name__}: {exc}") for m in methods]
     base.update(uncertainty_columns(obs, cell))

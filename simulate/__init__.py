@@ -20,27 +20,32 @@ from .scene import Scene, SceneError, sample_scene
 GENERATOR = "lidarcam.simulate/1"
 
 
-def trial_rngs(options: SimOptions, seed: int, trial: int) -> tuple[np.random.Generator, ...]:
+def trial_rngs(options: SimOptions, seed: int, trial: int, stream: int | None = None
+               ) -> tuple[np.random.Generator, ...]:
     """Independent generators (geometry, lidar noise, camera noise) of one trial.
 
     Derived from ``SeedSequence(entropy=seed, spawn_key=(settings_hash(options), trial))``: the stream of a
-    trial depends only on the base seed, the settings and the trial index, never on process order.
+    trial depends only on the base seed, the settings and the trial index, never on process order. With
+    ``stream`` (common random numbers) ``stream`` replaces the settings hash, so trial ``t`` draws the same
+    random numbers under every setting and differences between settings are not sampling noise.
     """
-    ss = np.random.SeedSequence(entropy=int(seed), spawn_key=(settings_hash(options), int(trial)))
+    key = settings_hash(options) if stream is None else int(stream)
+    ss = np.random.SeedSequence(entropy=int(seed), spawn_key=(key, int(trial)))
     return tuple(np.random.default_rng(s) for s in ss.spawn(3))
 
 
-def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0
+def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | None = None
                    ) -> tuple[Scene, list[np.ndarray], list[np.ndarray], list[np.ndarray | None]]:
     """One trial's truth and measurements: (scene, scans (per board (K_i,2) in the lidar frame, metres,
     ordered by bearing), camera-estimated ``T_cam_board`` per board (4x4), the image corners (J,2) each pose
     came from (None in ``exact`` mode)).
 
     Boards are separate captures unless ``shared_scan`` (then one scan, nearest hit wins). In ``image``
-    mode a board whose checkerboard is not detected is re-drawn (it counts as a failed attempt).
+    mode a board whose checkerboard is not detected is re-drawn (it counts as a failed attempt). ``stream``:
+    see ``trial_rngs``.
     """
     o = options
-    rng_geo, rng_lidar, rng_cam = trial_rngs(o, seed, trial)
+    rng_geo, rng_lidar, rng_cam = trial_rngs(o, seed, trial, stream)
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     spec = BoardSpec.of(o)
     cam_poses: list[np.ndarray] = []
@@ -68,16 +73,16 @@ def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0
     return scene, scans, cam_poses, corners
 
 
-def generate(options: SimOptions, seed: int = 0, trial: int = 0) -> Observations:
+def generate(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | None = None) -> Observations:
     """One simulated calibration problem with its ground truth ``T_lidar_cam``.
 
     ``meta``: generator name, the options as a dict, seed, trial, settings hash, and (when the camera poses
     are estimated, ``pose_mode`` pixel or image) the true ``T_cam_board`` per board. In those modes every board
     also carries its image corners (``corners_px``, ``corners_board``) and the observations the camera
-    (pinhole, no distortion).
+    (pinhole, no distortion). ``stream`` (common random numbers, see ``trial_rngs``) is in ``meta`` when given.
     """
     o = options
-    scene, scans, cam_poses, corners = simulate_trial(o, seed, trial)
+    scene, scans, cam_poses, corners = simulate_trial(o, seed, trial, stream)
     P = checkerboard_corners(o)
     boards = tuple(BoardObservation(T, scene.outline, s, uv, None if uv is None else P)
                    for T, s, uv in zip(cam_poses, scans, corners, strict=True))
@@ -85,6 +90,8 @@ def generate(options: SimOptions, seed: int = 0, trial: int = 0) -> Observations
         Camera(camera_matrix(o.focal_px, o.cam_width, o.cam_height), [], o.cam_width, o.cam_height)
     meta = {"generator": GENERATOR, "options": options.to_dict(), "seed": int(seed), "trial": int(trial),
             "settings_hash": settings_hash(options)}
+    if stream is not None:
+        meta["stream"] = int(stream)
     if options.pose_mode != "exact":
         meta["T_cam_board_true"] = scene.T_cam_board.tolist()
     return Observations(boards, scene.T_lidar_cam, meta, camera)

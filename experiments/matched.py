@@ -1,0 +1,102 @@
+"""``make reproduce-paper PRESET=paper-matched``: the paper's sweeps under a preset, judged beside the default.
+
+    python -m experiments.matched [--preset paper-matched] [--trials 500] [--compare-trials 500 | 0]
+                                  [--results results] [--n-jobs -1] [OVERRIDE ...]
+
+Runs ``conf/experiment/boards.yaml`` and ``noise.yaml`` with ``preset=<preset>`` (``conf/preset/``) and the
+paper's four methods (``methods=seed``: the claims compare only those), writes tables and figures into
+``<results>/<preset>/``; then, unless ``--compare-trials 0``, the same sweeps under the default preset into
+``<results>/<preset>/default/`` (seeded as ``make reproduce-paper``: the same simulated
+trials, so its first 100 trials give the default report's valid rates). ``REPORT.md`` judges every claim under
+both with paired 95% bootstrap intervals (``experiments.claim_stats``) and reads the search's tables
+(``<results>/search/``) for the sensitivity. Re-running resumes; ``timings.json`` keeps the measured wall
+times of each part.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import pandas as pd
+
+from .aggregate import write_tables
+from .figures import draw_sweep
+from .reproduce import PAPER_EXPERIMENTS, experiment_cells
+from .runner import load_cell, run_cells
+
+RUN_OVERRIDES = ("methods=seed", "metrics.uncertainty=false")  # the claims read neither the others nor CRLBs
+
+
+def run_preset(preset: str | None, trials: int, results_dir: str, out: Path, n_jobs: int,
+               overrides: Sequence[str] = (), figures: bool = True, run: bool = True) -> float:
+    """Run both paper sweeps under ``preset`` (None: the default), write their tables into ``out``; seconds.
+    ``run=False``: tables of the trials already stored (up to ``trials`` per setting), nothing computed."""
+    t0 = time.perf_counter()
+    extra = [f"n_trials={trials}", f"results_dir={results_dir}", *RUN_OVERRIDES, *overrides]
+    if preset:
+        extra.append(f"preset={preset}")
+    cells = {e: experiment_cells(e, extra) for e in PAPER_EXPERIMENTS}
+    if run:
+        run_cells([c for cs in cells.values() for c in cs], n_jobs=n_jobs, label=f"reproduce {preset or 'default'}")
+    for sweep, cs in cells.items():
+        write_tables(pd.concat([load_cell(c) for c in cs], ignore_index=True), sweep, out)
+        if figures:
+            draw_sweep(out, sweep)
+            for pdf in (out / "figures").glob("*.pdf"):
+                pdf.unlink()  # PNG only: the PDFs of the default report are enough
+    return time.perf_counter() - t0
+
+
+def matched(preset: str = "paper-matched", trials: int = 500, compare_trials: int = 500,
+            results_dir: str = "results", n_jobs: int = -1, overrides: Sequence[str] = (), run: bool = True,
+            compare_from: str | None = None) -> dict:
+    from .matched_report import write_matched_report
+
+    out = Path(results_dir) / preset
+    out.mkdir(parents=True, exist_ok=True)
+    timings_path = out / "timings.json"
+    timings = json.loads(timings_path.read_text()) if timings_path.exists() else {}
+    if run:
+        timings[f"{preset}_s"] = run_preset(preset, trials, results_dir, out, n_jobs, overrides)
+        timings[f"{preset}_trials"] = trials
+    else:
+        run_preset(preset, trials, results_dir, out, n_jobs, overrides, run=False)
+    if compare_from:  # the default's tables of an earlier run (e.g. results/paper), copied as they are
+        (out / "default").mkdir(exist_ok=True)
+        for f in Path(compare_from).glob("*_*.*"):
+            if f.name.startswith(("summary_", "trials_", "settings_")):
+                shutil.copy(f, out / "default" / f.name)
+    elif compare_trials:
+        timings["default_s"] = run_preset(None, compare_trials, results_dir, out / "default", n_jobs, overrides,
+                                          figures=False)
+        timings["default_trials"] = compare_trials
+    timings_path.write_text(json.dumps(timings, indent=1) + "\n")
+    t0 = time.perf_counter()
+    report = write_matched_report(out, preset, Path(results_dir) / "search")
+    return {"out": out, "report": report, "report_s": time.perf_counter() - t0, **timings}
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to every sweep")
+    ap.add_argument("--preset", default="paper-matched", help="conf/preset/<name>.yaml")
+    ap.add_argument("--trials", type=int, default=500, help="trials per setting under the preset")
+    ap.add_argument("--compare-trials", type=int, default=500, help="trials per setting under the default (0: skip)")
+    ap.add_argument("--results", default="results")
+    ap.add_argument("--n-jobs", type=int, default=-1)
+    ap.add_argument("--no-run", action="store_true", help="tables and report of the stored trials only")
+    ap.add_argument("--compare-from", default=None, help="take the default's tables from this folder instead")
+    a = ap.parse_args(argv)
+    r = matched(a.preset, a.trials, a.compare_trials, a.results, a.n_jobs, a.overrides, not a.no_run,
+                a.compare_from)
+    print(", ".join(f"{k} {v:.1f}" for k, v in r.items() if k.endswith("_s")))
+    print(f"Report: {r['report']}")
+
+
+if __name__ == "__main__":
+    main()
