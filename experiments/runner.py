@@ -38,6 +38,7 @@ from calib_core.metrics import (
     pose_errors,
 )
 from calib_core.uncertainty import conditioning, crlb
+from simulate.options import hashed_settings
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -81,7 +82,7 @@ class Cell:
     @property
     def key(self) -> str:
         """Readable, stable folder name: board count, noise, and a hash of every setting that shapes a row."""
-        payload = json.dumps({"sim": self.sim, "seed": self.seed, "metrics": self.metrics,
+        payload = json.dumps({"sim": hashed_settings(self.sim), "seed": self.seed, "metrics": self.metrics,
                               "method_options": {m: self.method_options[m] for m in sorted(self.method_options)}},
                              sort_keys=True, default=str)
         digest = hashlib.sha1(payload.encode()).hexdigest()[:10]

@@ -13,7 +13,8 @@ from calib_core.transforms import invert_T
 
 from .camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners, observe_board_pose, render_board_image
 from .lidar import beam_bearings, cast_scan
-from .options import SimOptions, settings_hash
+from .options import SimOptions, contamination_hash, hashed_settings, settings_hash
+from .outliers import contaminate, contamination_rng
 from .scene import Scene, SceneError, sample_scene
 
 GENERATOR = "lidarcam.simulate/1"
@@ -68,12 +69,18 @@ def generate(options: SimOptions, seed: int = 0, trial: int = 0) -> Observations
     """One simulated calibration problem with its ground truth ``T_lidar_cam``.
 
     ``meta``: generator name, the options as a dict, seed, trial, settings hash, and (when the camera poses
-    are estimated, ``pose_mode`` pixel or image) the true ``T_cam_board`` per board.
+    are estimated, ``pose_mode`` pixel or image) the true ``T_cam_board`` per board; with contamination on
+    (``simulate.outliers``), ``wrong_boards``: the boards whose scan is another object's segment.
     """
     scene, scans, cam_poses = simulate_trial(options, seed, trial)
+    wrong: list[int] = []
+    if hashed_settings(options.to_dict()) != options.to_dict():  # some contamination is on
+        scans, wrong = contaminate(scans, options, contamination_rng(seed, contamination_hash(options), trial))
     boards = tuple(BoardObservation(T, scene.outline, s) for T, s in zip(cam_poses, scans, strict=True))
     meta = {"generator": GENERATOR, "options": options.to_dict(), "seed": int(seed), "trial": int(trial),
             "settings_hash": settings_hash(options)}
+    if wrong:
+        meta["wrong_boards"] = wrong
     if options.pose_mode != "exact":
         meta["T_cam_board_true"] = scene.T_cam_board.tolist()
     return Observations(boards, scene.T_lidar_cam, meta)

@@ -12,6 +12,7 @@ from ..refine import refine
 from ..registry import Method
 from ..residuals import perturb
 from ..result import SolveFailure
+from ..search import consensus_search, finish_search
 from ..selection import EDGE_SIGMA_M, OUTLINE_SIGMA_M, lidarcam_residuals
 from ..selection import lidarcam as lidarcam_score
 from ..solvers.candidates import minimal_candidates
@@ -23,7 +24,6 @@ from ..uncertainty import (
     conditioning,
     degeneracy_warnings,
     refinement_covariance,
-    scan_noise_estimate,
 )
 from .suffixes import F_SCALE_SIGMAS
 
@@ -100,59 +100,84 @@ def refine_start(obs: Observations, data: ScanData, T0: np.ndarray, sopts: dict,
     return final, r, T1, False
 
 
+def select_and_refine(obs: Observations, C: np.ndarray, sopts: dict, *, n_refine: int, loss: str, f_scale: float,
+                      max_nfev: int, do_polish: bool, polish_threshold: float, distinct_rot_deg: float,
+                      distinct_trans_m: float):
+    """Score candidates ``C`` with ``selection.lidarcam`` on ``obs``, refine the ``n_refine`` best distinct ones
+    (``refine_start``) and return (score, RefineResult, T, polished, start T) of the best."""
+    starts = best_distinct(C, lidarcam_score(obs, C, **sopts), n_refine, distinct_rot_deg, distinct_trans_m)
+    if not starts:
+        raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
+    data = obs.scan_data
+    tries = [(*refine_start(obs, data, T0, sopts, loss=loss, f_scale=f_scale, max_nfev=max_nfev,
+                            do_polish=do_polish, polish_threshold=polish_threshold), T0) for T0 in starts]
+    return min(tries, key=lambda x: x[0])
+
+
 def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine: int = 3, loss: str = "linear",
              f_scale: float | None = None, edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
              behind_penalty: float = np.inf, use_zhang_pless: bool = True, distinct_rot_deg: float = 1.0,
              distinct_trans_m: float = 0.05, min_conditioning: float = 1e-6, warn_min_boards: int = 4,
              warn_min_normal_spread_deg: float = 5.0, warn_min_conditioning: float = 1e-3, max_nfev: int = 100,
-             polish: bool = True, polish_threshold: float = 10.0, **solver_options):
+             polish: bool = True, polish_threshold: float = 10.0, trim_points: bool = True,
+             reject_boards: bool = True, **solver_options):
     """Our method.
 
-    1. Candidates (``candidate_pool``): the minimal solver on all board triples (``solver_options`` go to it),
-       plus the linear Zhang & Pless solution when there are >= 5 boards (``use_zhang_pless``).
-    2. Score every candidate with ``selection.lidarcam`` (range residuals in units of the noise std
-       ``range_sigma_m``, default estimated from the scan lines; endpoint and outline terms; boards behind the camera).
-    3. Refine the ``n_refine`` best distinct candidates (differing by ``distinct_rot_deg`` or
-       ``distinct_trans_m``) by maximum likelihood on the range residuals (``loss``, ``f_scale``); keep the one
-       whose refined pose scores least. With ``polish``, a refined pose whose endpoint and outline terms exceed
-       ``polish_threshold`` (the range optimum puts scan points off the boards) is refined further on the whole
-       ``selection.lidarcam`` cost (numerical Jacobian) and kept when that scores less.
-    4. Covariance ``sigma^2 (J^T J)^-1`` (``range_sigma_m`` or estimated from the final residuals), conditioning and
-       ``info["warnings"]``; after a polish the covariance is still that of the range model at the answer
-       (it ignores the outline information: conservative). Fails with a reason when no candidate
-       exists, none scores finite, or the refined pose's conditioning is below ``min_conditioning``.
+    1. Point-level trimming (``trim_points``; ``calib_core.inliers``): scan points off their board's robust line
+       (gross outliers, mixed pixels at the ends) are left out.
+    2. Consensus over boards (``reject_boards``; ``calib_core.consensus``): hypotheses from the minimal solver on
+       board triples (all while few, sampled adaptively beyond) and Zhang & Pless on sampled subsets, scored on
+       every board by a per-board chi-square test of the noise model; local optimisation of the best few on their
+       consensus sets. Boards that fail are left out (``info["boards_rejected"]``).
+    3. On the consensus boards: every hypothesis computed from them is scored with ``selection.lidarcam`` (range
+       residuals in units of the noise std ``range_sigma_m``, default estimated from the scan lines; endpoint and
+       outline terms; boards behind the camera); the ``n_refine`` best distinct ones (differing by
+       ``distinct_rot_deg`` or ``distinct_trans_m``) are refined by maximum likelihood on the range residuals
+       (``loss``, ``f_scale``), polished on the whole cost when the outlines disagree (``polish``,
+       ``polish_threshold``); the best is kept.
+    4. A final per-board test at the refined pose (boards that fail are left out and the pose refined again) and
+       a final point test (range residuals beyond ``inliers.TRIM_SIGMAS`` stds left out, refined again).
+    5. Covariance ``sigma^2 (J^T J)^-1`` on the boards used, conditioning and ``info["warnings"]``. Fails with a
+       reason when no candidate exists, fewer than 3 consistent boards remain, or the conditioning of the
+       refined pose is below ``min_conditioning``.
     """
-    C, reasons = candidate_pool(obs, use_zhang_pless, **solver_options)
-    if len(C) == 0:
-        raise SolveFailure("no candidate: " + "; ".join(reasons))
-    sigma = range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs)
+    sigma_opt = range_sigma_m
+    search = consensus_search(obs, range_sigma_m=range_sigma_m, outline_sigma_m=outline_sigma_m,
+                              trim=trim_points, reject=reject_boards, use_zhang_pless=use_zhang_pless,
+                              **solver_options)
+    sigma = search.sigma_m
     sopts = {"range_sigma_m": sigma, "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m,
              "behind_penalty": behind_penalty}
-    starts = best_distinct(C, lidarcam_score(obs, C, **sopts), n_refine, distinct_rot_deg, distinct_trans_m)
-    if not starts:
-        raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
-    data = obs.scan_data
     fs = f_scale if f_scale is not None else F_SCALE_SIGMAS * sigma
-    tries = [(*refine_start(obs, data, T0, sopts, loss=loss, f_scale=fs, max_nfev=max_nfev, do_polish=polish,
-                            polish_threshold=polish_threshold), T0) for T0 in starts]
-    final, r, T_best, polished, T0 = min(tries, key=lambda x: x[0])
-    cond = conditioning(obs, T_best)
+    ropts = {"n_refine": n_refine, "loss": loss, "f_scale": fs, "max_nfev": max_nfev, "do_polish": polish,
+             "polish_threshold": polish_threshold, "distinct_rot_deg": distinct_rot_deg,
+             "distinct_trans_m": distinct_trans_m}
+    final, r, T_best, polished, T0 = select_and_refine(search.obs_used, search.pool, sopts, **ropts)
+    fin = finish_search(search, T_best, reject=reject_boards, refit=lambda o, T: select_and_refine(
+        o, T[None], sopts, **{**ropts, "n_refine": 1}))
+    if fin.refit is not None:
+        final, r, T_best, polished, _ = fin.refit
+    obs_u, C = fin.obs_used, search.all_candidates
+    cond = conditioning(obs_u, T_best)
     if not cond >= min_conditioning:
         raise SolveFailure(f"lidarcam: degenerate board set, the extrinsic is not determined (inverse condition "
                            f"number {cond:.1e} < {min_conditioning:g})", C)
     try:
-        cov = refinement_covariance(data, T_best, "range", range_sigma_m)
+        cov = refinement_covariance(obs_u.scan_data, T_best, "range", sigma_opt)
     except UncertaintyError as err:
         raise SolveFailure(f"lidarcam: {err}", C) from None
-    warnings = degeneracy_warnings(obs, T_best, min_boards=warn_min_boards,
-                                   min_normal_spread_deg=warn_min_normal_spread_deg,
-                                   min_conditioning=warn_min_conditioning)
-    start = float(lidarcam_score(obs, T0[None], **sopts)[0])
-    return T_best, C, {"cost": final, "polished": polished, "score_start": start, "n_refined": len(starts),
+    warnings = fin.warnings + degeneracy_warnings(obs_u, T_best, min_boards=warn_min_boards,
+                                                  min_normal_spread_deg=warn_min_normal_spread_deg,
+                                                  min_conditioning=warn_min_conditioning)
+    start = float(lidarcam_score(search.obs_used, T0[None], **sopts)[0])
+    return T_best, C, {"cost": final, "polished": polished, "score_start": start, "n_refined": n_refine,
                        "sigma_m_selection": sigma, "refine_cost": r.cost, "refine_nfev": r.nfev, "covariance": cov,
-                       "conditioning": cond, "warnings": warnings}
+                       "conditioning": cond, "warnings": warnings, **fin.info}
 
 
 LIDARCAM = Method("lidarcam", lidarcam, 3, "this project (lidarcam)",
-                  "minimal-solver (+ Zhang & Pless) candidates; all-evidence likelihood selection; ML refinement "
-                  "of the best few; covariance and degeneracy warnings", cost="O(N^4) candidate scoring")
+                  "point trimming; consensus over boards (minimal-solver triples + Zhang & Pless subsets, "
+                  "per-board chi-square tests; inconsistent boards rejected and named); all-evidence likelihood "
+                  "selection; ML refinement of the best few; covariance and degeneracy warnings",
+                  cost="about linear in N: all C(N,3) triples up to 12 boards, then an "
+                  "adaptively sampled, bounded set; per-board tests O(hypotheses x N)")
