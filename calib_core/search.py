@@ -23,8 +23,9 @@ from .result import SolveFailure
 from .transforms import matrix_to_rotvec
 from .uncertainty import scan_noise_estimate
 
-POOL_MAX = 32
-"""When triples were sampled, the final selection scores at most this many hypotheses (best MSAC first)."""
+POOL_MAX = 64
+"""The final selection scores at most this many hypotheses, the best by MSAC cost (the per-board statistics are
+sufficient statistics of the same evidence, so the all-evidence score's best few are among them)."""
 LO_STARTS = 3
 """Distinct best MSAC hypotheses that get a local optimisation on their consensus sets."""
 LO_ROUNDS = 4
@@ -135,8 +136,7 @@ def consensus_search(obs: Observations, *, range_sigma_m: float | None, outline_
             raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(good)} boards agree on one extrinsic "
                                f"(at least 3 are needed); the others fail the per-board test", H.T)
     within = np.flatnonzero(H.within(used))
-    if not H.exhaustive:
-        within = within[np.argsort(cost[within], kind="stable")[:POOL_MAX]]
+    within = within[np.argsort(msac_cost(H.q[within][:, used]), kind="stable")[:POOL_MAX]]
     pool = np.concatenate([H.T[within]] + ([np.array(lo_T)] if lo_T else []))
     return Search(obs_t, rep, good, lines, H, used, pool, sigma, outline_sigma_m, rejected)
 

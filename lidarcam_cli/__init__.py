@@ -17,6 +17,8 @@ def _cmd_methods(args) -> int:
     print(f"{'method':<{w}}  min boards  citation / summary")
     for m in table.values():
         print(f"{m.name:<{w}}  {m.min_boards:>10}  {m.citation}\n{'':<{w}}  {'':>10}  {m.summary}")
+        if m.cost:
+            print(f"{'':<{w}}  {'':>10}  cost: {m.cost}")
     return 0
 
 
@@ -38,8 +40,15 @@ def _cmd_calibrate(args) -> int:
             print(f"1-sigma: rotation {res.sigma_rot_deg:.3f} deg, translation {res.sigma_trans_mm:.1f} mm")
         if "conditioning" in res.info:
             print(f"conditioning (inverse condition number, 1 = ideal, < 1e-3 poor): {res.info['conditioning']:.2e}")
-        for w in res.info.get("warnings", []):
-            print(f"warning: {w}")
+        if res.boards_used is not None:
+            print(f"boards used ({len(res.boards_used)} of {obs.n_boards}): "
+                  + ", ".join(map(str, res.boards_used)))
+            for r in res.boards_rejected:
+                stat = "" if r.get("statistic") is None else f" (statistic {r['statistic']:.3g})"
+                print(f"board {r['index']} rejected{stat}: {r['reason']}")
+        for w in res.warnings:
+            if not (res.boards_rejected and w.startswith("board ") and " left out: " in w):
+                print(f"warning: {w}")
         if obs.T_lidar_cam_true is not None:
             e_R, e_t = pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)
             print(f"against ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm")
