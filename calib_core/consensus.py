@@ -103,11 +103,20 @@ def _statistics(obs: Observations, L: BoardLines, T: np.ndarray, outline_sigma_m
     # scan ends in each board's frame: p_W = Phi^T (R^T (p_L - t) - Delta)
     p_C = np.einsum("mba,mnkb->mnka", R, L.ends[None] - t[:, None, None, :])
     depth = p_C[..., 2].mean(axis=-1)                                         # scan centre's depth in {C}
-    for i, b in enumerate(obs.boards):
-        p_W = (p_C[:, i] - b.T_cam_board[:3, 3]) @ b.T_cam_board[:3, :3]
-        q[:, i] += np.sum((outside_outline(p_W[..., :2], b.outline) / outline_sigma_m) ** 2, axis=-1)
+    T_cb = np.array([b.T_cam_board for b in obs.boards])
+    p_W = np.einsum("mnkb,nba->mnka", p_C - T_cb[None, :, None, :3, 3], T_cb[:, :3, :3])
+    for idx, outline in _outline_groups(obs):          # boards sharing one outline at once
+        q[:, idx] += np.sum((outside_outline(p_W[:, idx, :, :2], outline) / outline_sigma_m) ** 2, axis=-1)
     q = np.where((depth > 0) & np.isfinite(q), q, np.inf)
     return q
+
+
+def _outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(board indices, outline) of each distinct outline among the boards."""
+    groups: dict[bytes, list[int]] = {}
+    for i, b in enumerate(obs.boards):
+        groups.setdefault(np.ascontiguousarray(b.outline).tobytes() + bytes([len(b.outline)]), []).append(i)
+    return [(np.array(idx), obs.boards[idx[0]].outline) for idx in groups.values()]
 
 
 def data_seed(obs: Observations) -> int:

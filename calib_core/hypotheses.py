@@ -6,6 +6,7 @@ and, from 5 boards on, Zhang & Pless on the whole set and on sampled subsets. Sa
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,15 +64,16 @@ def _solve(obs: Observations, lines: BoardLines, tri: np.ndarray, solver_options
 def triple_hypotheses(obs: Observations, lines: BoardLines, outline_sigma_m: float, solver_options: dict):
     """(T, source, q, exhaustive, n_triples): all triples while few, else adaptive sampling."""
     N = obs.n_boards
-    all_tri = board_triples(N)
-    if len(all_tri) <= EXHAUSTIVE_TRIPLES:
+    n_all = math.comb(N, 3)
+    if n_all <= EXHAUSTIVE_TRIPLES:
+        all_tri = board_triples(N)
         T, src = _solve(obs, lines, all_tri, solver_options)
         return T, src, board_statistics(obs, lines, T, outline_sigma_m), True, len(all_tri)
     rng = np.random.default_rng(data_seed(obs))
     seen: set = set()
     Ts, srcs, qs = [], [], []
     best_inliers = 0
-    while len(seen) < min(MAX_SAMPLED_TRIPLES, len(all_tri)):
+    while len(seen) < min(MAX_SAMPLED_TRIPLES, n_all):
         tri = sample_triples(N, SAMPLE_BATCH, rng, seen)
         if len(tri) == 0:
             break

@@ -25,7 +25,10 @@ from .uncertainty import scan_noise_estimate
 
 POOL_MAX = 64
 """The final selection scores at most this many hypotheses, the best by MSAC cost (the per-board statistics are
-sufficient statistics of the same evidence, so the all-evidence score's best few are among them)."""
+sufficient statistics of the same evidence, so the all-evidence score's best few are among them) ..."""
+POOL_MAX_SAMPLED = 8
+"""... and this many when triples were sampled (many boards: the local optimisation's results are in the pool
+too, and the all-evidence score costs O(pool x points))."""
 LO_STARTS = 3
 """Distinct best MSAC hypotheses that get a local optimisation on their consensus sets."""
 LO_ROUNDS = 4
@@ -136,7 +139,8 @@ def consensus_search(obs: Observations, *, range_sigma_m: float | None, outline_
             raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(good)} boards agree on one extrinsic "
                                f"(at least 3 are needed); the others fail the per-board test", H.T)
     within = np.flatnonzero(H.within(used))
-    within = within[np.argsort(msac_cost(H.q[within][:, used]), kind="stable")[:POOL_MAX]]
+    cap = POOL_MAX if H.exhaustive else POOL_MAX_SAMPLED
+    within = within[np.argsort(msac_cost(H.q[within][:, used]), kind="stable")[:cap]]
     pool = np.concatenate([H.T[within]] + ([np.array(lo_T)] if lo_T else []))
     return Search(obs_t, rep, good, lines, H, used, pool, sigma, outline_sigma_m, rejected)
 
