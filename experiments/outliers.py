@@ -4,7 +4,8 @@ and the clean-data check of the default method (valid rate, RMS error over the C
     python -m experiments.outliers [--trials 100] [--results results] [--n-jobs -1]
     python -m experiments.outliers --clean [--trials 100]          # clean-data check only, printed
 
-Writes ``<results>/outliers/``: ``summary_outliers.csv`` (per contamination x method), the figure
+Writes ``<results>/outliers/``: the standard tables of ``experiments.aggregate`` (``summary_outliers.csv``,
+``trials_outliers.csv``), ``robustness_outliers.csv`` (per contamination x method, the columns below), the figure
 ``figures/outliers.png`` (and PDF) and ``REPORT.md``. "Accurate" is the robustness target's bound (1.5 deg and
 80 mm); "valid" the paper's (8 deg, 0.8 m). For methods that reject boards: the share of the simulated wrong
 boards caught, the share of trials naming every wrong board, and the share of trials losing a good board.
@@ -19,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .aggregate import write_tables
 from .catalog import method_colour, method_label, method_order
 from .reproduce import experiment_cells
 from .runner import load_cell, run_cells
@@ -122,8 +124,9 @@ def run(trials: int, results_dir: str, n_jobs: int) -> Path:
     df = pd.concat([load_cell(c) for c in cells], ignore_index=True)
     out = Path(results_dir) / "outliers"
     out.mkdir(parents=True, exist_ok=True)
+    write_tables(df, "outliers", out)                     # the standard per-setting tables
     summary = summarise(df)
-    summary.to_csv(out / "summary_outliers.csv", index=False, float_format="%.6g")
+    summary.to_csv(out / "robustness_outliers.csv", index=False, float_format="%.6g")
     draw(summary, out)
     (out / "REPORT.md").write_text(report(summary, trials, f"python -m experiments.outliers --trials {trials}"))
     return out
@@ -142,7 +145,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(clean_check(args.trials).to_string(index=False, float_format=lambda x: f"{x:.3f}"))
         return
     out = run(args.trials, args.results, args.n_jobs)
-    print(f"wrote {out}/summary_outliers.csv, {out}/figures/outliers.png, {out}/REPORT.md")
+    print(f"wrote {out}/robustness_outliers.csv, {out}/figures/outliers.png, {out}/REPORT.md")
 
 
 if __name__ == "__main__":
