@@ -40,6 +40,22 @@ def pose_errors(T: np.ndarray, T_true: np.ndarray) -> tuple[np.ndarray, np.ndarr
             translation_error_m(T[..., :3, 3], T_true[:3, 3]))
 
 
+def pose_error_vector(T: np.ndarray, T_true: np.ndarray) -> np.ndarray:
+    """The error of ``T`` in the covariance's parameters: (rotation vector of ``R R_true^T`` (rad, lidar frame),
+    ``t - t_true`` (m)), a 6-vector; its rotation norm is ``e_R`` in radians."""
+    from scipy.spatial.transform import Rotation
+
+    T, T_true = np.asarray(T, float), np.asarray(T_true, float)
+    return np.r_[Rotation.from_matrix(T[:3, :3] @ T_true[:3, :3].T).as_rotvec(), T[:3, 3] - T_true[:3, 3]]
+
+
+def nees(T: np.ndarray, T_true: np.ndarray, covariance: np.ndarray) -> float:
+    """Normalised estimation error squared ``e^T P^-1 e`` (``e = pose_error_vector``): chi-square with 6 degrees
+    of freedom (mean 6) when the covariance ``P`` is honest."""
+    e = pose_error_vector(T, T_true)
+    return float(e @ np.linalg.solve(np.asarray(covariance, float), e))
+
+
 def is_valid(e_R_deg, e_t_m, max_rot_deg: float = VALID_MAX_ROT_DEG,
              max_trans_m: float = VALID_MAX_TRANS_M) -> np.ndarray:
     """A valid solution: ``e_R < max_rot_deg`` and ``e_t < max_trans_m`` (paper: 8 deg, 0.8 m). NaN is invalid."""

@@ -1,6 +1,6 @@
 """The data model: one board view (camera pose of the board + lidar scan on it) and a set of them.
 
-Frames (see METHOD.md): ``{L}`` lidar, scan plane z = 0; ``{C}`` camera (z optical axis, y down);
+Frames (see docs/METHOD.md): ``{L}`` lidar, scan plane z = 0; ``{C}`` camera (z optical axis, y down);
 ``{W}_i`` board i, board plane z = 0. Units: metres, radians. ``T_a_b`` maps points of b into a.
 """
 

@@ -81,7 +81,7 @@ RESIDUALS = {"plane": plane_residuals, "range": range_residuals}
 def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     """(M,N,2,3) first and last scan point of each board in that board's frame, per candidate.
 
-    ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (METHOD.md eq. 7), metres.
+    ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (docs/METHOD.md eq. 7), metres.
     """
     ends = np.array([[b.scan_3d[0], b.scan_3d[-1]] for b in obs.boards])   # (N,2,3) lidar frame
     T_cb = np.array([b.T_cam_board for b in obs.boards])                    # (N,4,4)
@@ -91,7 +91,7 @@ def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
 
 
 def point_line_errors(obs: Observations, candidates: np.ndarray) -> np.ndarray:
-    """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (METHOD.md eq. 8-12).
+    """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (docs/METHOD.md eq. 8-12).
 
     Each endpoint is paired with the board edge nearest to it (point-to-line distance), the two endpoints
     with different edges (the pair of distinct edges with the least summed distance). The error of an

@@ -2,7 +2,7 @@
 
 A scorer is ``f(obs, candidates (M,4,4) T_lidar_cam, **options) -> (M,) cost``. ``point_to_plane`` is
 Vasconcelos' choice; ``peng2022`` is the paper's uncertainty-weighted joint likelihood of the point-line
-error (METHOD.md eq. 1-12), returned as minus its log; ``lidarcam`` is ours: a negative log-likelihood that
+error (docs/METHOD.md eq. 1-12), returned as minus its log; ``lidarcam`` is ours: a negative log-likelihood that
 uses all the evidence (every scan point's range residual, both endpoints against the board edges, scan points
 inside the board outline, boards in front of the camera).
 """
@@ -32,7 +32,7 @@ def point_to_plane(obs: Observations, candidates: np.ndarray) -> np.ndarray:
 def peng2022(obs: Observations, candidates: np.ndarray, *, delta_m: float = 0.030,
              normalise_candidates: bool = True, beta_norm: str = "sum", beta_eps: float = 1e-12,
              error: str = "point_line", weighting: str = "uncertainty", return_details: bool = False):
-    """Minus the log of the paper's uncertainty-weighted joint likelihood (METHOD.md eq. 1-6), per candidate.
+    """Minus the log of the paper's uncertainty-weighted joint likelihood (docs/METHOD.md eq. 1-6), per candidate.
 
     Args:
         delta_m: ``delta`` of eq. 1 in metres (the paper's 30 mm).
@@ -94,7 +94,7 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
 
     ``cost = 0.5 sum_k (e_k / sigma)^2 + 0.5 sum_{i,end} (d_{i,end} / edge_sigma)^2 + 0.5 sum_k (o_k / outline_sigma)^2
     + behind_penalty * (boards behind the camera)`` with ``e_k`` the range residual of every scan point against
-    its board plane, ``d`` the point-line errors of the two endpoints of every board (METHOD.md eq. 8-12), ``o_k``
+    its board plane, ``d`` the point-line errors of the two endpoints of every board (docs/METHOD.md eq. 8-12), ``o_k``
     the distance of every scan point, mapped into its board's frame, outside the board outline, and a board
     "behind the camera" when the centroid of its scan points mapped into the camera frame has depth <= 0.
 

@@ -84,7 +84,7 @@ class Crlb:
 
     Attributes:
         rot_rms_deg: ``sqrt(trace(cov[:3,:3]))`` in degrees: the bound on the RMS of the norm of the rotation-vector
-            error ``log(R R_true^T)``, i.e. the RMS of the geodesic angle, which is exactly ``e_R`` of METHOD.md
+            error ``log(R R_true^T)``, i.e. the RMS of the geodesic angle, which is exactly ``e_R`` of docs/METHOD.md
             eq. 13. Compare it with ``sqrt(mean(e_R^2))`` over trials, not with ``mean(e_R)``: for a Gaussian
             error with isotropic covariance, ``mean(e_R)`` is about 0.92 times the RMS.
         trans_rms_m: ``sqrt(trace(cov[3:,3:]))``: the bound on the RMS of ``e_t = |t - t_true|`` (metres).

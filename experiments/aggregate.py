@@ -28,7 +28,7 @@ NON_SETTING = set(RESULT_COLUMNS) | {"sweep", "setting_key"}
 TRIAL_TABLE_COLUMNS = ("sweep", "setting_key", "n_boards", "noise_mm", "trial", "method", "ok", "reason", "valid",
                        "e_R_deg", "e_t_m", "n_candidates", "true_among_candidates", "some_candidate_valid",
                        "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds", "crlb_rot_deg",
-                       "crlb_trans_mm", "conditioning")
+                       "crlb_trans_mm", "conditioning", "nees", "sigma_rot_deg", "sigma_trans_mm")
 
 
 def wilson_interval(k, n, z: float = Z95) -> tuple[np.ndarray, np.ndarray]:
@@ -63,6 +63,23 @@ def _top_reason(reasons: pd.Series) -> str:
     return str(folded.value_counts().index[0])
 
 
+def _efficiency(v: pd.DataFrame) -> dict[str, float]:
+    """Over the valid trials ``v``: RMS errors, their ratio to the RMS of the CRLB (1 = efficient), and the mean and
+    median NEES (6 = honest covariance)."""
+    def rms(col):
+        x = v[col].to_numpy(float) if col in v else np.array([])
+        x = x[np.isfinite(x)]
+        return float(np.sqrt(np.mean(x**2))) if len(x) else np.nan
+
+    rms_R, rms_t = rms("e_R_deg"), 1000 * rms("e_t_m")
+    nees = v["nees"].to_numpy(float) if "nees" in v else np.array([])
+    nees = nees[np.isfinite(nees)]
+    return {"rms_e_R_deg": rms_R, "rms_e_t_mm": rms_t,
+            "rms_over_crlb_rot": rms_R / rms("crlb_rot_deg"), "rms_over_crlb_trans": rms_t / rms("crlb_trans_mm"),
+            "mean_nees": float(nees.mean()) if len(nees) else np.nan,
+            "median_nees": float(np.median(nees)) if len(nees) else np.nan}
+
+
 def summarise(df: pd.DataFrame) -> pd.DataFrame:
     """One row per setting x method of the trial rows ``df`` (see the module docstring for the columns)."""
     if df.empty:
@@ -89,6 +106,7 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
                      "median_seconds": float(g["seconds"].median()) if g["seconds"].notna().any() else np.nan,
                      "mean_crlb_rot_deg": _nanmean(g["crlb_rot_deg"]),
                      "mean_crlb_trans_mm": _nanmean(g["crlb_trans_mm"]),
+                     **_efficiency(g.loc[valid]),
                      "median_conditioning": float(g["conditioning"].median()) if g["conditioning"].notna().any()
                      else np.nan,
                      "top_failure": _top_reason(g.loc[~ok, "reason"])})

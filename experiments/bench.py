@@ -1,6 +1,11 @@
 """``make bench``: the time of one ``calibrate`` per registered method on 8 boards (median over many
+<<<<<<< HEAD
 repetitions), how the default method's time grows with the number of boards (8, 20, 40, 100), and the minimal
 solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``).
+=======
+repetitions), the minimal solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``)
+and its accuracy on noise-free simulated triples (closed-form and eigenvalue quartic roots).
+>>>>>>> main
 
     python -m experiments.bench [--boards 8] [--problems 10] [--repeats 20] [--triples 10000]
                                 [--scaling 8,20,40,100] [--scaling-problems 3]
@@ -73,10 +78,11 @@ def time_scaling(counts: Sequence[int], n_problems: int, method: str = "lidarcam
 
 
 def triple_arrays(obs_list: list, n_triples: int):
-    """Stacked plane/line arrays of at least ``n_triples`` board triples drawn from ``obs_list``."""
+    """Stacked plane/line arrays of at least ``n_triples`` board triples drawn from ``obs_list``, and the true
+    ``T_lidar_cam`` (B,4,4) of each triple's problem."""
     from calib_core.solvers.vasconcelos import board_triples
 
-    ns, ds, ps, us = [], [], [], []
+    ns, ds, ps, us, Ts = [], [], [], [], []
     while sum(len(x) for x in ns) < n_triples:
         for obs in obs_list:
             lines = fit_lines(obs)
@@ -85,14 +91,37 @@ def triple_arrays(obs_list: list, n_triples: int):
             u = np.array([ln.direction for ln in lines])
             tri = board_triples(obs.n_boards)
             ns.append(n[tri]), ds.append(d[tri]), ps.append(p[tri]), us.append(u[tri])
-    return tuple(np.concatenate(a)[:n_triples] for a in (ns, ds, ps, us))
+            Ts.append(np.repeat(obs.T_lidar_cam_true[None], len(tri), axis=0))
+    return tuple(np.concatenate(a)[:n_triples] for a in (ns, ds, ps, us, Ts))
+
+
+def minimal_accuracy(n_boards: int, count: int, n_triples: int, quartic: str = "closed") -> dict:
+    """On noise-free simulated triples: the largest error of the candidate nearest the truth
+    (``max(|dR|_F, |dt| in m)``), over triples the solver solved, binned by the smallest singular value of
+    the triple's normal matrix (its conditioning)."""
+    from calib_core.solvers.vasconcelos import solve_triples
+
+    obs_list = [generate(SimOptions(n_boards=n_boards, noise_mm=0.0), seed=777, trial=i) for i in range(count)]
+    n, d, p, u, T = triple_arrays(obs_list, n_triples)
+    sol = solve_triples(n, d, p, u, quartic=quartic)
+    err = np.maximum(np.linalg.norm(sol.T_lidar_cam[:, :3, :3] - T[sol.triple, :3, :3], axis=(1, 2)),
+                     np.linalg.norm(sol.T_lidar_cam[:, :3, 3] - T[sol.triple, :3, 3], axis=1))
+    best = np.full(len(n), np.inf)
+    np.minimum.at(best, sol.triple, err)
+    solved = np.array([r is None for r in sol.reasons])
+    sv = np.linalg.svd(n, compute_uv=False)[:, -1]
+    out = {"quartic": quartic, "triples": len(n), "solved": int(solved.sum())}
+    for lo in (1e-3, 1e-2, 1e-1):
+        m = solved & (sv >= lo)
+        out[f"max_err(sv>={lo:g})"] = float(best[m].max()) if m.any() else float("nan")
+    return out
 
 
 def time_minimal(obs_list: list, n_triples: int, repeats: int = 3) -> dict:
     """Triples per second of one vectorised ``solve_triples`` call on ``n_triples`` triples (best of repeats)."""
     from calib_core.solvers.vasconcelos import solve_triples
 
-    n, d, p, u = triple_arrays(obs_list, n_triples)
+    n, d, p, u, _ = triple_arrays(obs_list, n_triples)
     best = float("inf")
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -126,6 +155,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     mt = time_minimal(obs_list, args.triples)
     print(f"minimal solver (solve_triples, one call, one core): {mt['triples']} triples in {mt['seconds']:.3f} s = "
           f"{mt['triples_per_s']:,.0f} triples/s ({mt['solutions']} real solutions)")
+    for quartic in ("closed", "eig"):
+        print("minimal solver accuracy on noise-free triples:", minimal_accuracy(args.boards, args.problems,
+                                                                                 args.triples, quartic))
 
 
 if __name__ == "__main__":

@@ -16,23 +16,11 @@ import numpy as np
 import pandas as pd
 
 
-def nees(res, T_true: np.ndarray) -> float:
-    """Normalised estimation error squared of a result against the truth (6 dof; its mean is 6 when the
-    covariance is right). The error is in the covariance's parameters: ``T = (exp(w) R_true, t_true + dt)``."""
-    from calib_core.transforms import matrix_to_rotvec
-
-    if not res.ok or res.covariance is None:
-        return np.nan
-    w = matrix_to_rotvec(res.T_lidar_cam[:3, :3] @ T_true[:3, :3].T)
-    e = np.r_[w, res.T_lidar_cam[:3, 3] - T_true[:3, 3]]
-    return float(e @ np.linalg.solve(res.covariance, e))
-
-
 def clean_check(trials: int, boards: Sequence[int] = (3, 4, 5, 6, 7, 8), method: str = "lidarcam") -> pd.DataFrame:
     """The paper's board sweep (20 mm, seed 0, trials 0..trials-1: the same data as ``results/paper``) with the
     default method: valid rate, RMS e_R over the mean CRLB, mean NEES, trials with a board rejected."""
     from calib_core import calibrate
-    from calib_core.metrics import is_valid, pose_errors
+    from calib_core.metrics import is_valid, nees, pose_errors
     from calib_core.uncertainty import crlb
     from simulate import SimOptions, generate
 
@@ -48,7 +36,8 @@ def clean_check(trials: int, boards: Sequence[int] = (3, 4, 5, 6, 7, 8), method:
                 v.append(bool(is_valid(e_R, e_t)))
                 if v[-1]:
                     eR.append(float(e_R))
-                    ne.append(nees(res, obs.T_lidar_cam_true))
+                    ne.append(nees(res.T_lidar_cam, obs.T_lidar_cam_true, res.covariance)
+                              if res.covariance is not None else np.nan)
                 rej += bool(res.info.get("boards_rejected"))
             else:
                 v.append(False)

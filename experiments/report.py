@@ -53,7 +53,7 @@ class Claim:
 
 
 def paper_claims() -> list[Claim]:
-    """METHOD.md "The paper's claims" and the error claims of the paper's Section 3.1 text (Fig. 4, 6)."""
+    """docs/METHOD.md "The paper's claims" and the error claims of the paper's Section 3.1 text (Fig. 4, 6)."""
     claims = [Claim("boards", "valid-solution probability +2 to +20 points vs Francisco (3-8 boards)",
                     "abstract, Fig. 3a", "points", FRANCISCO, 2, 20)]
     claims += [Claim("boards", "valid-solution probability +30% to +260% vs Zhang (relative, 3-8 boards)",
@@ -170,39 +170,28 @@ def _claim_rows(verdicts: list[Verdict]) -> list[str]:
     return lines
 
 
-def _valid_table(summary: pd.DataFrame, x: str) -> list[str]:
+def _method_table(summary: pd.DataFrame, x: str, cell) -> list[str]:
+    """A markdown table: one row per value of ``x``, one column per method, ``cell(summary row)`` in each (``-``
+    where the method has no row, or ``cell`` returns None)."""
     methods = method_order(summary["method"].unique())
     lines = [f"| {x} | " + " | ".join(method_label(m) for m in methods) + " |",
              "|---|" + "---|" * len(methods)]
     for xv, g in summary.groupby(x, sort=True):
-        cells = []
-        for m in methods:
-            r = g[g["method"] == m]
-            if r.empty:
-                cells.append("-")
-                continue
-            r = r.iloc[0]
-            cells.append(f"{100 * r.valid_rate:.0f}% [{100 * r.valid_lo95:.0f}, {100 * r.valid_hi95:.0f}]")
+        rows = [g[g["method"] == m] for m in methods]
+        cells = [(cell(r.iloc[0]) if not r.empty else None) or "-" for r in rows]
         lines.append(f"| {xv:g} | " + " | ".join(cells) + " |")
     return lines
 
 
-def _error_table(summary: pd.DataFrame, x: str) -> list[str]:
-    methods = method_order(summary["method"].unique())
-    lines = [f"| {x} | " + " | ".join(method_label(m) for m in methods) + " |",
-             "|---|" + "---|" * len(methods)]
-    for xv, g in summary.groupby(x, sort=True):
-        cells = []
-        for m in methods:
-            r = g[g["method"] == m]
-            if r.empty or r.iloc[0].n_ok == 0:
-                cells.append("-")
-                continue
-            r = r.iloc[0]
-            cells.append(f"{r.mean_e_R_deg:.2f} / {1000 * r.mean_e_t_m:.0f} (med {r.median_e_R_deg:.2f} / "
-                         f"{1000 * r.median_e_t_m:.0f})")
-        lines.append(f"| {xv:g} | " + " | ".join(cells) + " |")
-    return lines
+def _valid_cell(r) -> str:
+    return f"{100 * r.valid_rate:.0f}% [{100 * r.valid_lo95:.0f}, {100 * r.valid_hi95:.0f}]"
+
+
+def _error_cell(r) -> str | None:
+    if r.n_ok == 0:
+        return None
+    return (f"{r.mean_e_R_deg:.2f} / {1000 * r.mean_e_t_m:.0f} (med {r.median_e_R_deg:.2f} / "
+            f"{1000 * r.median_e_t_m:.0f})")
 
 
 def _mean_rate(summary: pd.DataFrame, method: str, col: str, mask=None) -> float:
@@ -333,10 +322,10 @@ def build_report(tables: str | Path) -> str:
         spec = PAPER_SWEEPS[sweep]
         fig3 = spec.valid.split("_")[0]
         lines += ["", f"## Sweep {sweep}: valid-solution probability ({fig3}), % [95% Wilson interval]", ""]
-        lines += _valid_table(summary, spec.x)
+        lines += _method_table(summary, spec.x, _valid_cell)
         lines += ["", f"## Sweep {sweep}: mean / median errors, e_R deg / e_t mm "
                   f"({spec.mean.split('_')[0]}, {spec.box.split('_')[0]})", ""]
-        lines += _error_table(summary, spec.x)
+        lines += _method_table(summary, spec.x, _error_cell)
         lines += ["", f"Figures: `figures/{spec.valid}.png`, `figures/{spec.mean}.png`, `figures/{spec.box}.png` "
                   "(and PDF)."]
     lines += ["", "## Where and why we differ", ""]

@@ -35,6 +35,7 @@ from calib_core.metrics import (
     VALID_MAX_ROT_DEG,
     VALID_MAX_TRANS_M,
     is_valid,
+    nees,
     pose_errors,
 )
 from calib_core.uncertainty import conditioning, crlb
@@ -46,7 +47,8 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 RESULT_COLUMNS = (
     "trial", "method", "ok", "reason", "e_R_deg", "e_t_m", "valid", "n_candidates", "true_among_candidates",
     "some_candidate_valid", "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds",
-    "crlb_rot_deg", "crlb_trans_mm", "conditioning", "n_wrong", "n_rejected", "wrong_caught", "good_lost",
+    "crlb_rot_deg", "crlb_trans_mm", "conditioning", "nees", "sigma_rot_deg", "sigma_trans_mm",
+    "n_wrong", "n_rejected", "wrong_caught", "good_lost",
 )
 # Columns that legitimately differ between two runs of the same settings (wall time).
 TIMING_COLUMNS = ("seconds",)
@@ -115,7 +117,8 @@ def resolve_methods(names: Iterable[str]) -> tuple[str, ...]:
 def _failure_row(base: dict, method: str, reason: str) -> dict:
     return {**base, "method": method, "ok": False, "reason": reason, "e_R_deg": np.nan, "e_t_m": np.nan,
             "valid": False, "n_candidates": 0, "true_among_candidates": False, "some_candidate_valid": False,
-            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan}
+            "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan, "seconds": np.nan,
+            "nees": np.nan, "sigma_rot_deg": np.nan, "sigma_trans_mm": np.nan}
 
 
 def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, Any]:
@@ -123,11 +126,15 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     row: dict[str, Any] = {"ok": bool(result.ok), "reason": result.reason or "", "seconds": float(result.seconds),
                            "n_candidates": result.n_candidates, "e_R_deg": np.nan, "e_t_m": np.nan,
                            "valid": False, "true_among_candidates": False, "some_candidate_valid": False,
-                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan}
+                           "best_candidate_e_R_deg": np.nan, "best_candidate_e_t_m": np.nan,
+                           "nees": np.nan, "sigma_rot_deg": np.nan, "sigma_trans_mm": np.nan}
     if result.ok:
         e_R, e_t = pose_errors(result.T_lidar_cam, T_true)
         row.update(e_R_deg=float(e_R), e_t_m=float(e_t),
                    valid=bool(is_valid(e_R, e_t, metrics["max_rot_deg"], metrics["max_trans_m"])))
+        if result.covariance is not None:
+            row.update(nees=nees(result.T_lidar_cam, T_true, result.covariance),
+                       sigma_rot_deg=result.sigma_rot_deg, sigma_trans_mm=result.sigma_trans_mm)
     if result.n_candidates:
         cR, ct = pose_errors(result.candidates, T_true)
         best = int(np.nanargmin(cR)) if np.isfinite(cR).any() else 0
@@ -260,7 +267,7 @@ def _write_atomic(df: pd.DataFrame, path: Path) -> None:
 def _write_chunk(cell: Cell, trials: Sequence[int], methods: Sequence[str], rows: list[dict]) -> None:
     cols = list(cell.columns()) + list(RESULT_COLUMNS)
     df = pd.DataFrame(rows)
-    df = df[cols + [c for c in df.columns if c not in cols]]
+    df = df.reindex(columns=cols + [c for c in df.columns if c not in cols])  # a trial_fn may omit metric columns
     tag = hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
     _write_atomic(df, cell.dir / f"chunk-{min(trials):05d}-{max(trials):05d}-{tag}.csv")
 

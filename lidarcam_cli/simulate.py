@@ -21,7 +21,7 @@ def add_parsers(subparsers) -> argparse.ArgumentParser:
     ``--seed``, ``--trial`` and ``--out``. Sets ``func`` to ``run``."""
     p = subparsers.add_parser(
         "simulate", help="write one simulated lidar-camera calibration problem (observations JSON)",
-        description="Simulate boards seen by a 2D lidar and a camera (METHOD.md, Section 3.1) and write them "
+        description="Simulate boards seen by a 2D lidar and a camera (docs/METHOD.md) and write them "
                     "with their ground truth as a lidarcam.observations/1 file.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--seed", type=int, default=0, help="base seed")

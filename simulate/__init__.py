@@ -1,6 +1,6 @@
 """The benchmark's problem generator: simulated 2D-lidar + camera board views with their ground truth.
 
-``generate(options, seed, trial)`` draws one problem (``calib_core.Observations``) following METHOD.md's
+``generate(options, seed, trial)`` draws one problem (``calib_core.Observations``) following docs/METHOD.md's
 simulation protocol; every assumption is a field of ``SimOptions``.
 """
 

@@ -14,7 +14,7 @@ POSE_MODES = ("exact", "pixel", "image")
 
 @dataclass(frozen=True)
 class SimOptions:
-    """Every assumption of the simulated calibration scene (METHOD.md, Section 3.1), one primitive per field.
+    """Every assumption of the simulated calibration scene (docs/METHOD.md), one primitive per field.
 
     Scene: boards are separate captures of one board moved to ``n_boards`` poses (``shared_scan=False``,
     so boards never occlude each other), or all in one scan (``shared_scan=True``: their bearing intervals

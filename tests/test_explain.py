@@ -1,4 +1,4 @@
-"""Issue 7: the peng2022 ablations, the explain experiment files, and a tiny explain run."""
+"""The peng2022 ablations, the explain experiment files, and a tiny explain run."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Metrics of METHOD.md eq. 13-15: e_R is the geodesic angle, e_t the distance, validity is strict."""
+"""Metrics of docs/METHOD.md eq. 13-15: e_R is the geodesic angle, e_t the distance, validity is strict."""
 
 from __future__ import annotations
 

@@ -8,6 +8,7 @@ import zlib
 import numpy as np
 import pytest
 
+from calib_core.solvers.orientation import kabsch
 from calib_core.solvers.vasconcelos import (
     MAX_SOLUTIONS,
     REASON_PLANES,
@@ -15,7 +16,6 @@ from calib_core.solvers.vasconcelos import (
     REASON_TRIANGLE,
     MinimalSolutions,
     board_triples,
-    kabsch,
     solve_triple,
     solve_triples,
 )
@@ -234,7 +234,7 @@ def test_near_real_option_adds_flagged_candidates_only():
 
 
 def test_closed_form_orientation_matches_kabsch():
-    from calib_core.solvers.vasconcelos import _abs_orientation_3pt
+    from calib_core.solvers.orientation import abs_orientation_3pt
 
     rng = rng_for("test_closed_form_orientation_matches_kabsch")
     K = 200
@@ -243,10 +243,10 @@ def test_closed_form_orientation_matches_kabsch():
     R_true = rotvec_to_matrix(rng.normal(size=(K, 3)))
     t_true = rng.normal(size=(K, 3))
     P = np.einsum("kji,knj->kni", R_true, Q - t_true[:, None])  # Q = R P + t
-    R, t = _abs_orientation_3pt(P, q)
+    R, t = abs_orientation_3pt(P, q)
     assert np.allclose(R, R_true, atol=1e-12) and np.allclose(t, t_true, atol=1e-12)
     P_noisy = P + rng.normal(scale=1e-3, size=P.shape)
-    R, t = _abs_orientation_3pt(P_noisy, q)
+    R, t = abs_orientation_3pt(P_noisy, q)
     Rk, tk = kabsch(P_noisy, Q)
     assert np.allclose(R, Rk, atol=1e-5) and np.allclose(t, tk, atol=1e-4)
 

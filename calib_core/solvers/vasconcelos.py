@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import LidarcamError
+from .orientation import abs_orientation_3pt, cross, cross2, dot, unit
 from .polynomial import newton_roots, quartic_roots_closed, quartic_roots_eig
 
 # Reasons (the ``reasons`` entries; ``None`` means solved).
@@ -103,20 +104,6 @@ def board_triples(n_boards: int) -> np.ndarray:
 # Small vectorised helpers
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("...i,...i->...", a, b)
-
-
-def _cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
 def _sym3_min_eig(A: np.ndarray) -> np.ndarray:
     """Smallest eigenvalue of symmetric 3x3 matrices (...,3,3), closed form (trigonometric)."""
     a11, a22, a33 = A[..., 0, 0], A[..., 1, 1], A[..., 2, 2]
@@ -173,8 +160,8 @@ def _polish_lambdas(s, aa, bb, cc, ca, cb, cg, iters: int) -> np.ndarray:
                       np.stack([z, 2 * (s2 - ca * s3), 2 * (s3 - ca * s2)], -1)], axis=1)
         # Cramer: J^-1 = adj(J) / det(J), adj rows from cross products of J's columns.
         c0, c1, c2 = J[:, :, 0], J[:, :, 1], J[:, :, 2]
-        adj = np.stack([_cross(c1, c2), _cross(c2, c0), _cross(c0, c1)], axis=1)
-        det = _dot(c0, adj[:, 0])
+        adj = np.stack([cross(c1, c2), cross(c2, c0), cross(c0, c1)], axis=1)
+        det = dot(c0, adj[:, 0])
         ok = np.abs(det) > 1e-300
         step = -np.einsum("kij,kj->ki", adj, f) / np.where(ok, det, 1.0)[:, None]
         s_new = s + np.where(ok[:, None], step, 0.0)
@@ -185,58 +172,6 @@ def _polish_lambdas(s, aa, bb, cc, ca, cb, cg, iters: int) -> np.ndarray:
         f = np.where(better[:, None], f_new, f)
         fn = np.where(better, fn_new, fn)
     return s
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
-def _abs_orientation_3pt(P: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """R (K,3,3), t (K,3) with ``[q, 0] ~ R P + t`` for camera triangles P (K,3,3) and scan-plane triangles q (K,3,2).
-
-    Closed form: align the triangles' oriented planes, then take the least-squares in-plane angle.  Equal to
-    Kabsch/SVD (det +1) for congruent triangles and to first order for nearly congruent ones.  The scan
-    triangle lies in z = 0, so its frame is the identity up to the sign of its orientation.
-    """
-    cP = P.mean(axis=1)
-    Y = P - cP[:, None, :]
-    a = P[:, 1] - P[:, 0]
-    e1 = a / np.sqrt(np.einsum("ki,ki->k", a, a))[:, None]
-    nrm = _cross(a, P[:, 2] - P[:, 0])
-    nrm /= np.sqrt(np.einsum("ki,ki->k", nrm, nrm))[:, None]
-    e2 = _cross(nrm, e1)
-    xp = np.einsum("kni,ki->kn", Y, e1)
-    yp = np.einsum("kni,ki->kn", Y, e2)
-    cq = q.mean(axis=1)
-    xq, yq = q[:, :, 0] - cq[:, :1], q[:, :, 1] - cq[:, 1:]
-    sgn = np.where(_cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]) >= 0, 1.0, -1.0)
-    yq = yq * sgn[:, None]  # coordinates in the frame (x, sgn y, sgn z), whose third axis is the normal
-    sn = np.einsum("kn,kn->k", xp, yq) - np.einsum("kn,kn->k", yp, xq)
-    cs = np.einsum("kn,kn->k", xp, xq) + np.einsum("kn,kn->k", yp, yq)
-    h = np.hypot(sn, cs)
-    h = np.where(h > 0, h, 1.0)
-    co, si = (cs / h)[:, None], (sn / h)[:, None]
-    R = np.empty(P.shape[:1] + (3, 3))
-    R[:, 0] = co * e1 - si * e2
-    R[:, 1] = sgn[:, None] * (si * e1 + co * e2)
-    R[:, 2] = sgn[:, None] * nrm
-    t = -np.einsum("kij,kj->ki", R, cP)
-    t[:, :2] += cq
-    return R, t
-
-
-def kabsch(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Reference absolute orientation by SVD (det fixed +1): R (K,3,3), t (K,3) minimising sum |Q - (R P + t)|^2.
-
-    ``P, Q`` (K,n,3) corresponding point sets.  The solver uses the faster closed form for three points.
-    """
-    cP, cQ = P.mean(axis=1), Q.mean(axis=1)
-    H = np.einsum("kni,knj->kij", P - cP[:, None], Q - cQ[:, None])
-    U, _, Vt = np.linalg.svd(H)
-    D = np.ones(U.shape[:-1])
-    D[:, -1] = np.sign(np.linalg.det(Vt.transpose(0, 2, 1) @ U.transpose(0, 2, 1)))
-    R = (Vt.transpose(0, 2, 1) * D[:, None, :]) @ U.transpose(0, 2, 1)
-    return R, cQ - np.einsum("kij,kj->ki", R, cP)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -276,14 +211,14 @@ def _degeneracy(n, p, u, idx, reasons, *, min_plane_sv, min_line_sin, min_triang
     bad_planes = ~(sv_min >= min_plane_sv)
     ui, uj = u[:, _PAIRS[:, 0]], u[:, _PAIRS[:, 1]]
     pi, pj = p[:, _PAIRS[:, 0]], p[:, _PAIRS[:, 1]]
-    sin_ij = _cross2(ui, uj)  # (K,3)
+    sin_ij = cross2(ui, uj)  # (K,3)
     bad_lines = ~(np.abs(sin_ij).min(axis=1) >= min_line_sin)
-    s_ij = _cross2(pj - pi, uj) / np.where(bad_lines[:, None], 1.0, sin_ij)
+    s_ij = cross2(pj - pi, uj) / np.where(bad_lines[:, None], 1.0, sin_ij)
     q = pi + s_ij[..., None] * ui
     sides2 = np.stack([np.sum((q[:, 0] - q[:, 1]) ** 2, -1), np.sum((q[:, 0] - q[:, 2]) ** 2, -1),
                        np.sum((q[:, 1] - q[:, 2]) ** 2, -1)], axis=-1)
     longest2 = sides2.max(axis=1)
-    area2 = np.abs(_cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]))
+    area2 = np.abs(cross2(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]))
     bad_tri = ~(area2 >= min_triangle * longest2) | ~(longest2 >= min_side**2)
     bad_tri &= ~bad_lines
     reasons[idx[bad_tri]] = REASON_TRIANGLE
@@ -296,17 +231,17 @@ def _grunert_setup(n, d, q, sides2):
     """Step 2: the planes' common point O (K,3), the line directions and scan points relabelled for Grunert
     (side b = |P1 P3| the longest) (K,3,3), (K,3,2), and Grunert's (aa, bb, cc, ca, cb, cg), each (K,)."""
     n1, n2, n3 = n[:, 0], n[:, 1], n[:, 2]
-    c23, c31, c12 = _cross(n2, n3), _cross(n3, n1), _cross(n1, n2)
-    detN = _dot(n1, c23)
+    c23, c31, c12 = cross(n2, n3), cross(n3, n1), cross(n1, n2)
+    detN = dot(n1, c23)
     O = (d[:, 0, None] * c23 + d[:, 1, None] * c31 + d[:, 2, None] * c12) / detN[:, None]
-    V = _unit(np.stack([c12, -c31, c23], axis=1))  # v_12, v_13, v_23
+    V = unit(np.stack([c12, -c31, c23], axis=1))  # v_12, v_13, v_23
     perm = _PERM_BY_LONGEST[np.argmax(sides2, axis=1)]  # (K,3)
     rows = np.arange(len(n))[:, None]
     Vg = V[rows, perm]
     Qg = q[rows, perm]
-    cg = _dot(Vg[:, 0], Vg[:, 1])
-    cb = _dot(Vg[:, 0], Vg[:, 2])
-    ca = _dot(Vg[:, 1], Vg[:, 2])
+    cg = dot(Vg[:, 0], Vg[:, 1])
+    cb = dot(Vg[:, 0], Vg[:, 2])
+    ca = dot(Vg[:, 1], Vg[:, 2])
     aa = np.sum((Qg[:, 1] - Qg[:, 2]) ** 2, -1)
     bb = np.sum((Qg[:, 0] - Qg[:, 2]) ** 2, -1)
     cc = np.sum((Qg[:, 0] - Qg[:, 1]) ** 2, -1)
@@ -415,7 +350,7 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     P = O[k_tr2, None, :] + s[:, :, None] * Vg[k_tr2]
 
     # 5. Absolute orientation: lidar = R camera + t.
-    R, t = _abs_orientation_3pt(P, Qg[k_tr2])
+    R, t = abs_orientation_3pt(P, Qg[k_tr2])
     T = np.zeros((R.shape[0], 4, 4))
     T[:, :3, :3] = R
     T[:, :3, 3] = t
