@@ -154,3 +154,37 @@ def test_cli_prints_rejected_boards(tmp_path, capsys):
     assert main(["calibrate", str(path), "--out", str(tmp_path / "r.json")]) == 0
     out = capsys.readouterr().out
     assert f"board {obs.meta['wrong_boards'][0]} rejected" in out and "boards used (7 of 8)" in out
+
+
+def test_report_marks_rejected_boards(tmp_path):
+    from rig.report import write_report
+
+    obs = generate(SimOptions(n_boards=8, wrong_segments=1), seed=2, trial=0)
+    res = calibrate(obs)
+    summary = write_report(None, obs, res, tmp_path)
+    text = summary.markdown.read_text()
+    w = obs.meta["wrong_boards"][0]
+    row = next(ln for ln in text.splitlines() if ln.startswith(f"| {w} |"))
+    assert "rejected:" in row
+    assert sum("| used |" in ln for ln in text.splitlines()) == 7
+
+
+def test_overlay_of_a_rejected_pose_is_drawn(tmp_path):
+    from rig.dataset import CameraModel
+    from rig.report import _overlay
+
+    obs = generate(SimOptions(n_boards=3), seed=2, trial=0)
+    cam = CameraModel(800, 600, np.array([[800.0, 0, 399.5], [0, 800.0, 299.5], [0, 0, 1]]), np.zeros(5))
+    b = obs.boards[0]
+    T_cam_lidar = np.linalg.inv(obs.T_lidar_cam_true)
+    gray = np.full((600, 800), 128, np.uint8)
+    for name, why in (("used", None), ("rejected", "scan inconsistent with the board plane")):
+        _overlay(tmp_path / f"{name}.png", gray, cam, T_cam_lidar, b.T_cam_board, b.outline, None, b.scan, 50.0,
+                 "pose", why)
+    import matplotlib.image as mpimg
+
+    used, rej = mpimg.imread(tmp_path / "used.png"), mpimg.imread(tmp_path / "rejected.png")
+    def red(img):
+        return int(((img[..., 0] > 0.9) & (img[..., 1] < 0.2) & (img[..., 2] < 0.2)).sum())
+
+    assert red(rej) > 1000 and red(used) < red(rej) / 10
