@@ -1,12 +1,12 @@
-"""Our method, ``lidarcam``: minimal-solver (+ Zhang & Pless) candidates, an all-evidence likelihood to choose
-among them, maximum-likelihood refinement of the best few, covariance and degeneracy warnings."""
+"""Our method, ``lidarcam``, an orchestration: point trimming and the consensus search over boards
+(``calib_core.search``), an all-evidence likelihood to choose among the consensus hypotheses, maximum-likelihood
+refinement of the best few, the final per-board and per-point tests, covariance and warnings."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..lines import fit_line
 from ..observations import Observations, ScanData
 from ..refine import refine
 from ..registry import Method
@@ -15,9 +15,6 @@ from ..result import SolveFailure
 from ..search import consensus_search, finish_search
 from ..selection import EDGE_SIGMA_M, OUTLINE_SIGMA_M, lidarcam_residuals
 from ..selection import lidarcam as lidarcam_score
-from ..solvers.candidates import minimal_candidates
-from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
-from ..solvers.zhang_pless import zhang_pless_linear
 from ..transforms import matrix_to_rotvec
 from ..uncertainty import (
     UncertaintyError,
@@ -26,32 +23,6 @@ from ..uncertainty import (
     refinement_covariance,
 )
 from .suffixes import F_SCALE_SIGMAS
-
-
-def candidate_pool(obs: Observations, use_zhang_pless: bool = True, **solver_options) -> tuple[np.ndarray, list[str]]:
-    """Candidates (M,4,4): the minimal solver on all triples of the boards whose scan is line-like, plus the
-    linear Zhang & Pless solution from 5 boards on; and the reasons for what was left out."""
-    reasons, pools = [], []
-    good = []
-    for i, b in enumerate(obs.boards):
-        try:
-            fit_line(b.scan)
-            good.append(i)
-        except SolveFailure as fail:
-            reasons.append(f"board {i}: {fail.reason}")
-    try:
-        cands = minimal_candidates(obs.subset(good), **solver_options)
-        pools.append(cands.T_lidar_cam)
-        if len(cands.T_lidar_cam) == 0:
-            reasons.append(f"minimal solver: {cands.summary()}")
-    except SolveFailure as fail:
-        reasons.append(f"minimal solver: {fail.reason}")
-    if use_zhang_pless and obs.n_boards >= ZP_MIN_BOARDS:
-        try:
-            pools.append(zhang_pless_linear(obs)[None])
-        except SolveFailure as fail:
-            reasons.append(f"zhang_pless_linear: {fail.reason}")
-    return (np.concatenate(pools) if pools else np.zeros((0, 4, 4))), reasons
 
 
 def _distinct(T: np.ndarray, chosen: list[np.ndarray], rot_deg: float, trans_m: float) -> bool:
