@@ -109,7 +109,7 @@ def consensus_search(obs: Observations, *, range_sigma_m: float | None, outline_
             fit_line(b.scan)
             good.append(i)
         except SolveFailure as fail:
-            rejected.append(_rejection(i, f"scan is not a straight segment: {fail.reason}"))
+            rejected.append(_rejection(i, f"no line fits its scan: {fail.reason}"))
     good = np.array(good, dtype=int)
     if len(good) < 3:
         raise SolveFailure(f"lidarcam: only {len(good)} boards with a line-like scan (at least 3 are needed): "
