@@ -31,6 +31,9 @@ POOL_MAX_SAMPLED = 8
 too, and the all-evidence score costs O(pool x points))."""
 LO_STARTS = 3
 """Distinct best MSAC hypotheses that get a local optimisation on their consensus sets."""
+LO_STARTS_ALL = 2
+"""... and distinct best hypotheses by the untruncated sum of the statistics, optimised on all boards first (so a
+consensus that leaves a good board out must beat the one that keeps every board)."""
 LO_ROUNDS = 4
 
 
@@ -79,10 +82,11 @@ def _distinct_order(T: np.ndarray, cost: np.ndarray, n: int) -> list[int]:
 
 
 def local_optimise(obs: Observations, lines: BoardLines, T0: np.ndarray, q0: np.ndarray, sigma_m: float,
-                   outline_sigma_m: float):
-    """Refine ``T0`` on the boards it explains (``q0 < SCORE_TAU``), re-test every board, repeat until the
-    consensus set is stable: (T, used (N,) bool, q (N,), inflation, MSAC cost at the final threshold)."""
-    used, T, q = q0 < SCORE_TAU, T0, q0
+                   outline_sigma_m: float, start_all: bool = False):
+    """Refine ``T0`` on the boards it explains (``q0 < SCORE_TAU``; every board in front of the camera with
+    ``start_all``), re-test every board, repeat until the consensus set is stable: (T, used (N,) bool, q (N,),
+    inflation, MSAC cost at the final threshold plus ``N log(inflation)``)."""
+    used, T, q = (np.isfinite(q0) if start_all else q0 < SCORE_TAU), T0, q0
     s2 = 1.0
     for _ in range(LO_ROUNDS):
         if used.sum() < 3:
@@ -125,8 +129,11 @@ def consensus_search(obs: Observations, *, range_sigma_m: float | None, outline_
     lo_T: list[np.ndarray] = []
     if reject:
         best = None
-        for j in _distinct_order(H.T, cost, LO_STARTS):
-            res = local_optimise(obs_g, lines, H.T[j], H.q[j], sigma, outline_sigma_m)
+        # starts: the best MSAC hypotheses, and the best by the untruncated sum (all boards, no rejection)
+        starts = [(j, False) for j in _distinct_order(H.T, cost, LO_STARTS)]
+        starts += [(j, True) for j in _distinct_order(H.T, np.sum(H.q, axis=1), LO_STARTS_ALL)]
+        for j, start_all in starts:
+            res = local_optimise(obs_g, lines, H.T[j], H.q[j], sigma, outline_sigma_m, start_all)
             lo_T.append(res[0])
             if best is None or res[4] < best[4]:
                 best = res
