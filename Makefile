@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
 .DEFAULT_GOAL := help
-.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper robustness clean
+.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise robustness clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
@@ -39,6 +39,9 @@ reproduce-paper: $(STAMP) ## Run the paper's sweeps, write results/paper/ (table
 
 explain-paper: $(STAMP) ## Ablations of peng2022 + unstated-setting sweeps, write results/explain/ (< 10 min on 2 cores)
 	$(PY) -m experiments.explain
+
+corner-noise: $(STAMP) ## Camera-noise sweeps (joint model over corners and ranges), write results/corner_noise/
+	$(PY) -m experiments.corner_noise --trials 25 --boards-trials 25
 
 robustness: $(STAMP) ## Wrong boards, outlier points, mixed pixels (experiment=outliers), write results/outliers/
 	$(PY) -m experiments.outliers

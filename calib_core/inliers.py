@@ -10,12 +10,12 @@ line (the noise is along the beam) is tested against the pooled noise scale of a
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .lines import MIN_LINE_POINTS, tls_line
-from .observations import BoardObservation, Observations
+from .observations import Observations
 
 TRIM_SIGMAS = 4.0
 """A scan point whose range residual against its board's robust line exceeds this many pooled noise stds is
@@ -132,6 +132,6 @@ def apply_trim(obs: Observations, report: TrimReport) -> Observations:
     """``obs`` with every board's scan reduced to its kept points (the same object when nothing was left out)."""
     if report.n_trimmed == 0:
         return obs
-    boards = tuple(b if k.all() else BoardObservation(b.T_cam_board, b.outline, b.scan[k])
+    boards = tuple(b if k.all() else replace(b, scan=b.scan[k])
                    for b, k in zip(obs.boards, report.keep, strict=True))
-    return type(obs)(boards, obs.T_lidar_cam_true, dict(obs.meta))
+    return replace(obs, boards=boards, meta=dict(obs.meta))

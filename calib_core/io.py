@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .camera import Camera
 from .errors import ObservationError
 from .metrics import sigma_rot_deg, sigma_trans_m
 from .observations import BoardObservation, Observations
@@ -20,12 +21,30 @@ def observations_to_dict(obs: Observations) -> dict:
     """Plain-JSON form of ``obs`` under schema ``lidarcam.observations/1``."""
     d: dict = {"schema": OBS_SCHEMA,
                "boards": [{"T_cam_board": b.T_cam_board.tolist(), "outline": b.outline.tolist(),
-                           "scan": b.scan.tolist()} for b in obs.boards]}
+                           "scan": b.scan.tolist(), **_corners_dict(b)} for b in obs.boards]}
+    if obs.camera is not None:
+        d["camera"] = obs.camera.to_dict()
     if obs.T_lidar_cam_true is not None:
         d["ground_truth"] = {"T_lidar_cam": obs.T_lidar_cam_true.tolist()}
     if obs.meta:
         d["meta"] = obs.meta
     return d
+
+
+def _corners_dict(b: BoardObservation) -> dict:
+    if not b.has_corners:
+        return {}
+    return {"corners_px": b.corners_px.tolist(), "corners_board": b.corners_board.tolist()}
+
+
+def camera_from_dict(raw) -> Camera:
+    """The optional file-level ``camera`` object: ``K`` (3x3), ``dist`` (OpenCV order), ``width``, ``height``."""
+    if not isinstance(raw, dict):
+        raise ObservationError("must be an object", field="camera")
+    for key in ("K", "width", "height"):
+        if key not in raw:
+            raise ObservationError("missing key", field=f"camera.{key}")
+    return Camera(raw["K"], raw.get("dist") or [], raw["width"], raw["height"])
 
 
 def observations_from_dict(data, source: str | None = None) -> Observations:
@@ -53,7 +72,8 @@ def observations_from_dict(data, source: str | None = None) -> Observations:
             if key not in rb:
                 raise fail("missing key", board=i, field=key)
         try:
-            boards.append(BoardObservation(rb["T_cam_board"], rb["outline"], rb["scan"]))
+            boards.append(BoardObservation(rb["T_cam_board"], rb["outline"], rb["scan"], rb.get("corners_px"),
+                                           rb.get("corners_board")))
         except ObservationError as err:
             raise err.within(file=source, board=i) from None
     T_true = None
@@ -64,7 +84,8 @@ def observations_from_dict(data, source: str | None = None) -> Observations:
         T_true = gt["T_lidar_cam"]
     meta = data.get("meta") or {}
     try:
-        return Observations(tuple(boards), T_true, dict(meta))
+        camera = camera_from_dict(data["camera"]) if data.get("camera") is not None else None
+        return Observations(tuple(boards), T_true, dict(meta), camera)
     except ObservationError as err:
         raise err.within(file=source) from None
 

@@ -83,3 +83,4 @@ def sigma_rot_deg(covariance: np.ndarray) -> float:
 def sigma_trans_m(covariance: np.ndarray) -> float:
     """1-sigma translation (metres): root of the trace of the translation block of a 6x6 covariance."""
     return float(np.sqrt(np.trace(np.asarray(covariance, float)[3:, 3:])))
+

@@ -12,10 +12,13 @@ from typing import Any
 
 import numpy as np
 
+from .camera import Camera
 from .errors import ObservationError
 from .transforms import ROTATION_TOL, rotation_defect
 
 MIN_SCAN_POINTS = 2
+MIN_CORNERS = 4
+"""Fewest image corners a board may carry (a planar pose needs 4)."""
 
 
 def _frozen_array(value, name: str, shape: tuple) -> np.ndarray:
@@ -78,11 +81,16 @@ class BoardObservation:
             The paper's square of side c is ``[[0,0],[c,0],[c,c],[0,c]]``.
         scan: (K,2) lidar points on this board, in the lidar frame (scan plane z = 0), ordered by bearing;
             metres.
+        corners_px: optional (J,2) detected image corners, distorted pixels as the detector returns them.
+        corners_board: optional (J,3) the same corners in the board frame (metres; given as (J,2) on z = 0).
+            Both or neither; they need the file's ``Observations.camera``.
     """
 
     T_cam_board: np.ndarray
     outline: np.ndarray
     scan: np.ndarray
+    corners_px: np.ndarray | None = None
+    corners_board: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         T = _frozen_array(self.T_cam_board, "T_cam_board", (4, 4))
@@ -103,6 +111,31 @@ class BoardObservation:
         object.__setattr__(self, "T_cam_board", T)
         object.__setattr__(self, "outline", outline)
         object.__setattr__(self, "scan", scan)
+        self._check_corners()
+
+    def _check_corners(self) -> None:
+        if self.corners_px is None and self.corners_board is None:
+            return
+        for name in ("corners_px", "corners_board"):
+            if getattr(self, name) is None:
+                other = "corners_board" if name == "corners_px" else "corners_px"
+                raise ObservationError(f"missing while {other} is given (both or neither)", field=name)
+        px = _frozen_array(self.corners_px, "corners_px", (None, 2))
+        planar = np.ndim(self.corners_board) == 2 and np.shape(self.corners_board)[1] == 2
+        pb = _frozen_array(self.corners_board, "corners_board", (None, 2 if planar else 3))
+        if planar:
+            pb = np.column_stack([pb, np.zeros(len(pb))])
+            pb.setflags(write=False)
+        if len(px) != len(pb):
+            raise ObservationError(f"{len(px)} image corners but {len(pb)} board corners", field="corners_board")
+        if len(px) < MIN_CORNERS:
+            raise ObservationError(f"fewer than {MIN_CORNERS} corners ({len(px)})", field="corners_px")
+        object.__setattr__(self, "corners_px", px)
+        object.__setattr__(self, "corners_board", pb)
+
+    @property
+    def has_corners(self) -> bool:
+        return self.corners_px is not None
 
     @property
     def normal_cam(self) -> np.ndarray:
@@ -153,17 +186,24 @@ class Observations:
         T_lidar_cam_true: optional 4x4 true extrinsic (maps camera points into the lidar frame;
             the paper's ``p_L = R p_C + t``).
         meta: free-form provenance (simulator settings, seed, source file); not used by the solvers.
+        camera: optional intrinsics (``calib_core.camera.Camera``); required when a board carries corners.
     """
 
     boards: tuple[BoardObservation, ...]
     T_lidar_cam_true: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    camera: Camera | None = None
 
     def __post_init__(self) -> None:
         boards = tuple(self.boards)
         for i, b in enumerate(boards):
             if not isinstance(b, BoardObservation):
                 raise ObservationError(f"not a BoardObservation ({type(b).__name__})", board=i)
+            if b.has_corners and self.camera is None:
+                raise ObservationError("image corners given but the file has no camera intrinsics", board=i,
+                                       field="camera")
+        if self.camera is not None and not isinstance(self.camera, Camera):
+            raise ObservationError(f"not a Camera ({type(self.camera).__name__})", field="camera")
         object.__setattr__(self, "boards", boards)
         if self.T_lidar_cam_true is not None:
             T = _frozen_array(self.T_lidar_cam_true, "ground_truth.T_lidar_cam", (4, 4))
@@ -180,7 +220,13 @@ class Observations:
 
     def subset(self, indices) -> Observations:
         """The same problem with only the boards at ``indices`` (in that order)."""
-        return Observations(tuple(self.boards[i] for i in indices), self.T_lidar_cam_true, dict(self.meta))
+        return Observations(tuple(self.boards[i] for i in indices), self.T_lidar_cam_true, dict(self.meta),
+                            self.camera)
+
+    @property
+    def has_corners(self) -> bool:
+        """True when every board carries image corners (and the camera is known): the joint model applies."""
+        return bool(self.boards) and self.camera is not None and all(b.has_corners for b in self.boards)
 
     def planes_cam(self) -> tuple[np.ndarray, np.ndarray]:
         """Board planes in the camera frame: normals (N,3) and offsets (N,), plane ``n . p_C = d``."""

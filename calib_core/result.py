@@ -103,6 +103,8 @@ class CalibrationResult:
             d["covariance"] = np.asarray(self.covariance).tolist()
             d["sigma_rot_deg"] = self.sigma_rot_deg
             d["sigma_trans_mm"] = self.sigma_trans_mm
+            if "covariance_model" in self.info:
+                d["covariance_model"] = str(self.info["covariance_model"])
         d["warnings"] = self.warnings
         if self.boards_used is not None:
             d["boards_used"] = self.boards_used

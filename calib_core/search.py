@@ -8,7 +8,7 @@ observations. Lidar frame, metres, radians.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -16,7 +16,7 @@ from .consensus import SCORE_TAU, TEST_CHI2, BoardLines, board_lines, board_stat
 from .hypotheses import Hypotheses, hypotheses
 from .inliers import TRIM_SIGMAS, TrimReport, apply_trim, trim_points
 from .lines import fit_line
-from .observations import BoardObservation, Observations
+from .observations import Observations
 from .refine import refine
 from .residuals import range_residuals
 from .result import SolveFailure
@@ -185,8 +185,8 @@ def _point_test(obs: Observations, T: np.ndarray, sigma_m: float) -> tuple[Obser
             boards.append(b)
             continue
         n += int((~keep).sum())
-        boards.append(BoardObservation(b.T_cam_board, b.outline, b.scan[keep]))
-    return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta)), n
+        boards.append(replace(b, scan=b.scan[keep]))
+    return replace(obs, boards=tuple(boards), meta=dict(obs.meta)), n
 
 
 def finish_search(s: Search, T: np.ndarray, *, reject: bool, refit: Callable) -> Finish:

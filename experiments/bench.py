@@ -1,13 +1,11 @@
 """``make bench``: the time of one ``calibrate`` per registered method on 8 boards (median over many
-<<<<<<< HEAD
-repetitions), how the default method's time grows with the number of boards (8, 20, 40, 100), and the minimal
-solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``).
-=======
-repetitions), the minimal solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``)
-and its accuracy on noise-free simulated triples (closed-form and eigenvalue quartic roots).
->>>>>>> main
+repetitions), how the default method's time grows with the number of boards (8, 20, 40, 100), the minimal
+solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``) and its accuracy on noise-free
+simulated triples (closed-form and eigenvalue quartic roots), and the joint model over image corners and ranges at
+8 and 40 boards (0.5 px corner noise): the joint refinement alone (``calib_core.joint.joint_refine`` from the
+range-only answer) and whole ``calibrate`` calls that end in it.
 
-    python -m experiments.bench [--boards 8] [--problems 10] [--repeats 20] [--triples 10000]
+    python -m experiments.bench [--boards 8] [--problems 10] [--repeats 20] [--triples 10000] [--joint-boards 8 40]
                                 [--scaling 8,20,40,100] [--scaling-problems 3]
 
 Single process, run it with ``OMP_NUM_THREADS=1`` (the Makefile exports it) for one-core numbers.
@@ -131,6 +129,33 @@ def time_minimal(obs_list: list, n_triples: int, repeats: int = 3) -> dict:
             "solutions": int(len(sol.T_lidar_cam))}
 
 
+def _median_ms(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times))
+
+
+def time_joint(n_boards: int, count: int, repeats: int, seed: int = 12345) -> dict:
+    """Median ms of the joint refinement alone, of ``calibrate(lidarcam)`` and of ``zhang_pless_linear+joint`` on
+    ``count`` problems of ``n_boards`` boards with image corners (0.5 px); ``lidarcam`` only up to 12 boards (its
+    candidate scoring is O(N^4))."""
+    from calib_core.joint import joint_refine
+
+    opts = SimOptions(n_boards=n_boards, pose_mode="pixel", pixel_noise_px=0.5)
+    obs_list = [generate(opts, seed=seed, trial=i) for i in range(count)]
+    out = {"boards": n_boards, "joint_refine_ms": [], "lidarcam_ms": [], "zpl_joint_ms": []}
+    for obs in obs_list:
+        T0 = calibrate(obs, "zhang_pless_linear+ml").T_lidar_cam
+        out["joint_refine_ms"].append(_median_ms(lambda o=obs, T=T0: joint_refine(o, T), repeats))
+        out["zpl_joint_ms"].append(_median_ms(lambda o=obs: calibrate(o, "zhang_pless_linear+joint"), repeats))
+        if n_boards <= 12:
+            out["lidarcam_ms"].append(_median_ms(lambda o=obs: calibrate(o, "lidarcam"), repeats))
+    return {k: (float(np.median(v)) if v else float("nan")) if isinstance(v, list) else v for k, v in out.items()}
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--boards", type=int, default=8)
@@ -139,6 +164,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--triples", type=int, default=10_000)
     ap.add_argument("--scaling", default="8,20,40,100", help="board counts of the default method's scaling table")
     ap.add_argument("--scaling-problems", type=int, default=3)
+    ap.add_argument("--joint-boards", type=int, nargs="*", default=[8, 40])
     args = ap.parse_args(argv)
     counts = [int(c) for c in args.scaling.split(",") if c.strip()]
     if counts:
@@ -158,6 +184,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     for quartic in ("closed", "eig"):
         print("minimal solver accuracy on noise-free triples:", minimal_accuracy(args.boards, args.problems,
                                                                                  args.triples, quartic))
+    for nb in args.joint_boards:
+        j = time_joint(nb, min(args.problems, 5), max(3, args.repeats // 4))
+        print(f"joint model, {nb} boards with corners (0.5 px), median ms: joint_refine {j['joint_refine_ms']:.1f}, "
+              f"calibrate zhang_pless_linear+joint {j['zpl_joint_ms']:.1f}, calibrate lidarcam {j['lidarcam_ms']:.1f}")
 
 
 if __name__ == "__main__":

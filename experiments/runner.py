@@ -18,6 +18,7 @@ import hashlib
 import json
 import math
 import os
+import socket
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -29,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from calib_core import CalibrationError, calibrate, get_method
+from calib_core.joint import corner_residuals, joint_crlb
 from calib_core.metrics import (
     TRUTH_MAX_ROT_DEG,
     TRUTH_MAX_TRANS_M,
@@ -158,8 +160,25 @@ def rejection_columns(result, wrong_boards: Sequence[int]) -> dict[str, Any]:
     return out
 
 
+def corner_sigma_px(obs, sim: dict) -> float | None:
+    """The corner noise std (px) of a simulated trial with image corners: ``pixel_noise_px`` in ``pixel`` mode, the
+    RMS detection error against the true poses in ``image`` mode; None without corners or true poses."""
+    if not obs.has_corners or "T_cam_board_true" not in obs.meta:
+        return None
+    from simulate import SimOptions
+
+    o = SimOptions(**sim)
+    if o.pose_mode == "pixel":
+        return o.pixel_noise_px
+    e = corner_residuals(obs, np.asarray(obs.meta["T_cam_board_true"], float))
+    return float(np.sqrt(np.mean(e**2)))
+
+
 def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
-    """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number."""
+    """CRLB of the rotation (deg) and translation (mm) at the trial's noise, and the conditioning number.
+
+    With image corners the bound is that of the joint model (range and corner noise, board poses unknown, at the
+    true poses; ``corner_sigma_px``), else that of the range model (board poses exact)."""
     out = {"crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan, "conditioning": np.nan}
     if not cell.metrics.get("uncertainty", True):
         return out
@@ -167,7 +186,11 @@ def uncertainty_columns(obs, cell: Cell) -> dict[str, float]:
     sigma_mm = cell.metrics.get("crlb_sigma_mm")
     sigma_mm = cell.sim.get("noise_mm", 0.0) if sigma_mm is None else sigma_mm
     try:
-        bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
+        px = corner_sigma_px(obs, cell.sim)
+        if px is None:
+            bound = crlb(obs, range_sigma_m=float(sigma_mm) / 1000.0)
+        else:
+            bound = joint_crlb(obs, float(sigma_mm) / 1000.0, px, T_cam_board=np.asarray(obs.meta["T_cam_board_true"]))
         out.update(crlb_rot_deg=float(bound.rot_rms_deg), crlb_trans_mm=1000.0 * float(bound.trans_rms_m))
     except Exception:  # noqa: BLE001 -- a degenerate board set has no bound: NaN, not a dead cell
         pass
@@ -258,8 +281,14 @@ def load_sweep(results_dir: str | Path, sweep: str) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
+def _tmp_name(path: Path) -> Path:
+    """A hidden temporary name next to ``path``, unique per host and process (workers of a cluster share the store
+    on one file system, where two hosts may run the same pid)."""
+    return path.with_name(f".{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
+
+
 def _write_atomic(df: pd.DataFrame, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = _tmp_name(path)
     df.to_csv(tmp, index=False, float_format="%.10g")
     os.replace(tmp, path)
 
@@ -278,7 +307,9 @@ def _prepare(cell: Cell) -> None:
     if not settings.exists():
         d = asdict(cell)
         d.pop("n_trials"), d.pop("methods"), d.pop("results_dir")
-        settings.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
+        tmp = _tmp_name(settings)  # whole or absent: a worker killed mid-write must not leave half a file
+        tmp.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
+        os.replace(tmp, settings)
 
 
 def pending(cell: Cell, chunk_size: int) -> list[tuple[int, ...] | tuple]:

@@ -7,7 +7,7 @@ import sys
 
 from calib_core.errors import LidarcamError
 
-from . import rig, simulate
+from . import bag, rig, simulate
 
 
 def _cmd_methods(args) -> int:
@@ -37,7 +37,9 @@ def _cmd_calibrate(args) -> int:
         for row in res.T_lidar_cam:
             print("  " + "  ".join(f"{v: .6f}" for v in row))
         if res.covariance is not None:
-            print(f"1-sigma: rotation {res.sigma_rot_deg:.3f} deg, translation {res.sigma_trans_mm:.1f} mm")
+            model = res.info.get("covariance_model")
+            print(f"1-sigma: rotation {res.sigma_rot_deg:.3f} deg, translation {res.sigma_trans_mm:.1f} mm"
+                  + (f" (covariance model: {model})" if model else ""))
         if "conditioning" in res.info:
             print(f"conditioning (inverse condition number, 1 = ideal, < 1e-3 poor): {res.info['conditioning']:.2e}")
         if res.boards_used is not None:
@@ -62,6 +64,8 @@ def _cmd_calibrate(args) -> int:
             extra = {"method": res.method}
             if res.covariance is not None:
                 extra.update(sigma_rot_deg=res.sigma_rot_deg, sigma_trans_mm=res.sigma_trans_mm)
+                if "covariance_model" in res.info:
+                    extra["covariance_model"] = f"'{res.info['covariance_model']}'"
             if "conditioning" in res.info:
                 extra["conditioning"] = float(res.info["conditioning"])
             with open(args.yaml, "w") as f:
@@ -85,6 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=_cmd_calibrate)
     simulate.add_parsers(sub)
     rig.add_parsers(sub)
+    bag.add_parsers(sub)
     return p
 
 

@@ -13,11 +13,12 @@ found is skipped with its reason, never used.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from calib_core.errors import LidarcamError
+from calib_core.camera import Camera
+from calib_core.errors import LidarcamError, ObservationError
 from calib_core.lines import tls_line
 from calib_core.observations import BoardObservation, Observations
 from calib_core.transforms import make_T, transform_points
@@ -437,7 +438,8 @@ def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = Non
         diag.length_m, diag.range_m, diag.line_rms_mm = length, rmid, 1000 * rms
         if diag.source == "window" and rms > opts.split_tol:
             diag.notes.append(f"window points fit a line only to {1000 * rms:.0f} mm RMS")
-        obs = BoardObservation(det.T_cam_board, dataset.board.outline, scan.points[idx])
+        obs = BoardObservation(det.T_cam_board, dataset.board.outline, scan.points[idx], det.corners,
+                               dataset.board.corners)
         diag.used = True
         return obs, diag, det
     except (ExtractionError, DatasetError) as err:
@@ -449,11 +451,15 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
     """Every pose of ``dataset`` -> (Observations of the usable poses, diagnostics of every pose).
 
     ``Observations.meta`` holds ``poses`` (the pose name of each board, in order), ``skipped`` (pose -> reason),
-    ``reproj_rms_px`` per board and ``dataset`` (the folder). The ground truth of a simulated dataset
+    ``reproj_rms_px`` per board and ``dataset`` (the folder). Every board carries its detected corners (distorted
+    pixels, canonical order) and their board-frame positions, and the observations the camera intrinsics, so the
+    joint model over corners and ranges applies (``meta["camera_note"]`` says why not when the intrinsics do not
+    fit ``calib_core.camera.Camera``). The ground truth of a simulated dataset
     (ground_truth.yaml ``T_lidar_cam``) becomes ``T_lidar_cam_true``.
     """
     opts = opts or ExtractOptions()
     boards, diags = [], []
+    camera, camera_note = _camera(dataset)
     for pose in dataset.poses:
         obs, diag, _ = extract_pose(pose, dataset, opts)
         if obs is not None:
@@ -467,7 +473,20 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
             "poses": [d.name for d in diags if d.used],
             "skipped": {d.name: d.reason for d in diags if not d.used},
             "reproj_rms_px": [d.reproj_rms_px for d in diags if d.used]}
-    return Observations(tuple(boards), None if gt is None else np.asarray(gt, float), meta), diags
+    if camera is None:
+        boards = [replace(b, corners_px=None, corners_board=None) for b in boards]
+        meta["camera_note"] = camera_note
+    return Observations(tuple(boards), None if gt is None else np.asarray(gt, float), meta, camera), diags
+
+
+def _camera(dataset: Dataset) -> tuple[Camera | None, str]:
+    """The dataset's intrinsics for the observations (the boards then carry their detected corners), or None and
+    why the joint model cannot use them."""
+    c = dataset.camera
+    try:
+        return Camera(c.K, c.dist, c.width, c.height), ""
+    except ObservationError as err:
+        return None, f"image corners left out, the joint model cannot use the camera: {err}"
 
 
 def format_diagnostics(diags: list[PoseDiagnostics]) -> str:

@@ -50,9 +50,11 @@ def _as_result(result) -> dict:
     if isinstance(result, CalibrationResult):
         return {"method": result.method, "ok": result.ok, "reason": result.reason,
                 "T_lidar_cam": result.T_lidar_cam, "covariance": result.covariance,
+                "covariance_model": result.info.get("covariance_model"),
                 "boards_rejected": result.boards_rejected, "warnings": result.warnings}
     return {"method": result.get("method", "?"), "ok": bool(result.get("ok")), "reason": result.get("reason"),
             "T_lidar_cam": result.get("T_lidar_cam"), "covariance": result.get("covariance"),
+            "covariance_model": result.get("covariance_model"),
             "boards_rejected": result.get("boards_rejected") or [], "warnings": result.get("warnings") or []}
 
 
@@ -267,7 +269,8 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
                f"- rotation: {sigma_rot_deg(cov):.3f} deg overall; per axis (lidar frame, x y z): "
                f"{', '.join(f'{v:.3f}' for v in sr)} deg",
                f"- translation of T_lidar_cam: {1000 * sigma_trans_m(cov):.1f} mm overall; per axis (x y z): "
-               f"{', '.join(f'{v:.1f}' for v in st)} mm", ""]
+               f"{', '.join(f'{v:.1f}' for v in st)} mm",
+               f"- covariance model: {res.get('covariance_model') or 'not stated'}", ""]
     else:
         md += ["No covariance in the result: no 1-sigma figures.", ""]
     if observations.T_lidar_cam_true is not None:

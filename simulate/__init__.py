@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from calib_core.camera import Camera
 from calib_core.observations import BoardObservation, Observations
 from calib_core.transforms import invert_T
 
-from .camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners, observe_board_pose, render_board_image
+from .camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners, observe_board, render_board_image
 from .lidar import beam_bearings, cast_scan
 from .options import SimOptions, contamination_hash, hashed_settings, settings_hash
 from .outliers import contaminate, contamination_rng
@@ -31,9 +32,10 @@ def trial_rngs(options: SimOptions, seed: int, trial: int) -> tuple[np.random.Ge
 
 
 def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0
-                   ) -> tuple[Scene, list[np.ndarray], list[np.ndarray]]:
+                   ) -> tuple[Scene, list[np.ndarray], list[np.ndarray], list[np.ndarray | None]]:
     """One trial's truth and measurements: (scene, scans (per board (K_i,2) in the lidar frame, metres,
-    ordered by bearing), camera-estimated ``T_cam_board`` per board (4x4)).
+    ordered by bearing), camera-estimated ``T_cam_board`` per board (4x4), the image corners (J,2) each pose
+    came from (None in ``exact`` mode)).
 
     Boards are separate captures unless ``shared_scan`` (then one scan, nearest hit wins). In ``image``
     mode a board whose checkerboard is not detected is re-drawn (it counts as a failed attempt).
@@ -43,15 +45,17 @@ def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     spec = BoardSpec.of(o)
     cam_poses: list[np.ndarray] = []
+    corners: list[np.ndarray | None] = []
 
     def observe(T_lidar_cam, T_lidar_board) -> bool:
         try:
-            T = observe_board_pose(K, invert_T(T_lidar_cam) @ T_lidar_board, spec, o.pose_mode, o.cam_width,
+            T, uv = observe_board(K, invert_T(T_lidar_cam) @ T_lidar_board, spec, o.pose_mode, o.cam_width,
                                    o.cam_height, rng_cam, o.pixel_noise_px, o.image_noise_std,
                                    o.render_supersample)
         except CameraError:
             return False
         cam_poses.append(T)
+        corners.append(uv)
         return True
 
     scene = sample_scene(o, rng_geo, accept=observe)
@@ -62,28 +66,35 @@ def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0
     else:
         scans = [cast_scan(bearings, T[None], scene.outline, o.lidar_max_range_m, sigma, rng_lidar)[0]
                  for T in scene.T_lidar_board]
-    return scene, scans, cam_poses
+    return scene, scans, cam_poses, corners
 
 
 def generate(options: SimOptions, seed: int = 0, trial: int = 0) -> Observations:
     """One simulated calibration problem with its ground truth ``T_lidar_cam``.
 
     ``meta``: generator name, the options as a dict, seed, trial, settings hash, and (when the camera poses
-    are estimated, ``pose_mode`` pixel or image) the true ``T_cam_board`` per board; with contamination on
-    (``simulate.outliers``), ``wrong_boards``: the boards whose scan is another object's segment.
+    are estimated, ``pose_mode`` pixel or image) the true ``T_cam_board`` per board. In those modes every board
+    also carries its image corners (``corners_px``, ``corners_board``) and the observations the camera
+    (pinhole, no distortion). With contamination on (``simulate.outliers``), ``wrong_boards``: the boards whose
+    scan is another object's segment.
     """
-    scene, scans, cam_poses = simulate_trial(options, seed, trial)
+    o = options
+    scene, scans, cam_poses, corners = simulate_trial(o, seed, trial)
     wrong: list[int] = []
-    if hashed_settings(options.to_dict()) != options.to_dict():  # some contamination is on
-        scans, wrong = contaminate(scans, options, contamination_rng(seed, contamination_hash(options), trial))
-    boards = tuple(BoardObservation(T, scene.outline, s) for T, s in zip(cam_poses, scans, strict=True))
+    if hashed_settings(o.to_dict()) != o.to_dict():  # some contamination is on
+        scans, wrong = contaminate(scans, o, contamination_rng(seed, contamination_hash(o), trial))
+    P = checkerboard_corners(o)
+    boards = tuple(BoardObservation(T, scene.outline, s, uv, None if uv is None else P)
+                   for T, s, uv in zip(cam_poses, scans, corners, strict=True))
+    camera = None if o.pose_mode == "exact" else \
+        Camera(camera_matrix(o.focal_px, o.cam_width, o.cam_height), [], o.cam_width, o.cam_height)
     meta = {"generator": GENERATOR, "options": options.to_dict(), "seed": int(seed), "trial": int(trial),
             "settings_hash": settings_hash(options)}
     if wrong:
         meta["wrong_boards"] = wrong
     if options.pose_mode != "exact":
         meta["T_cam_board_true"] = scene.T_cam_board.tolist()
-    return Observations(boards, scene.T_lidar_cam, meta)
+    return Observations(boards, scene.T_lidar_cam, meta, camera)
 
 
 __all__ = [

@@ -157,7 +157,16 @@ def pose_from_corners(K: np.ndarray, corners_board: np.ndarray, corners_px: np.n
 def observe_board_pose(K: np.ndarray, T_cam_board: np.ndarray, spec, mode: str, width: int, height: int,
                        rng: np.random.Generator, pixel_noise_px: float = 0.0, image_noise_std: float = 0.0,
                        supersample: int = 4) -> np.ndarray:
-    """The camera's estimate of ``T_cam_board`` (4x4) under ``mode``:
+    """The camera's estimate of ``T_cam_board`` (4x4) under ``mode`` (``observe_board`` without the corners)."""
+    return observe_board(K, T_cam_board, spec, mode, width, height, rng, pixel_noise_px, image_noise_std,
+                         supersample)[0]
+
+
+def observe_board(K: np.ndarray, T_cam_board: np.ndarray, spec, mode: str, width: int, height: int,
+                  rng: np.random.Generator, pixel_noise_px: float = 0.0, image_noise_std: float = 0.0,
+                  supersample: int = 4) -> tuple[np.ndarray, np.ndarray | None]:
+    """The camera's estimate of ``T_cam_board`` (4x4) under ``mode`` and the image corners (N,2) it came from
+    (in ``checkerboard_corners`` order; None in ``exact`` mode):
 
     ``exact``: the true pose; ``pixel``: true inner corners + N(0, ``pixel_noise_px``) per coordinate, then
     IPPE; ``image``: render, add N(0, ``image_noise_std``) grey-level noise, detect, IPPE.
@@ -165,7 +174,7 @@ def observe_board_pose(K: np.ndarray, T_cam_board: np.ndarray, spec, mode: str, 
     """
     T_cam_board = np.asarray(T_cam_board, float)
     if mode == "exact":
-        return T_cam_board.copy()
+        return T_cam_board.copy(), None
     P = checkerboard_corners(spec)
     if mode == "pixel":
         uv = project(K, T_cam_board, P) + rng.normal(0.0, pixel_noise_px, (len(P), 2))
@@ -178,4 +187,4 @@ def observe_board_pose(K: np.ndarray, T_cam_board: np.ndarray, spec, mode: str, 
             raise CameraError("checkerboard not detected in the rendered image")
     else:
         raise ValueError(f"unknown pose mode {mode!r} (exact|pixel|image)")
-    return pose_from_corners(K, P, uv)
+    return pose_from_corners(K, P, uv), uv

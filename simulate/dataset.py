@@ -123,6 +123,19 @@ def _mat_yaml(M: np.ndarray, indent: str = "    ") -> str:
     return "\n".join(f"{indent}- [{', '.join(repr(float(v)) for v in row)}]" for row in np.asarray(M))
 
 
+def write_board_yaml(path, options: SimOptions, outline_sim: np.ndarray) -> None:
+    """board.yaml (docs/dataset.md) of the simulated board; ``outline_sim`` (V,2) in the simulator's board frame,
+    shifted here to the dataset's frame (origin at the first inner corner)."""
+    spec = BoardSpec.of(options)
+    c0 = checkerboard_corners(spec)[0]
+    Path(path).write_text(
+        "# checkerboard: inner corners cols x rows, square side and the board's outline, metres.\n"
+        "# board frame: origin at the first inner corner, x along a row, y along a column, plane z = 0.\n"
+        f"cols: {spec.squares_x - 1}\nrows: {spec.squares_y - 1}\nsquare_m: {spec.square_m!r}\n"
+        "outline_m:\n" + _mat_yaml(np.asarray(outline_sim) - c0[:2], "  ") + "\n"
+        "# colour of the square between the first inner corners (x, y in [0, square_m])\norigin_square: light\n")
+
+
 def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, room: RoomOptions | None = None,
                   distortion=(0.0, 0.0, 0.0, 0.0, 0.0), blur_sigma_px: float = 0.7, image_noise_std: float = 2.0,
                   scan_columns: str = "bearing_range", keyed_scans: bool = False, camera_style: str = "opencv",
@@ -215,13 +228,7 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
         _plain_camera_yaml(out / "camera.yaml", o.cam_width, o.cam_height, K, dist)
     else:
         raise ValueError(f"camera_style must be opencv or plain, got {camera_style!r}")
-    outline = scene.outline - c0[:2]
-    (out / "board.yaml").write_text(
-        "# checkerboard: inner corners cols x rows, square side and the board's outline, metres.\n"
-        "# board frame: origin at the first inner corner, x along a row, y along a column, plane z = 0.\n"
-        f"cols: {cols}\nrows: {rows}\nsquare_m: {spec.square_m!r}\n"
-        "outline_m:\n" + _mat_yaml(outline, "  ") + "\n"
-        "# colour of the square between the first inner corners (x, y in [0, square_m])\norigin_square: light\n")
+    write_board_yaml(out / "board.yaml", o, scene.outline)
 
     T_lc = scene.T_lidar_cam
     T_cb = scene.T_cam_board @ T_sim_ds

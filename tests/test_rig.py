@@ -346,3 +346,17 @@ def test_keyed_xy_scans_plain_camera_and_jpg(tmp_path):
     obs, diags = extract(ds, ExtractOptions(range_sigma_m=0.005))
     assert obs.n_boards == 4, format_diagnostics(diags)
     assert "fewer than 5" in " ".join(__import__("rig.report", fromlist=["x"]).report_warnings(obs, [1.0] * 4))
+
+
+def test_extracted_rig_carries_corners_and_lidarcam_uses_the_joint_model(rig):
+    # the detected corners (distorted pixels) and the camera go into the observations; the joint model projects
+    # through the dataset's distortion, so the corner residuals at the refined poses are sub-pixel
+    from calib_core import calibrate
+
+    _, obs, _ = rig
+    assert obs.has_corners and obs.camera.dist[0] == -0.1
+    res = calibrate(obs, "lidarcam")
+    assert res.ok and res.info["covariance_model"] == "joint", res.info
+    assert res.info["corner_rms_px"] < 0.5
+    e_R, e_t = pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)
+    assert e_R < 4 * res.sigma_rot_deg and 1000 * e_t < 4 * res.sigma_trans_mm, (e_R, e_t, res.sigma_rot_deg)

@@ -292,7 +292,7 @@ def test_impossible_constraint_is_named():
 
 def test_simulate_trial_scans_match_generate():
     opts = replace(NOISE_FREE, n_boards=2)
-    scene, scans, _ = simulate_trial(opts, seed=1)
+    scene, scans, _, _ = simulate_trial(opts, seed=1)
     obs = generate(opts, seed=1)
     assert np.array_equal(scene.T_lidar_cam, obs.T_lidar_cam_true)
     assert all(np.array_equal(s, b.scan) for s, b in zip(scans, obs.boards, strict=True))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..joint import RANGE_ONLY_MODEL, JointError, joint_step
 from ..observations import Observations, ScanData
 from ..refine import refine
 from ..registry import Method
@@ -91,7 +92,8 @@ def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine:
              distinct_trans_m: float = 0.05, min_conditioning: float = 1e-6, warn_min_boards: int = 4,
              warn_min_normal_spread_deg: float = 5.0, warn_min_conditioning: float = 1e-3, max_nfev: int = 100,
              polish: bool = True, polish_threshold: float = 10.0, trim_points: bool = True,
-             reject_boards: bool = True, **solver_options):
+             reject_boards: bool = True, use_corners: bool = True, corner_sigma_px: float | None = None,
+             **solver_options):
     """Our method.
 
     1. Point-level trimming (``trim_points``; ``calib_core.inliers``): scan points off their board's robust line
@@ -108,9 +110,13 @@ def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine:
        ``polish_threshold``); the best is kept.
     4. A final per-board test at the refined pose (boards that fail are left out and the pose refined again) and
        a final point test (range residuals beyond ``inliers.TRIM_SIGMAS`` stds left out, refined again).
-    5. Covariance ``sigma^2 (J^T J)^-1`` on the boards used, conditioning and ``info["warnings"]``. Fails with a
-       reason when no candidate exists, fewer than 3 consistent boards remain, or the conditioning of the
-       refined pose is below ``min_conditioning``.
+    5. On the boards used: when every board carries image corners (and ``use_corners``), the joint maximum
+       likelihood over corners and ranges from that answer (``calib_core.joint``; noise stds ``corner_sigma_px``,
+       ``range_sigma_m`` or estimated), with the extrinsic's covariance, board poses marginalised
+       (``info["covariance_model"]`` "joint"); otherwise the range model's covariance ``sigma^2 (J^T J)^-1``
+       ("range-only, ignores camera noise"). Conditioning and ``info["warnings"]``. Fails with a reason when no
+       candidate exists, fewer than 3 consistent boards remain, or the conditioning of the refined pose is below
+       ``min_conditioning``.
     """
     sigma_opt = range_sigma_m
     search = consensus_search(obs, range_sigma_m=range_sigma_m, outline_sigma_m=outline_sigma_m,
@@ -133,17 +139,32 @@ def lidarcam(obs: Observations, *, range_sigma_m: float | None = None, n_refine:
     if not cond >= min_conditioning:
         raise SolveFailure(f"lidarcam: degenerate board set, the extrinsic is not determined (inverse condition "
                            f"number {cond:.1e} < {min_conditioning:g})", C)
-    try:
-        cov = refinement_covariance(obs_u.scan_data, T_best, "range", sigma_opt)
-    except UncertaintyError as err:
-        raise SolveFailure(f"lidarcam: {err}", C) from None
-    warnings = fin.warnings + degeneracy_warnings(obs_u, T_best, min_boards=warn_min_boards,
-                                                  min_normal_spread_deg=warn_min_normal_spread_deg,
-                                                  min_conditioning=warn_min_conditioning)
+    T_best, cov, jinfo = final_step(obs_u, T_best, C, use_corners, range_sigma_m=sigma_opt,
+                                    corner_sigma_px=corner_sigma_px, loss=loss)
+    warnings = fin.warnings + jinfo.pop("warnings", []) + degeneracy_warnings(
+        obs_u, T_best, min_boards=warn_min_boards, min_normal_spread_deg=warn_min_normal_spread_deg,
+        min_conditioning=warn_min_conditioning)
     start = float(lidarcam_score(search.obs_used, T0[None], **sopts)[0])
     return T_best, C, {"cost": final, "polished": polished, "score_start": start, "n_refined": n_refine,
                        "sigma_m_selection": sigma, "refine_cost": r.cost, "refine_nfev": r.nfev, "covariance": cov,
-                       "conditioning": cond, "warnings": warnings, **fin.info}
+                       "conditioning": cond, "warnings": warnings, **fin.info, **jinfo}
+
+
+def final_step(obs: Observations, T: np.ndarray, C: np.ndarray, use_corners: bool, *, range_sigma_m, corner_sigma_px,
+               loss: str) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The answer and its covariance: the joint ML over corners and ranges (``calib_core.joint``) when every board
+    carries image corners, else the range model's covariance at ``T`` (it ignores the camera's noise)."""
+    why = None
+    if use_corners and obs.has_corners:
+        try:
+            return joint_step(obs, T, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss)
+        except (JointError, UncertaintyError) as err:
+            why = f"joint refinement failed ({err}); covariance of the range model only"
+    try:
+        cov = refinement_covariance(obs.scan_data, T, "range", range_sigma_m)
+    except UncertaintyError as err:
+        raise SolveFailure(f"lidarcam: {err}", C) from None
+    return T, cov, {"covariance_model": RANGE_ONLY_MODEL, **({"warnings": [why]} if why else {})}
 
 
 LIDARCAM = Method("lidarcam", lidarcam, 3, "this project (lidarcam)",

@@ -1,10 +1,12 @@
-"""Derived methods by name suffix: ``X+ml`` (maximum-likelihood refinement on the range residuals) and
-``X+plane`` (refinement on point-to-plane distances) for any method ``X``, each with a covariance."""
+"""Derived methods by name suffix: ``X+ml`` (maximum-likelihood refinement on the range residuals), ``X+plane``
+(refinement on point-to-plane distances) and ``X+joint`` (joint maximum likelihood over image corners and ranges,
+``calib_core.joint``) for any method ``X``, each with a covariance and ``info["covariance_model"]``."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..joint import RANGE_ONLY_MODEL, JointError, joint_step
 from ..observations import Observations
 from ..refine import refine
 from ..registry import Method, derived
@@ -30,7 +32,7 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
     except UncertaintyError as err:
         raise SolveFailure(f"refinement: {err}", T0[None]) from None
     info = {"refine_cost": r.cost, "refine_initial_cost": r.initial_cost, "refine_nfev": r.nfev,
-            "refine_residual": residual, "refine_loss": loss, "covariance": cov,
+            "refine_residual": residual, "refine_loss": loss, "covariance": cov, "covariance_model": RANGE_ONLY_MODEL,
             "conditioning": conditioning(obs, r.T_lidar_cam)}
     return r, cov, info
 
@@ -51,7 +53,40 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
     return derived(base, suffix, func, f"{base.name}, then {what}, with covariance")
 
 
+JOINT_OPTIONS = ("loss", "f_scale", "range_sigma_m", "corner_sigma_px", "max_iter")
+"""Options of an ``X+joint`` method that go to the joint refinement; all others go to ``X``."""
+
+
+def joint_method(base: Method) -> Method:
+    """The method ``base.name + "+joint"``: run ``base``, then the joint maximum likelihood over the image corners
+    and the ranges from its answer (``calib_core.joint.joint_step``; options ``JOINT_OPTIONS``, ``f_scale`` in noise
+    stds), with the extrinsic's covariance, board poses marginalised. Without corners on every board it is
+    ``X+ml`` and says so in ``info["warnings"]`` (its covariance ignores the camera's noise)."""
+    def func(obs: Observations, **options):
+        jopts = {k: options.pop(k) for k in JOINT_OPTIONS if k in options}
+        T0, cands, info = base.func(obs, **options)
+        T0 = np.asarray(T0, float)
+        why = "no image corners" if not obs.has_corners else None
+        if why is None:
+            try:
+                T, cov, jinfo = joint_step(obs, T0, **jopts)
+            except (JointError, UncertaintyError) as err:
+                why = f"joint refinement failed ({err})"
+            else:
+                jinfo["conditioning"] = conditioning(obs, T)
+                return T, cands, {**info, **jinfo, "covariance": cov, "base_T_lidar_cam": T0}
+        ropts = {k: jopts[k] for k in ("loss", "range_sigma_m") if k in jopts}
+        r, _, rinfo = refine_and_cover(obs, T0, "range", **ropts)
+        warn = f"{why}: range-only maximum likelihood; its covariance ignores the camera's noise"
+        return r.T_lidar_cam, cands, {**info, **rinfo, "base_T_lidar_cam": T0,
+                                      "warnings": [*info.get("warnings", []), warn]}
+
+    return derived(base, "joint", func, f"{base.name}, then joint maximum likelihood over image corners and "
+                   "lidar ranges (board poses estimated), with covariance")
+
+
 SUFFIX_FACTORIES = {
     "ml": lambda base: refined_method(base, "range", "ml"),
     "plane": lambda base: refined_method(base, "plane", "plane"),
+    "joint": joint_method,
 }
