@@ -128,15 +128,15 @@ def consensus_search(obs: Observations, *, range_sigma_m: float | None, outline_
     used = np.ones(len(good), bool)
     lo_T: list[np.ndarray] = []
     if reject:
-        best = None
         # starts: the best MSAC hypotheses, and the best by the untruncated sum (all boards, no rejection)
         starts = [(j, False) for j in _distinct_order(H.T, cost, LO_STARTS)]
         starts += [(j, True) for j in _distinct_order(H.T, np.sum(H.q, axis=1), LO_STARTS_ALL)]
-        for j, start_all in starts:
-            res = local_optimise(obs_g, lines, H.T[j], H.q[j], sigma, outline_sigma_m, start_all)
-            lo_T.append(res[0])
-            if best is None or res[4] < best[4]:
-                best = res
+        results = [local_optimise(obs_g, lines, H.T[j], H.q[j], sigma, outline_sigma_m, a) for j, a in starts]
+        lo_T = [res[0] for res in results]
+        # compare them at one truncation (the largest inflation among them): a solution must not win by
+        # leaving out boards that inflate its own noise estimate
+        tau = TEST_CHI2 * max((res[3] for res in results), default=1.0)
+        best = min(results, key=lambda res: float(msac_cost(res[2][None], tau)[0])) if results else None
         if best is None:
             raise SolveFailure("lidarcam: no hypothesis puts the boards in front of the camera", H.T)
         used = best[1]
