@@ -156,10 +156,15 @@ def msac_cost(q: np.ndarray, tau: float = SCORE_TAU) -> np.ndarray:
     return np.sum(np.minimum(q, tau), axis=1)
 
 
+MAX_INFLATION = 25.0
+"""The inflation is capped here (the boards' lines scatter 5 times more than the range noise explains): beyond,
+the boards do not agree on one extrinsic and the tests reject them rather than widen."""
+
+
 def inflation(q_used: np.ndarray, dof: int = 2) -> float:
-    """Variance inflation (>= 1) of the per-board statistics of the boards in use: their median over the
-    chi-square median, so that unmodelled noise (e.g. camera-pose errors) does not reject good boards."""
+    """Variance inflation (1 .. ``MAX_INFLATION``) of the per-board statistics of the boards in use: their median
+    over the chi-square median, so that unmodelled noise (e.g. camera-pose errors) does not reject good boards."""
     if len(q_used) == 0:
         return 1.0
     chi2_median = {1: 0.455, 2: 1.386, 3: 2.366}.get(dof, dof * (1 - 2 / (9 * dof)) ** 3)
-    return max(1.0, float(np.median(q_used)) / chi2_median)
+    return min(MAX_INFLATION, max(1.0, float(np.median(q_used)) / chi2_median))

@@ -196,7 +196,9 @@ def finish_search(s: Search, T: np.ndarray, *, reject: bool, refit: Callable) ->
     s2 = inflation(q[s.used])
     used = q <= TEST_CHI2 * s2 if reject else s.used
     if used.sum() < 3:
-        used = s.used
+        raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(q)} boards pass the per-board test at the "
+                           "refined extrinsic (at least 3 are needed): the boards do not agree on one extrinsic",
+                           s.hyps.T)
     rejected = [r for r in s.rejected if r["index"] not in set(s.good.tolist())]
     rejected += [_rejection(s.good[k], board_reason(q[k], TEST_CHI2 * s2), q[k]) for k in np.flatnonzero(~used)]
     obs_u, n_pts = _point_test(s.obs.subset(s.good[used]), T, s.sigma_m)
