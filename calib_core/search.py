@@ -35,6 +35,8 @@ LO_STARTS_ALL = 2
 """... and distinct best hypotheses by the untruncated sum of the statistics, optimised on all boards first (so a
 consensus that leaves a good board out must beat the one that keeps every board)."""
 LO_ROUNDS = 4
+MIN_TESTABLE = 4
+"""Boards are tested and rejected only from this many on: three boards fit every minimal solution exactly."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,7 +129,7 @@ def consensus_search(obs: Observations, *, range_sigma_m: float | None, outline_
     cost = msac_cost(H.q)
     used = np.ones(len(good), bool)
     lo_T: list[np.ndarray] = []
-    if reject:
+    if reject and len(good) >= MIN_TESTABLE:
         # starts: the best MSAC hypotheses, and the best by the untruncated sum (all boards, no rejection)
         starts = [(j, False) for j in _distinct_order(H.T, cost, LO_STARTS)]
         starts += [(j, True) for j in _distinct_order(H.T, np.sum(H.q, axis=1), LO_STARTS_ALL)]
@@ -194,7 +196,7 @@ def finish_search(s: Search, T: np.ndarray, *, reject: bool, refit: Callable) ->
     back) and the point test on the boards kept; ``refit(obs, T)`` refines again when either changed anything."""
     q = board_statistics(s.obs_good, s.lines, T, s.outline_sigma_m)[0]
     s2 = inflation(q[s.used])
-    used = q <= TEST_CHI2 * s2 if reject else s.used
+    used = q <= TEST_CHI2 * s2 if reject and len(q) >= MIN_TESTABLE else s.used
     if used.sum() < 3:
         raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(q)} boards pass the per-board test at the "
                            "refined extrinsic (at least 3 are needed): the boards do not agree on one extrinsic",
