@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
 .DEFAULT_GOAL := help
-.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise robustness clean
+.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard robustness clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
@@ -42,6 +42,13 @@ explain-paper: $(STAMP) ## Ablations of peng2022 + unstated-setting sweeps, writ
 
 corner-noise: $(STAMP) ## Camera-noise sweeps (joint model over corners and ranges), write results/corner_noise/
 	$(PY) -m experiments.corner_noise --trials 25 --boards-trials 25
+
+REAL_DATA ?= ../shared/real-data
+real-data: $(STAMP) ## The three public rigs end to end, write results/real/ (REAL_DATA=path to the data sets)
+	$(PY) -m experiments.real_data --data $(REAL_DATA)
+
+leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v1.yaml -> results/leaderboard/ (FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
+	$(PY) -m experiments.leaderboard $(if $(FULL),--full) $(ARGS)
 
 robustness: $(STAMP) ## Wrong boards, outlier points, mixed pixels (experiment=outliers), write results/outliers/
 	$(PY) -m experiments.outliers

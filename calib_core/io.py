@@ -10,6 +10,7 @@ import numpy as np
 
 from .camera import Camera
 from .errors import ObservationError
+from .exports import FrameExport
 from .metrics import sigma_rot_deg, sigma_trans_m
 from .observations import BoardObservation, Observations
 from .transforms import invert_T, quaternion_xyzw
@@ -114,12 +115,15 @@ def _fmt_matrix(M: np.ndarray, indent: str) -> str:
     return "\n".join(f"{indent}- [{', '.join(repr(float(v)) for v in row)}]" for row in M)
 
 
-def extrinsic_yaml(T_lidar_cam: np.ndarray, extra: dict | None = None, covariance: np.ndarray | None = None) -> str:
+def extrinsic_yaml(T_lidar_cam: np.ndarray, extra: dict | None = None, covariance: np.ndarray | None = None,
+                   ros: FrameExport | None = None) -> str:
     """YAML text of an extrinsic: both 4x4 directions, quaternion (x, y, z, w) and translation, commented.
 
     ``extra`` adds top-level scalar keys (method name, 1-sigma figures, ...). ``covariance`` (6x6, rotation
     tangent of ``T_lidar_cam`` in the lidar frame (rad) then translation (m)) adds its 1-sigma figures
-    ``sigma_rot_deg`` and ``sigma_trans_mm`` (unless in ``extra``) and the matrix.
+    ``sigma_rot_deg`` and ``sigma_trans_mm`` (unless in ``extra``) and the matrix. ``ros``
+    (``calib_core.exports.frame_export``) adds a ``ros:`` block: frame names, the direction published, the
+    ``static_transform_publisher`` lines for ROS 1 and ROS 2 and the URDF joint.
     """
     extra = dict(extra or {})
     if covariance is not None:
@@ -146,4 +150,22 @@ def extrinsic_yaml(T_lidar_cam: np.ndarray, extra: dict | None = None, covarianc
         lines += ["# 6x6 covariance of T_lidar_cam: rotation vector of the left perturbation exp(w) R in the lidar",
                   "# frame (rad), then translation (m); sigma_rot_deg / sigma_trans_mm are the roots of the traces",
                   "covariance:", _fmt_matrix(cov, "  ")]
+    if ros is not None:
+        lines += _ros_block(ros)
     return "\n".join(lines) + "\n"
+
+
+def _ros_block(ros: FrameExport) -> list[str]:
+    def vec(v):
+        return f"[{', '.join(repr(float(x)) for x in v)}]"
+
+    return [f"# ROS: the transform published for {ros.parent} -> {ros.child} maps {ros.child} points into the "
+            f"{ros.parent} frame; here it is {ros.source}",
+            "ros:", f"  parent_frame: {ros.parent}", f"  child_frame: {ros.child}",
+            f"  T_parent_child: {ros.source}", f"  translation: {vec(ros.xyz)}",
+            f"  quaternion_xyzw: {vec(ros.quaternion_xyzw)}",
+            "  # URDF origin rpy: fixed-axis roll (x), pitch (y), yaw (z), radians",
+            f"  urdf_rpy: {vec(ros.rpy)}",
+            f"  static_transform_publisher_args: \"{ros.tf_args}\"",
+            f"  ros1: \"{ros.ros1}\"", f"  ros2: \"{ros.ros2}\"",
+            "  urdf_joint: |", *("    " + ln for ln in ros.urdf_joint().splitlines())]

@@ -57,10 +57,13 @@ class MethodsConf:
     """Which registered methods run on every trial (all on the same simulated data).
 
     ``names`` must be registered (an unknown name is a config error); ``options`` maps a method name to keyword
-    options of ``calib_core.calibrate``.
+    options of ``calib_core.calibrate``; ``plugins`` are modules imported first (in every worker too) whose
+    methods join the registry (``methods.plugins=[my_lab.my_method]``; installed ``lidarcam.methods`` entry
+    points are always loaded, see ``calib_core.plugins``).
     """
 
     names: list[str] = field(default_factory=lambda: list(PAPER_METHODS))
+    plugins: list[str] = field(default_factory=list)
     options: dict[str, Any] = field(default_factory=dict)
 
 
@@ -128,11 +131,15 @@ register_configs()
 
 def cell_from_cfg(cfg: DictConfig):
     """The runner's ``Cell`` of a composed config (its simulator options validated by ``SimOptions``)."""
+    from calib_core.plugins import load_plugins
+
     from .runner import Cell, resolve_methods
 
+    plugins = tuple(str(p) for p in cfg.methods.get("plugins", None) or ())
+    load_plugins(plugins)
     sim = dataclasses.asdict(sim_options(cfg))
     methods = resolve_methods(cfg.methods.names)
     options = OmegaConf.to_container(cfg.methods.options, resolve=True) or {}
     return Cell(sweep=str(cfg.sweep), sim=sim, seed=int(cfg.seed), n_trials=int(cfg.n_trials), methods=methods,
-                method_options={m: dict(options[m]) for m in methods if options.get(m)},
+                method_options={m: dict(options[m]) for m in methods if options.get(m)}, plugins=plugins,
                 metrics=OmegaConf.to_container(cfg.metrics, resolve=True), results_dir=str(cfg.results_dir))

@@ -11,8 +11,12 @@ Rows land in ``<results_dir>/<sweep>/trials/<setting-key>/``; re-running resumes
 
 from __future__ import annotations
 
+import sys
+
 import hydra
 from omegaconf import DictConfig
+
+from calib_core.errors import LidarcamError
 
 from .config import cell_from_cfg, register_configs
 from .runner import run_cells
@@ -30,7 +34,11 @@ def summary_line(df) -> str:
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
 def main(cfg: DictConfig) -> float:
-    cell = cell_from_cfg(cfg)
+    try:
+        cell = cell_from_cfg(cfg)
+    except LidarcamError as err:  # a plugin that does not load, an unknown method: one line, exit 2
+        print(f"experiments.run: error: {err}", file=sys.stderr)
+        sys.exit(2)
     df = run_cells([cell], n_jobs=cfg.n_jobs, chunk_size=cfg.chunk_size, progress=cfg.progress,
                    label=f"{cell.sweep} {cell.key}")
     print(f"{cell.dir}: {summary_line(df)}")

@@ -40,6 +40,7 @@ from calib_core.metrics import (
     nees,
     pose_errors,
 )
+from calib_core.plugins import load_plugins
 from calib_core.uncertainty import conditioning, crlb
 from simulate.options import hashed_settings
 
@@ -71,7 +72,8 @@ class Cell:
     """One setting of a sweep: simulator options, seed, trial count, methods and metric thresholds.
 
     ``sim`` holds ``simulate.SimOptions`` fields as plain values; ``method_options`` maps a method name to
-    its ``calibrate`` keyword options.
+    its ``calibrate`` keyword options; ``plugins`` are modules every worker imports before running (their
+    methods join the registry; ``calib_core.plugins``). Neither the plugins nor the method list change the key.
     """
 
     sweep: str
@@ -82,6 +84,7 @@ class Cell:
     method_options: dict[str, dict[str, Any]] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=_default_metrics)
     results_dir: str = "results"
+    plugins: tuple[str, ...] = ()
 
     @property
     def key(self) -> str:
@@ -230,6 +233,7 @@ TrialFn = Callable[[Cell, int, Sequence[str]], list[dict[str, Any]]]
 
 
 def _run_chunk(trial_fn: TrialFn, cell: Cell, trials: Sequence[int], methods: Sequence[str]):
+    load_plugins(cell.plugins)  # a worker process starts with the package's methods only (idempotent)
     rows = []
     for t in trials:
         rows.extend(trial_fn(cell, t, methods))
@@ -306,7 +310,7 @@ def _prepare(cell: Cell) -> None:
     settings = cell.dir / "settings.json"
     if not settings.exists():
         d = asdict(cell)
-        d.pop("n_trials"), d.pop("methods"), d.pop("results_dir")
+        d.pop("n_trials"), d.pop("methods"), d.pop("results_dir"), d.pop("plugins")
         tmp = _tmp_name(settings)  # whole or absent: a worker killed mid-write must not leave half a file
         tmp.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
         os.replace(tmp, settings)

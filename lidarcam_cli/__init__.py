@@ -14,19 +14,41 @@ def _cmd_methods(args) -> int:
     from calib_core.registry import METHODS as table
 
     w = max(len(n) for n in table)
-    print(f"{'method':<{w}}  min boards  citation / summary")
+    print(f"{'method':<{w}}  min boards  origin / citation / summary / cost")
     for m in table.values():
-        print(f"{m.name:<{w}}  {m.min_boards:>10}  {m.citation}\n{'':<{w}}  {'':>10}  {m.summary}")
+        pad = f"{'':<{w}}  {'':>10}  "
+        print(f"{m.name:<{w}}  {m.min_boards:>10}  from {m.origin}: {m.citation}\n{pad}{m.summary}")
         if m.cost:
-            print(f"{'':<{w}}  {'':>10}  cost: {m.cost}")
+            print(f"{pad}cost: {m.cost}")
     return 0
+
+
+def _frames(args):
+    """The ROS export asked for on the command line, or None (one frame name alone is an error)."""
+    from calib_core.errors import CalibrationError
+
+    if args.parent_frame is None and args.child_frame is None:
+        return None
+    if args.parent_frame is None or args.child_frame is None:
+        raise CalibrationError("--parent-frame and --child-frame go together")
+    return args.parent_frame, args.child_frame, args.parent_sensor
+
+
+def _print_ros(ros) -> None:
+    print(f"ROS: {ros.parent} -> {ros.child} is {ros.source}: it maps {ros.child} points into the {ros.parent} "
+          "frame (static_transform_publisher arguments: x y z qx qy qz qw parent child, metres)")
+    print(f"  ROS 1: {ros.ros1}")
+    print(f"  ROS 2: {ros.ros2}")
+    print("  URDF:  " + ros.urdf_joint().replace("\n", "\n         "))
 
 
 def _cmd_calibrate(args) -> int:
     from calib_core import calibrate
+    from calib_core.exports import frame_export
     from calib_core.io import extrinsic_yaml, load_observations
     from calib_core.metrics import pose_errors
 
+    frames = _frames(args)
     obs = load_observations(args.observations)
     res = calibrate(obs, method=args.method)
     if not res.ok:
@@ -54,6 +76,9 @@ def _cmd_calibrate(args) -> int:
         if obs.T_lidar_cam_true is not None:
             e_R, e_t = pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)
             print(f"against ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm")
+    ros = frame_export(res.T_lidar_cam, *frames) if res.ok and frames else None
+    if ros is not None:
+        _print_ros(ros)
     if args.out:
         res.save(args.out)
         print(f"wrote {args.out}")
@@ -69,15 +94,31 @@ def _cmd_calibrate(args) -> int:
             if "conditioning" in res.info:
                 extra["conditioning"] = float(res.info["conditioning"])
             with open(args.yaml, "w") as f:
-                f.write(extrinsic_yaml(res.T_lidar_cam, extra, covariance=res.covariance))
+                f.write(extrinsic_yaml(res.T_lidar_cam, extra, covariance=res.covariance, ros=ros))
             print(f"wrote {args.yaml}")
     return 0 if res.ok else 1
+
+
+def _plugin_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--plugin", action="append", default=[], metavar="MODULE",
+                   help="import this module first: its methods join the registry (repeatable; installed "
+                   "'lidarcam.methods' entry points are always loaded)")
+
+
+def load_plugins(argv) -> None:
+    """Load the installed method plugins and those named by ``--plugin`` in ``argv`` (PluginError: one line)."""
+    from calib_core.plugins import load_plugins as load
+
+    pre = argparse.ArgumentParser(add_help=False)
+    _plugin_option(pre)
+    load(pre.parse_known_args(argv)[0].plugin)
 
 
 def build_parser() -> argparse.ArgumentParser:
     from calib_core.registry import METHODS
 
     p = argparse.ArgumentParser(prog="lidarcam", description="2D lidar - camera extrinsic calibration")
+    _plugin_option(p)
     sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
     sp = sub.add_parser("methods", help="list the calibration methods")
     sp.set_defaults(func=_cmd_methods)
@@ -86,6 +127,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--method", default="lidarcam", choices=list(METHODS), help="method (default: %(default)s)")
     sp.add_argument("--out", help="write the result JSON (lidarcam.result/1) here")
     sp.add_argument("--yaml", help="write the extrinsic as YAML here")
+    sp.add_argument("--parent-frame", help="ROS frame name of the parent sensor (the lidar unless --parent-sensor "
+                    "camera): prints static_transform_publisher lines and a URDF joint, adds them to the YAML")
+    sp.add_argument("--child-frame", help="ROS frame name of the other sensor (the camera by default)")
+    sp.add_argument("--parent-sensor", choices=("lidar", "camera"), default="lidar",
+                    help="which sensor --parent-frame names (default: %(default)s, publishing T_lidar_cam)")
     sp.set_defaults(func=_cmd_calibrate)
     simulate.add_parsers(sub)
     rig.add_parsers(sub)
@@ -94,6 +140,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        load_plugins(argv)
+    except LidarcamError as err:
+        print(f"lidarcam: error: {err}", file=sys.stderr)
+        return 2
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)

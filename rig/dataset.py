@@ -131,7 +131,9 @@ class Pose:
 
     Attributes: ``name`` (file stem, e.g. ``"003"``); ``image_path`` (or None); ``scan`` (or None);
     ``window`` (bearing_min, bearing_max) radians from windows.yaml, or None; ``error``: a DatasetError when
-    the image or scan is missing or bad (the pose is then skipped by extraction), else None.
+    the image or scan is missing or bad (the pose is then skipped by extraction), else None; ``corners``: the
+    checkerboard detector's corners (N,2 pixels) when found already (extraction then skips the detection;
+    an empty array: the detector found no board).
     """
 
     name: str
@@ -139,6 +141,7 @@ class Pose:
     scan: Scan | None
     window: tuple[float, float] | None = None
     error: DatasetError | None = None
+    corners: np.ndarray | None = None
 
     def read_image(self) -> np.ndarray:
         """The image as 8-bit grayscale (H, W)."""
@@ -238,7 +241,11 @@ def _require(data: dict, key: str, path: Path):
 def load_camera(path) -> CameraModel:
     """Read camera.yaml: ``image_width``, ``image_height``, ``camera_matrix`` (3x3), ``distortion_coefficients``."""
     path = Path(path)
-    data = read_yaml(path)
+    return camera_from_dict(read_yaml(path), path)
+
+
+def camera_from_dict(data: dict, path: Path) -> CameraModel:
+    """A CameraModel from camera.yaml's keys (already parsed); errors name ``path``."""
     try:
         w, h = int(_require(data, "image_width", path)), int(_require(data, "image_height", path))
     except (TypeError, ValueError):

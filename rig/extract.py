@@ -32,6 +32,15 @@ class ExtractionError(LidarcamError):
     """A pose's board or scan segment could not be found; the message is the skip reason."""
 
 
+class AmbiguousSegment(ExtractionError):
+    """Several scan segments fit the board about equally; ``segments`` holds their (i0, i1) index ranges, best
+    first, so that a later pass (``extract``) can choose with the extrinsic of the unambiguous poses."""
+
+    def __init__(self, message: str, segments: list[tuple[int, int]]) -> None:
+        super().__init__(message)
+        self.segments = segments
+
+
 @dataclass(frozen=True)
 class ExtractOptions:
     """Thresholds of the extraction (metres, radians, pixels).
@@ -53,6 +62,17 @@ class ExtractOptions:
         chord_weight: weight of the expected-chord term in the ranking (0 disables it).
         detector_flags: extra ``cv2.CALIB_CB_*`` flags for findChessboardCornersSB (default: normalise + exhaustive
             + accuracy).
+        auto_background: with no background.csv, drop the points that stay put across the poses (rig.multipose).
+        static_tol_m: range agreement for a point to count as the same return in another pose.
+        outline_known: False when the physical board may be larger than ``board.outline`` (e.g. a printed sheet on
+            a larger board): segments longer than the outline's chord are not penalised, up to ``max_board_m``.
+        max_board_m: longest accepted segment when the outline is not known.
+        skip_ambiguous: skip a pose whose two best segments score within ``ambiguity_margin`` (else keep the best
+            with a note).
+        merge_duplicates: poses whose camera views agree within ``duplicate_deg`` / ``duplicate_m`` are one board
+            pose captured several times: they become one board holding all their scan points.
+        resolve_ratio: an ambiguous pose is resolved by the extrinsic of the unambiguous poses when its best
+            candidate's point-to-plane RMS is below ``split_tol`` and below this times the next one's.
     """
 
     max_offset_m: float = 0.5
@@ -67,6 +87,16 @@ class ExtractOptions:
     scan_plane_normal_cam: tuple[float, float, float] = (0.0, 1.0, 0.0)
     chord_weight: float = 0.5
     detector_flags: int | None = None
+    auto_background: bool = True
+    static_tol_m: float = 0.03
+    outline_known: bool = True
+    max_board_m: float = 2.0
+    skip_ambiguous: bool = True
+    ambiguity_margin: float = 0.1
+    merge_duplicates: bool = True
+    duplicate_deg: float = 1.5
+    duplicate_m: float = 0.015
+    resolve_ratio: float = 0.5
 
     @property
     def split_tol(self) -> float:
@@ -91,6 +121,7 @@ class PoseDiagnostics:
     n_candidates: int = 0
     source: str = ""
     segment: tuple[int, int] | None = None
+    ambiguous: list[tuple[int, int]] = field(default_factory=list)
     n_points: int = 0
     bearing_deg: tuple[float, float] | None = None
     length_m: float = math.nan
@@ -141,8 +172,11 @@ def _solve_pose(obj: np.ndarray, corners: np.ndarray, camera: CameraModel):
     return make_T(R, tvec.ravel()), rms
 
 
-def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags: int | None = None) -> BoardDetection:
+def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags: int | None = None,
+                 corners: np.ndarray | None = None) -> BoardDetection:
     """Find the checkerboard in ``gray`` and its pose ``T_cam_board``; raises ExtractionError when not found.
+    ``corners`` (N,2): the detector's corners found already (e.g. for the intrinsics), to skip the detection; an
+    empty array means the detector already found no board.
 
     The detector's corner order is made canonical: the board frame is right-handed with z pointing away from the
     camera (a mirrored order is reversed along rows) and, when ``cols + rows`` is odd and board.yaml states the
@@ -152,7 +186,9 @@ def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags:
 
     if flags is None:
         flags = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
-    found, corners = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags=flags)
+    found = corners is not None and len(corners) > 0
+    if corners is None:
+        found, corners = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags=flags)
     if not found or corners is None:
         raise ExtractionError(f"checkerboard with {board.cols}x{board.rows} inner corners not found in the image")
     corners = corners.reshape(-1, 2).astype(float)
@@ -346,9 +382,10 @@ def _describe(scan: Scan, idx: np.ndarray) -> tuple[float, float, float]:
 
 
 def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, opts: ExtractOptions | None = None,
-                       background: Scan | None = None, diag: PoseDiagnostics | None = None) -> np.ndarray:
+                       background: Scan | None = None, diag: PoseDiagnostics | None = None,
+                       static: np.ndarray | None = None) -> np.ndarray:
     """Indices of the scan points on the board (ordered along the sweep); raises ExtractionError when no segment
-    agrees with the camera's view of the board."""
+    agrees with the camera's view of the board. ``static``: mask of points that stay put across poses (dropped)."""
     opts = opts or ExtractOptions()
     diag = diag if diag is not None else PoseDiagnostics("")
     keep = np.ones(len(scan), bool)
@@ -356,6 +393,9 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
         bg = background_mask(scan, background, opts.background_tol_m)
         keep &= ~bg
         diag.n_background = int(bg.sum())
+    if static is not None:
+        keep &= ~static
+        diag.n_background += int(static.sum())
     segs = split_and_merge(scan, keep, opts)
     diag.n_segments = len(segs)
     if not segs:
@@ -365,6 +405,8 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
     lo, hi = near - opts.max_offset_m, far + opts.max_offset_m
     ext = board.outline.max(axis=0) - board.outline.min(axis=0)
     min_len, max_len = opts.min_length_frac * float(ext.min()), board.diagonal + opts.length_slack_m
+    if not opts.outline_known:
+        max_len = max(max_len, opts.max_board_m)
     chord = expected_chord(T_cam_board, board, opts.scan_plane_normal_cam) if opts.chord_weight > 0 else math.nan
     centre_dist = float(np.linalg.norm(transform_points(T_cam_board, [[*board.centre, 0.0]])[0]))
     cands, rejected = [], []
@@ -388,7 +430,8 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
             continue
         score = abs(rmid - centre_dist) / max(board.diagonal / 2, 1e-3)
         if math.isfinite(chord) and chord > 0:
-            score += opts.chord_weight * abs(length - chord) / chord
+            miss = length - chord if opts.outline_known else max(0.0, chord - length)
+            score += opts.chord_weight * abs(miss) / chord
         score += rms / opts.split_tol
         cands.append(_Segment(i0, i1, length, rmid, rms, score))
     diag.n_candidates = len(cands)
@@ -397,22 +440,29 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
                               f"({len(segs)} segments; refused: {'; '.join(rejected) if rejected else '-'})")
     cands.sort(key=lambda s: s.score)
     best = cands[0]
-    if len(cands) > 1 and cands[1].score - best.score < 0.1:
-        diag.notes.append(f"ambiguous: {len(cands)} segments fit the board about equally")
+    if len(cands) > 1 and cands[1].score - best.score < opts.ambiguity_margin:
+        two = ", ".join(f"{math.degrees(scan.bearing[c.i0]):.1f}..{math.degrees(scan.bearing[c.i1 - 1]):.1f} deg "
+                        f"(score {c.score:.2f})" for c in cands[:2])
+        if opts.skip_ambiguous:
+            raise AmbiguousSegment(f"ambiguous: {len(cands)} segments fit the board about equally: {two}",
+                                   [(c.i0, c.i1) for c in cands if c.score - best.score < opts.ambiguity_margin])
+        diag.notes.append(f"ambiguous: {len(cands)} segments fit the board about equally: {two}")
     return np.arange(best.i0, best.i1)
 
 
 # --------------------------------------------------------------------------------------------------- per pose
-def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = None
+def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = None, det: BoardDetection | None = None,
+                 static: np.ndarray | None = None
                  ) -> tuple[BoardObservation | None, PoseDiagnostics, BoardDetection | None]:
-    """One pose: (board observation or None, diagnostics, camera detection or None). Never raises for bad data."""
+    """One pose: (board observation or None, diagnostics, camera detection or None). Never raises for bad data.
+    ``det``: the camera detection made already; ``static``: the scan's static points (rig.multipose)."""
     opts = opts or ExtractOptions()
     diag = PoseDiagnostics(pose.name)
-    det = None
     try:
         if pose.error is not None:
             raise pose.error
-        det = detect_board(pose.read_image(), dataset.camera, dataset.board, opts.detector_flags)
+        if det is None:
+            det = detect_board(pose.read_image(), dataset.camera, dataset.board, opts.detector_flags, pose.corners)
         diag.n_corners = len(det.corners)
         diag.reproj_rms_px = det.reproj_rms_px
         diag.cam_distance_m = float(np.linalg.norm(
@@ -430,49 +480,158 @@ def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = Non
                                       f"{len(idx)} points (< {opts.min_points})")
         else:
             diag.source = "auto"
-            idx = find_board_segment(scan, det.T_cam_board, dataset.board, opts, dataset.background, diag)
-        length, rmid, rms = _describe(scan, idx)
-        diag.segment = (int(idx[0]), int(idx[-1]) + 1)
-        diag.n_points = len(idx)
-        diag.bearing_deg = (math.degrees(scan.bearing[idx[0]]), math.degrees(scan.bearing[idx[-1]]))
-        diag.length_m, diag.range_m, diag.line_rms_mm = length, rmid, 1000 * rms
-        if diag.source == "window" and rms > opts.split_tol:
-            diag.notes.append(f"window points fit a line only to {1000 * rms:.0f} mm RMS")
+            idx = find_board_segment(scan, det.T_cam_board, dataset.board, opts, dataset.background, diag, static)
+        _board_finish(scan, idx, diag)
+        if diag.source == "window" and diag.line_rms_mm > 1000 * opts.split_tol:
+            diag.notes.append(f"window points fit a line only to {diag.line_rms_mm:.0f} mm RMS")
         obs = BoardObservation(det.T_cam_board, dataset.board.outline, scan.points[idx], det.corners,
                                dataset.board.corners)
         diag.used = True
         return obs, diag, det
     except (ExtractionError, DatasetError) as err:
         diag.reason = str(err)
+        diag.ambiguous = list(getattr(err, "segments", []))
         return None, diag, det
+
+
+def _detect_all(dataset: Dataset, opts: ExtractOptions) -> dict[str, BoardDetection | Exception]:
+    """Camera side of every pose: its detection, or the error that stops it."""
+    out: dict[str, BoardDetection | Exception] = {}
+    for pose in dataset.poses:
+        try:
+            if pose.error is not None:
+                raise pose.error
+            out[pose.name] = detect_board(pose.read_image(), dataset.camera, dataset.board, opts.detector_flags,
+                                          pose.corners)
+        except (ExtractionError, DatasetError) as err:
+            out[pose.name] = err
+    return out
+
+
+def _board_finish(obs_scan: Scan, idx: np.ndarray, diag: PoseDiagnostics) -> None:
+    length, rmid, rms = _describe(obs_scan, idx)
+    diag.segment = (int(idx[0]), int(idx[-1]) + 1)
+    diag.n_points = len(idx)
+    diag.bearing_deg = (math.degrees(obs_scan.bearing[idx[0]]), math.degrees(obs_scan.bearing[idx[-1]]))
+    diag.length_m, diag.range_m, diag.line_rms_mm = length, rmid, 1000 * rms
+
+
+def _resolve_ambiguous(dataset: Dataset, boards: list, diags: list[PoseDiagnostics], dets: dict,
+                       opts: ExtractOptions) -> None:
+    """Second pass over ambiguous poses: calibrate on the unambiguous boards (``zhang_pless``, or ``vasconcelos``
+    with fewer than 5 boards or when it fails: both fast, point-to-plane), then keep the candidate
+    segment whose points lie on the board plane through that extrinsic, when it is clearly the best; otherwise
+    the pose stays skipped and its reason says what the extrinsic showed."""
+    todo = [k for k, d in enumerate(diags) if d.ambiguous]
+    good = [replace(b, corners_px=None, corners_board=None) for b in boards if b is not None]
+    if not todo or len(good) < 3:
+        return
+    from calib_core.entry import calibrate
+    from calib_core.transforms import invert_T
+
+    res = calibrate(Observations(tuple(good)), "zhang_pless") if len(good) >= 5 else None
+    if res is None or not res.ok:
+        res = calibrate(Observations(tuple(good)), "vasconcelos")
+    if not res.ok:
+        return
+    T_cam_lidar = invert_T(res.T_lidar_cam)
+    by_name = {p.name: p for p in dataset.poses}
+    for k in todo:
+        d, pose = diags[k], by_name[diags[k].name]
+        T_cb = dets[d.name].T_cam_board
+        n, off = T_cb[:3, 2], float(T_cb[:3, 2] @ T_cb[:3, 3])
+        rms = []
+        for i0, i1 in d.ambiguous:
+            P = transform_points(T_cam_lidar, np.column_stack([pose.scan.points[i0:i1], np.zeros(i1 - i0)]))
+            rms.append(float(np.sqrt(np.mean((P @ n - off) ** 2))))
+        order = np.argsort(rms)
+        best, second = rms[order[0]], rms[order[1]] if len(rms) > 1 else math.inf
+        what = ", ".join(f"{math.degrees(pose.scan.bearing[a]):.1f}..{math.degrees(pose.scan.bearing[b - 1]):.1f} "
+                         f"deg at {1000 * r:.0f} mm" for (a, b), r in zip(d.ambiguous, rms, strict=True))
+        if best < opts.split_tol and best < opts.resolve_ratio * second:
+            i0, i1 = d.ambiguous[order[0]]
+            idx = np.arange(i0, i1)
+            boards[k] = BoardObservation(T_cb, dataset.board.outline, pose.scan.points[idx], dets[d.name].corners,
+                                         dataset.board.corners)
+            d.used, d.reason = True, None
+            _board_finish(pose.scan, idx, d)
+            d.notes.append(f"ambiguous segments resolved by the extrinsic of {len(good)} other boards "
+                           f"(point-to-plane RMS: {what})")
+        else:
+            d.reason += f"; the extrinsic of {len(good)} other boards does not settle it ({what})"
+
+
+def _merge_duplicates(boards: list, diags: list[PoseDiagnostics], groups: list[int]) -> tuple[list, dict]:
+    """One board per duplicate group: the camera pose of the member with the lowest reprojection RMS and the scan
+    points of all members (ordered by bearing). Returns (boards, representative pose -> merged pose names)."""
+    by_group: dict[int, list[int]] = {}
+    for k, d in enumerate(diags):
+        if d.used:
+            by_group.setdefault(groups[k], []).append(k)
+    out, merged = [], {}
+    for members in by_group.values():
+        rep = min(members, key=lambda k: diags[k].reproj_rms_px)
+        pts = np.vstack([boards[k].scan for k in members])
+        pts = pts[np.argsort(np.arctan2(pts[:, 1], pts[:, 0]), kind="stable")]
+        for k in members:
+            diags[k].board_index = len(out)
+            if k != rep:
+                diags[k].notes.append(f"near-duplicate of pose {diags[rep].name}: merged into its board")
+        if len(members) > 1:
+            merged[diags[rep].name] = [diags[k].name for k in members if k != rep]
+        out.append(replace(boards[rep], scan=pts))
+    return out, merged
 
 
 def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Observations, list[PoseDiagnostics]]:
     """Every pose of ``dataset`` -> (Observations of the usable poses, diagnostics of every pose).
 
-    ``Observations.meta`` holds ``poses`` (the pose name of each board, in order), ``skipped`` (pose -> reason),
+    The camera side runs first for every pose; near-duplicate poses (rig.multipose.duplicate_groups) are grouped;
+    with no background.csv the points that stay put across the groups are dropped (``opts.auto_background``);
+    then each pose's board segment is searched for, and a group's boards are merged into one
+    (``opts.merge_duplicates``). ``Observations.meta`` holds ``poses`` (the pose name of each board, in order),
+    ``skipped`` (pose -> reason), ``merged`` (pose -> the near-duplicates merged into its board),
     ``reproj_rms_px`` per board and ``dataset`` (the folder). Every board carries its detected corners (distorted
     pixels, canonical order) and their board-frame positions, and the observations the camera intrinsics, so the
     joint model over corners and ranges applies (``meta["camera_note"]`` says why not when the intrinsics do not
     fit ``calib_core.camera.Camera``). The ground truth of a simulated dataset
     (ground_truth.yaml ``T_lidar_cam``) becomes ``T_lidar_cam_true``.
     """
+    from .multipose import duplicate_groups, static_masks
+
     opts = opts or ExtractOptions()
+    dets = _detect_all(dataset, opts)
+    Ts = [d.T_cam_board if isinstance(d, BoardDetection) else None for d in dets.values()]
+    groups = duplicate_groups(Ts, opts.duplicate_deg, opts.duplicate_m) if opts.merge_duplicates \
+        else list(range(len(Ts)))
+    statics = [None] * len(Ts)
+    if opts.auto_background and dataset.background is None:
+        statics = static_masks([p.scan if p.error is None else None for p in dataset.poses], groups,
+                               opts.static_tol_m)
     boards, diags = [], []
     camera, camera_note = _camera(dataset)
-    for pose in dataset.poses:
-        obs, diag, _ = extract_pose(pose, dataset, opts)
-        if obs is not None:
-            diag.board_index = len(boards)
-            boards.append(obs)
+    for k, pose in enumerate(dataset.poses):
+        det = dets[pose.name]
+        if isinstance(det, Exception):
+            obs, diag = None, PoseDiagnostics(pose.name, reason=str(det))
+        else:
+            obs, diag, _ = extract_pose(pose, dataset, opts, det, statics[k])
+        boards.append(obs)
         diags.append(diag)
+    _resolve_ambiguous(dataset, boards, diags, dets, opts)
+    boards, merged = _merge_duplicates(boards, diags, groups)
     gt = dataset.ground_truth.get("T_lidar_cam") if dataset.ground_truth else None
     if isinstance(gt, dict):
         gt = gt.get("matrix")
+    reps = {}
+    for d in diags:
+        if d.used and d.board_index not in reps and not any(n.startswith("near-duplicate") for n in d.notes):
+            reps[d.board_index] = d
     meta = {"source": "lidarcam extract", "dataset": str(dataset.root),
-            "poses": [d.name for d in diags if d.used],
+            "poses": [reps[i].name for i in range(len(boards))],
             "skipped": {d.name: d.reason for d in diags if not d.used},
-            "reproj_rms_px": [d.reproj_rms_px for d in diags if d.used]}
+            "merged": merged,
+            "reproj_rms_px": [reps[i].reproj_rms_px for i in range(len(boards))]}
     if camera is None:
         boards = [replace(b, corners_px=None, corners_board=None) for b in boards]
         meta["camera_note"] = camera_note

@@ -333,3 +333,18 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
     summary.markdown.write_text("\n".join(md) + "\n")
     return summary
+
+
+def save_overlay(path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_cam_board, outline, full_scan,
+                 board_scan, title: str, clim_mm: float = 50.0, colours: int = 128) -> Path:
+    """One scan-on-image overlay (as in ``write_report``) saved as a small palette PNG (``colours`` colours):
+    the whole scan through ``T_cam_lidar`` coloured by its distance to the board plane (mm), the board's own
+    points larger, the board outline from the camera in yellow."""
+    from PIL import Image
+
+    path = Path(path)
+    _overlay(path, gray, camera, T_cam_lidar, T_cam_board, outline, full_scan, board_scan, clim_mm, title)
+    with Image.open(path) as im:
+        small = im.convert("RGB").quantize(colours, method=Image.Quantize.MEDIANCUT)
+    small.save(path, optimize=True)
+    return path

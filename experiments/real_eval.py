@@ -1,0 +1,165 @@
+"""Evaluation of methods on one real rig without ground truth: full fit, leave-one-pose-out residual, agreement
+with a published result, time, and the degeneracy verdict. Uses ``calib_core.crossval`` and
+``calib_core.degeneracy`` when the library has them; otherwise the small fallbacks below (marked in the report).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+import calib_core
+from calib_core.metrics import pose_errors
+from calib_core.observations import Observations
+from calib_core.transforms import invert_T
+from rig.report import board_plane_distances as plane_distances
+
+try:  # leave-one-pose-out cross-validation of the library
+    from calib_core.crossval import leave_one_out as _library_loo
+except ImportError:  # pragma: no cover - depends on the library version
+    _library_loo = None
+try:
+    from calib_core.degeneracy import undetermined_directions as _library_degeneracy
+except ImportError:  # pragma: no cover
+    _library_degeneracy = None
+try:
+    from calib_core.uncertainty import scan_noise_estimate as _library_noise
+except ImportError:  # pragma: no cover
+    _library_noise = None
+
+HAVE_LIBRARY_CV = _library_loo is not None
+
+
+def range_noise_m(obs: Observations) -> float:
+    """Range-noise std (m) from the scan lines alone (no extrinsic): the library's estimate where it has one,
+    else the pooled total-least-squares line residual over the boards (2 degrees of freedom per line removed)."""
+    if _library_noise is not None:
+        return float(_library_noise(obs))
+    from calib_core.lines import tls_line
+
+    num = den = 0.0
+    for b in obs.boards:
+        if len(b.scan) >= 3:
+            r = tls_line(b.scan)[2]
+            num, den = num + float(r @ r), den + len(r) - 2
+    return math.sqrt(num / den) if den > 0 else math.nan
+
+
+def held_out(obs: Observations, method: str, sigma_m: float, **options) -> dict:
+    """Leave-one-pose-out: pooled RMS of the held-out poses' point-to-plane distances (mm and in units of the
+    range noise), folds that failed, seconds."""
+    if _library_loo is not None:
+        cv = _library_loo(obs, method, range_sigma_m=sigma_m, **options)
+        return {"rms_mm": cv.overall_rms_mm, "rms_sigmas": cv.overall_rms_sigmas, "n_ok": cv.n_ok,
+                "n": len(cv.names), "seconds": cv.seconds, "source": "calib_core.crossval"}
+    t0, sq, n, ok = time.perf_counter(), 0.0, 0, 0
+    N = obs.n_boards
+    for i in range(N):
+        res = calib_core.calibrate(obs.subset([j for j in range(N) if j != i]), method, **options)
+        if res.ok:
+            b = obs.boards[i]
+            e = plane_distances(invert_T(res.T_lidar_cam), b.T_cam_board, b.scan)
+            sq, n, ok = sq + float(e @ e), n + len(e), ok + 1
+    rms = math.sqrt(sq / n) if n else math.nan
+    return {"rms_mm": 1000 * rms, "rms_sigmas": rms / sigma_m, "n_ok": ok, "n": N,
+            "seconds": time.perf_counter() - t0, "source": "fallback (point-to-plane / sigma)"}
+
+
+def in_sample_rms_mm(obs: Observations, T_lidar_cam: np.ndarray) -> float:
+    """RMS point-to-plane distance of every board's points through ``T_lidar_cam`` (mm)."""
+    Ti = invert_T(T_lidar_cam)
+    e = np.concatenate([plane_distances(Ti, b.T_cam_board, b.scan) for b in obs.boards])
+    return 1000 * float(np.sqrt(np.mean(e ** 2)))
+
+
+def leaderboard(obs: Observations, methods, sigma_m: float, published: np.ndarray | None = None,
+                cv: bool = True, options: dict | None = None) -> list[dict]:
+    """One row per method: ok / reason, seconds, in-sample RMS, 1-sigma, agreement with ``published``
+    (deg, mm), held-out RMS (mm, sigmas). ``options``: per-method keyword arguments."""
+    rows = []
+    for m in methods:
+        opts = (options or {}).get(m, {})
+        res = calib_core.calibrate(obs, m, **opts)
+        row = {"method": m, "ok": res.ok, "reason": res.reason, "seconds": res.seconds,
+               "T_lidar_cam": None if not res.ok else res.T_lidar_cam.tolist(),
+               "sigma_rot_deg": res.sigma_rot_deg if res.ok else None,
+               "sigma_trans_mm": res.sigma_trans_mm if res.ok else None}
+        if res.ok:
+            row["fit_rms_mm"] = in_sample_rms_mm(obs, res.T_lidar_cam)
+            if published is not None:
+                e_R, e_t = pose_errors(res.T_lidar_cam, published)
+                row["vs_published_deg"], row["vs_published_mm"] = float(e_R), 1000 * float(e_t)
+        if cv:
+            row["cv"] = held_out(obs, m, sigma_m, **opts)
+        rows.append(row)
+        print(f"  {m}: ok={res.ok} {res.seconds:.2f} s" + (f", held-out {row['cv']['rms_mm']:.1f} mm"
+                                                            if cv else ""), flush=True)
+    return rows
+
+
+def degeneracy_verdict(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: float) -> tuple[str, bool | None]:
+    """(one sentence, determined?) from the library's information-matrix analysis, else the board-normal
+    spread only (``determined`` None: not assessed)."""
+    if _library_degeneracy is not None:
+        d = _library_degeneracy(obs, T_lidar_cam, sigma_m)
+        return d.message(), d.determined
+    from rig.report import normal_conditioning
+
+    ang, cond = normal_conditioning(obs)
+    return (f"not assessed by an information-matrix analysis here; board normals: largest pair angle {ang:.1f} deg, "
+            f"sigma3/sigma1 = {cond:.3f}"), None
+
+
+def fmt(v, spec: str = ".2f", none: str = "-") -> str:
+    """``v`` formatted, or ``none`` for None / NaN."""
+    return none if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, spec)
+
+
+def leaderboard_md(rows: list[dict], sigma_m: float, published: bool) -> list[str]:
+    """The leaderboard as a Markdown table, best held-out residual first."""
+    def key(r):
+        v = (r.get("cv") or {}).get("rms_mm")
+        return (0, v) if v is not None and math.isfinite(v) else (1, 0.0)
+
+    head = "| method | ok | held-out RMS (mm) | held-out (x noise) | folds ok | fit RMS (mm) | 1-sigma rot (deg) / " \
+           "trans (mm) |" + (" vs published (deg / mm) |" if published else "") + " time (s) |"
+    sep = "|---|---|---:|---:|---:|---:|---:|" + ("---:|" if published else "") + "---:|"
+    out = [head, sep]
+    for r in sorted(rows, key=key):
+        cv = r.get("cv") or {}
+        cells = [f"`{r['method']}`", "yes" if r["ok"] else f"no: {r['reason']}", fmt(cv.get("rms_mm"), ".1f"),
+                 fmt(cv.get("rms_sigmas"), ".2f"), f"{cv.get('n_ok', '-')}/{cv.get('n', '-')}",
+                 fmt(r.get("fit_rms_mm"), ".1f"),
+                 f"{fmt(r.get('sigma_rot_deg'), '.2f')} / {fmt(r.get('sigma_trans_mm'), '.1f')}"]
+        if published:
+            cells.append(f"{fmt(r.get('vs_published_deg'), '.3f')} / {fmt(r.get('vs_published_mm'), '.2f')}")
+        cells.append(fmt(r["seconds"] + cv.get("seconds", 0.0), ".2f"))
+        out.append("| " + " | ".join(cells) + " |")
+    out += ["", f"Range noise (from the scan lines, no extrinsic): {1000 * sigma_m:.1f} mm. Held-out: each pose "
+            "calibrated from the others, its scan points against its board plane from the camera; time: the full "
+            "fit plus every fold."]
+    return out
+
+
+def planar_calibration(obs: Observations, verdict_axes, given: dict | None = None
+                       ) -> tuple[list[str], np.ndarray | None]:
+    """(Markdown lines, T_lidar_cam or None): ``lidarcam`` with the undetermined mounting parameters fixed
+    (``calibrate(..., fixed=)``; ``given`` values, else 0) and the estimated ones with their 1-sigma."""
+    try:
+        from calib_core.mounting import UNIT_NAMES
+    except ImportError:
+        return ["Calibration with fixed mounting parameters: not available in this build of the library."], None
+    names = [f"{a}_deg" if f"{a}_deg" in UNIT_NAMES else f"{a}_m" for a in verdict_axes]
+    fixed = {n: (given or {}).get(n, 0.0) for n in names}
+    res = calib_core.calibrate(obs, "lidarcam", fixed=fixed)
+    if not res.ok:
+        return [f"Calibration with {fixed} fixed failed: {res.reason}"], None
+    info = res.info or {}
+    val, sig = info.get("mounting", {}), info.get("mounting_sigma", {})
+    cells = ", ".join(f"{n} = {val[n]:.3f} +- {sig[n]:.3f}" for n in UNIT_NAMES if n in sig)
+    fixed_txt = ", ".join(f"{k} = {v:g}" for k, v in fixed.items())
+    return [f"`lidarcam` with {fixed_txt} fixed (not measured for this rig: placeholders for the mounting a "
+            f"user measures; the estimated parameters do not depend on them here): {cells} (1-sigma).",
+            *(f"- warning: {w}" for w in info.get("warnings", []))], res.T_lidar_cam
