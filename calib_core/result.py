@@ -83,8 +83,25 @@ class CalibrationResult:
             return None
         return 1000.0 * sigma_trans_m(self.covariance)
 
+    @property
+    def warnings(self) -> list[str]:
+        """Plain-language warnings of the method (``info["warnings"]``; empty when none)."""
+        return [str(w) for w in self.info.get("warnings", [])]
+
+    @property
+    def boards_used(self) -> list[int] | None:
+        """Indices of the boards the answer rests on, for methods that leave boards out (None otherwise)."""
+        used = self.info.get("boards_used")
+        return None if used is None else [int(i) for i in used]
+
+    @property
+    def boards_rejected(self) -> list[dict]:
+        """Boards left out by the method: ``{"index", "reason", "statistic"}`` each (empty when none)."""
+        return [dict(r) for r in self.info.get("boards_rejected", [])]
+
     def to_dict(self) -> dict:
-        """JSON form under schema ``lidarcam.result/1``."""
+        """JSON form under schema ``lidarcam.result/1``; ``warnings`` always, ``boards_used`` and
+        ``boards_rejected`` (index, reason, statistic) when the method reports them (optional fields)."""
         d = {"schema": RESULT_SCHEMA, "method": self.method, "ok": bool(self.ok), "reason": self.reason,
              "T_lidar_cam": None if self.T_lidar_cam is None else self.T_lidar_cam.tolist(),
              "T_cam_lidar": None if self.T_cam_lidar is None else self.T_cam_lidar.tolist(),
@@ -95,10 +112,15 @@ class CalibrationResult:
             d["sigma_trans_mm"] = self.sigma_trans_mm
             if "covariance_model" in self.info:
                 d["covariance_model"] = str(self.info["covariance_model"])
-        if self.info.get("warnings"):
-            d["warnings"] = [str(w) for w in self.info["warnings"]]
+        d["warnings"] = self.warnings
         if self.info.get("verdict") is not None:
             d["verdict"] = self.info["verdict"]
+        if self.boards_used is not None:
+            d["boards_used"] = self.boards_used
+            d["boards_rejected"] = [{"index": int(r["index"]), "reason": str(r["reason"]),
+                                     "statistic": None if r.get("statistic") is None
+                                     or not np.isfinite(r["statistic"]) else float(r["statistic"])}
+                                    for r in self.boards_rejected]
         for k in JSON_INFO:
             if k not in d and self.info.get(k) is not None:
                 d[k] = self.info[k]
@@ -121,4 +143,7 @@ def load_result(path) -> dict:
     for k in ("T_lidar_cam", "T_cam_lidar", "covariance"):
         if d.get(k) is not None:
             d[k] = np.asarray(d[k], float)
+    d.setdefault("warnings", [])            # optional fields: files written before they existed lack them
+    d.setdefault("boards_used", None)
+    d.setdefault("boards_rejected", [])
     return d

@@ -1,10 +1,12 @@
 """``make bench``: the time of one ``calibrate`` per registered method on 8 boards (median over many
-repetitions), the minimal solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``)
-and its accuracy on noise-free simulated triples (closed-form and eigenvalue quartic roots), and the joint model
-over image corners and ranges at 8 and 40 boards (0.5 px corner noise): the joint refinement alone
-(``calib_core.joint.joint_refine`` from the range-only answer) and whole ``calibrate`` calls that end in it.
+repetitions), how the default method's time grows with the number of boards (8, 20, 40, 100), the minimal
+solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``) and its accuracy on noise-free
+simulated triples (closed-form and eigenvalue quartic roots), and the joint model over image corners and ranges at
+8 and 40 boards (0.5 px corner noise): the joint refinement alone (``calib_core.joint.joint_refine`` from the
+range-only answer) and whole ``calibrate`` calls that end in it.
 
     python -m experiments.bench [--boards 8] [--problems 10] [--repeats 20] [--triples 10000] [--joint-boards 8 40]
+                                [--scaling 8,20,40,100] [--scaling-problems 3]
 
 Single process, run it with ``OMP_NUM_THREADS=1`` (the Makefile exports it) for one-core numbers.
 """
@@ -52,6 +54,24 @@ def time_methods(obs_list: list, repeats: int) -> list[dict]:
         rows.append({"method": m, "median_ms": 1e3 * float(np.median(times)) if times else float("nan"),
                      "p90_ms": 1e3 * float(np.percentile(times, 90)) if times else float("nan"),
                      "runs": len(times), "valid": f"{sum(valid)}/{len(valid)}" + (f" error {error}" if error else "")})
+    return rows
+
+
+def time_scaling(counts: Sequence[int], n_problems: int, method: str = "lidarcam") -> list[dict]:
+    """Median wall time of one ``calibrate(obs, method)`` on ``n_problems`` problems per board count."""
+    rows = []
+    for n in counts:
+        times, valid = [], 0
+        for obs in problems(n, n_problems, seed=777):
+            t0 = time.perf_counter()
+            res = calibrate(obs, method)
+            times.append(time.perf_counter() - t0)
+            valid += bool(res.ok and is_valid(*pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)))
+        rows.append({"boards": n, "median_s": float(np.median(times)), "max_s": float(np.max(times)),
+                     "valid": f"{valid}/{len(times)}"})
+    base = rows[0]["median_s"] if rows else float("nan")
+    for r in rows:
+        r["ratio"] = r["median_s"] / base
     return rows
 
 
@@ -142,8 +162,16 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--problems", type=int, default=10)
     ap.add_argument("--repeats", type=int, default=20)
     ap.add_argument("--triples", type=int, default=10_000)
+    ap.add_argument("--scaling", default="8,20,40,100", help="board counts of the default method's scaling table")
+    ap.add_argument("--scaling-problems", type=int, default=3)
     ap.add_argument("--joint-boards", type=int, nargs="*", default=[8, 40])
     args = ap.parse_args(argv)
+    counts = [int(c) for c in args.scaling.split(",") if c.strip()]
+    if counts:
+        print(f"default method (lidarcam) vs board count, {args.scaling_problems} problems each, one process:")
+        print(f"  {'boards':>6}{'median s':>10}{'max s':>9}{'x 1st':>8}  valid")
+        for r in time_scaling(counts, args.scaling_problems):
+            print(f"  {r['boards']:>6}{r['median_s']:>10.3f}{r['max_s']:>9.3f}{r['ratio']:>8.1f}  {r['valid']}")
     obs_list = problems(args.boards, args.problems)
     rows = time_methods(obs_list, args.repeats)
     print(f"calibrate() on {args.boards} boards, {args.problems} problems x {args.repeats} repetitions:")

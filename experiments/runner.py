@@ -43,6 +43,7 @@ from calib_core.metrics import (
 )
 from calib_core.plugins import load_plugins
 from calib_core.uncertainty import conditioning, crlb
+from simulate.options import hashed_settings
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -51,6 +52,7 @@ RESULT_COLUMNS = (
     "trial", "method", "ok", "reason", "e_R_deg", "e_t_m", "valid", "n_candidates", "true_among_candidates",
     "some_candidate_valid", "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds",
     "crlb_rot_deg", "crlb_trans_mm", "conditioning", "nees", "sigma_rot_deg", "sigma_trans_mm",
+    "n_wrong", "n_rejected", "wrong_caught", "good_lost",
 )
 # Columns that legitimately differ between two runs of the same settings (wall time).
 TIMING_COLUMNS = ("seconds",)
@@ -91,7 +93,7 @@ class Cell:
     @property
     def key(self) -> str:
         """Readable, stable folder name: board count, noise, and a hash of every setting that shapes a row."""
-        payload = json.dumps({"sim": self.sim, "seed": self.seed, "metrics": self.metrics,
+        payload = json.dumps({"sim": hashed_settings(self.sim), "seed": self.seed, "metrics": self.metrics,
                               "method_options": {m: self.method_options[m] for m in sorted(self.method_options)},
                               **({} if self.crn_stream is None else {"crn_stream": self.crn_stream})},
                              sort_keys=True, default=str)
@@ -154,6 +156,18 @@ def evaluate(result, T_true: np.ndarray, metrics: dict[str, Any]) -> dict[str, A
     return row
 
 
+def rejection_columns(result, wrong_boards: Sequence[int]) -> dict[str, Any]:
+    """Boards the method left out: how many (NaN for methods that do not report it, or when it failed), how many
+    of the simulated wrong boards it caught, how many good boards it lost."""
+    out: dict[str, Any] = {"n_wrong": len(wrong_boards), "n_rejected": np.nan, "wrong_caught": np.nan,
+                           "good_lost": np.nan}
+    if result.ok and result.boards_used is not None:
+        rej = {int(r["index"]) for r in result.boards_rejected}
+        wrong = {int(i) for i in wrong_boards}
+        out.update(n_rejected=len(rej), wrong_caught=len(rej & wrong), good_lost=len(rej - wrong))
+    return out
+
+
 def corner_sigma_px(obs, sim: dict) -> float | None:
     """The corner noise std (px) of a simulated trial with image corners: ``pixel_noise_px`` in ``pixel`` mode, the
     RMS detection error against the true poses in ``image`` mode; None without corners or true poses."""
@@ -200,7 +214,7 @@ def simulate_trial(cell: Cell, trial: int, methods: Sequence[str]) -> list[dict[
     from simulate import SimOptions, generate
 
     base = {**cell.columns(), "trial": int(trial), "crlb_rot_deg": np.nan, "crlb_trans_mm": np.nan,
-            "conditioning": np.nan}
+            "conditioning": np.nan, "n_wrong": 0, "n_rejected": np.nan, "wrong_caught": np.nan, "good_lost": np.nan}
     try:
         obs = generate(SimOptions(**cell.sim), seed=cell.seed, trial=int(trial), stream=cell.crn_stream)
     except Exception as exc:  # noqa: BLE001 -- a bad draw is a status, not a crash
@@ -215,7 +229,8 @@ def simulate_trial(cell: Cell, trial: int, methods: Sequence[str]) -> list[dict[
         except Exception as exc:  # noqa: BLE001
             rows.append(_failure_row(base, m, f"error: {type(exc).__name__}: {exc}"))
             continue
-        rows.append({**base, "method": m, **evaluate(res, obs.T_lidar_cam_true, cell.metrics)})
+        rows.append({**base, "method": m, **evaluate(res, obs.T_lidar_cam_true, cell.metrics),
+                     **rejection_columns(res, obs.meta.get("wrong_boards", []))})
     return rows
 
 

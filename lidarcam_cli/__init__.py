@@ -70,8 +70,15 @@ def _cmd_calibrate(args) -> int:
                 print(f"  {k:>9} = {v: .4f}  " + ("(fixed, given)" if s is None else f"+- {s:.4f} (1-sigma)"))
         if "conditioning" in res.info:
             print(f"conditioning (inverse condition number, 1 = ideal, < 1e-3 poor): {res.info['conditioning']:.2e}")
-        for w in res.info.get("warnings", []):
-            print(f"warning: {w}")
+        if res.boards_used is not None:
+            print(f"boards used ({len(res.boards_used)} of {obs.n_boards}): "
+                  + ", ".join(map(str, res.boards_used)))
+            for r in res.boards_rejected:
+                stat = "" if r.get("statistic") is None else f" (statistic {r['statistic']:.3g})"
+                print(f"board {r['index']} rejected{stat}: {r['reason']}")
+        for w in res.warnings:
+            if not (res.boards_rejected and w.startswith("board ") and " left out: " in w):
+                print(f"warning: {w}")
         if obs.T_lidar_cam_true is not None:
             e_R, e_t = pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)
             print(f"against ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm")

@@ -353,6 +353,27 @@ class _Segment:
     score: float = math.inf
 
 
+CURVATURE_CHI2 = 15.14
+"""A segment is refused as not straight when a parabola along its line explains more of its scatter than a line
+by more than this chi-square(1) quantile (1 - 1e-4) in units of the range noise: an arc, not a board."""
+
+
+def curvature_statistic(P: np.ndarray, range_sigma_m: float) -> float:
+    """How much better a parabola than a straight line fits the (K,2) points, in chi-square(1) units of the range
+    noise across the line (``sigma |nu . beam|``); about chi-square(1) for a straight segment."""
+    if len(P) < 4:
+        return 0.0
+    c, u, res, _ = tls_line(P)
+    nu = np.array([-u[1], u[0]])
+    s = (P - c) @ u
+    A = np.column_stack([np.ones_like(s), s, s**2])
+    coef, *_ = np.linalg.lstsq(A, res, rcond=None)
+    gain = float(res @ res - np.sum((res - A @ coef) ** 2))
+    beams = P / np.linalg.norm(P, axis=1, keepdims=True)
+    sigma_p = range_sigma_m * max(float(np.sqrt(np.mean((beams @ nu) ** 2))), 0.05)
+    return gain / sigma_p**2
+
+
 def _describe(scan: Scan, idx: np.ndarray) -> tuple[float, float, float]:
     P = scan.points[idx]
     c, u, res, _ = tls_line(P)
@@ -401,6 +422,9 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
             why = f"length {length:.2f} m > diagonal {board.diagonal:.2f} m"
         elif length < min_len:
             why = f"length {length:.2f} m < {min_len:.2f} m"
+        elif (curv := curvature_statistic(scan.points[idx], opts.range_sigma_m)) > CURVATURE_CHI2:
+            why = (f"not straight within the noise (curvature statistic {curv:.3g} > {CURVATURE_CHI2:g}): "
+                   "an arc (a pillar, a curved object), not a board")
         if why:
             rejected.append(why)
             continue
@@ -413,7 +437,7 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
     diag.n_candidates = len(cands)
     if not cands:
         raise ExtractionError(f"no scan segment matches the board at {near:.2f}-{far:.2f} m "
-                              f"({len(segs)} segments; e.g. {rejected[0] if rejected else '-'})")
+                              f"({len(segs)} segments; refused: {'; '.join(rejected) if rejected else '-'})")
     cands.sort(key=lambda s: s.score)
     best = cands[0]
     if len(cands) > 1 and cands[1].score - best.score < opts.ambiguity_margin:

@@ -49,10 +49,12 @@ def _as_result(result) -> dict:
     if isinstance(result, CalibrationResult):
         return {"method": result.method, "ok": result.ok, "reason": result.reason,
                 "T_lidar_cam": result.T_lidar_cam, "covariance": result.covariance,
-                "covariance_model": result.info.get("covariance_model"), **{k: result.info.get(k) for k in JSON_INFO}}
+                "covariance_model": result.info.get("covariance_model"), **{k: result.info.get(k) for k in JSON_INFO},
+                "boards_rejected": result.boards_rejected, "warnings": result.warnings}
     return {"method": result.get("method", "?"), "ok": bool(result.get("ok")), "reason": result.get("reason"),
             "T_lidar_cam": result.get("T_lidar_cam"), "covariance": result.get("covariance"),
-            "covariance_model": result.get("covariance_model"), **{k: result.get(k) for k in JSON_INFO}}
+            "covariance_model": result.get("covariance_model"), **{k: result.get(k) for k in JSON_INFO},
+            "boards_rejected": result.get("boards_rejected") or [], "warnings": result.get("warnings") or []}
 
 
 def board_plane_distances(T_cam_lidar: np.ndarray, T_cam_board: np.ndarray, scan: np.ndarray) -> np.ndarray:
@@ -124,7 +126,7 @@ def _pose_name(observations: Observations, i: int) -> str:
 
 
 def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_cam_board, outline, full_scan,
-             board_scan, clim_mm: float, title: str) -> None:
+             board_scan, clim_mm: float, title: str, rejected: str | None = None) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
@@ -161,6 +163,10 @@ def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_c
                         s=size, edgecolors=edge, linewidths=0.4)
     ax.text(4, 4, title, color="white", fontsize=8, va="top", ha="left",
             bbox={"facecolor": "black", "alpha": 0.5, "pad": 2, "edgecolor": "none"})
+    if rejected:  # the calibration left this pose out: a red frame and the reason
+        ax.add_patch(_frame(w, h))
+        ax.text(4, h - 6, "REJECTED by the calibration: " + rejected, color="white", fontsize=8, va="bottom",
+                ha="left", wrap=True, bbox={"facecolor": "red", "alpha": 0.75, "pad": 2, "edgecolor": "none"})
     cax = fig.add_axes(((w + 15) / W, 0.08, 14 / W, 0.84))
     if sc is None:
         from matplotlib.cm import ScalarMappable
@@ -170,6 +176,12 @@ def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_c
     cb.set_label("distance to board plane (mm)", fontsize=8)
     cb.ax.tick_params(labelsize=7)
     fig.savefig(path, dpi=dpi, pil_kwargs={"compress_level": 1})
+
+
+def _frame(w: int, h: int):
+    from matplotlib.patches import Rectangle
+
+    return Rectangle((-0.5, -0.5), w, h, fill=False, edgecolor="red", linewidth=6)
 
 
 def _residual_plot(path: Path, bearing_deg: np.ndarray, dist_mm: np.ndarray, title: str) -> None:
@@ -264,6 +276,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     clim = float(math.ceil(clim / 10.0) * 10.0)
 
     rows = []
+    rejected = {int(r["index"]): r for r in res.get("boards_rejected") or []}
     reproj = (observations.meta or {}).get("reproj_rms_px") or []
     for i, b in enumerate(observations.boards):
         name = _pose_name(observations, i)
@@ -280,18 +293,20 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
                 full = pose.scan.points if pose.scan is not None else None
                 op = out / f"overlay_{name}.png"
                 _overlay(op, gray, dataset.camera, Ti, b.T_cam_board, b.outline, full, b.scan, clim,
-                         f"pose {name}: {len(b.scan)} board points, RMS {rms_mm[i]:.1f} mm")
+                         f"pose {name}: {len(b.scan)} board points, RMS {rms_mm[i]:.1f} mm",
+                         rejected[i]["reason"] if i in rejected else None)
                 summary.overlays.append(op)
                 links = f"[overlay](overlay_{name}.png), " + links
             except (KeyError, LidarcamError) as err:
                 summary.warnings.append(f"pose {name}: no overlay ({err})")
         rp_px = reproj[i] if i < len(reproj) and reproj[i] is not None else math.nan
+        status = "rejected: " + str(rejected[i]["reason"]) if i in rejected else "used"
         rows.append(f"| {i} | `{name}` | {len(b.scan)} | {rms_mm[i]:.1f} | {mean_mm[i]:+.1f} | "
-                    f"{'-' if not math.isfinite(rp_px) else f'{rp_px:.3f}'} | {links} |")
+                    f"{'-' if not math.isfinite(rp_px) else f'{rp_px:.3f}'} | {status} | {links} |")
     md += ["## Boards", "", "Residual: signed distance of the board's scan points to its plane (camera's pose of "
            "the board), through the extrinsic.", "",
-           "| board | pose | points | residual RMS (mm) | mean (mm) | corner reproj. RMS (px) | plots |",
-           "|---:|---|---:|---:|---:|---:|---|"] + rows + [""]
+           "| board | pose | points | residual RMS (mm) | mean (mm) | corner reproj. RMS (px) | status | plots |",
+           "|---:|---|---:|---:|---:|---:|---|---|"] + rows + [""]
     if finite:
         md += [f"Median board RMS: {float(np.median(finite)):.1f} mm; all points: "
                f"{math.sqrt(np.mean(np.concatenate([(1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)) ** 2 for b in observations.boards]))):.1f} mm.", ""]  # noqa: E501
@@ -300,7 +315,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
                f"normals {normal_spread_deg(observations):.1f} deg from one plane (spread).", ""]
     if skipped:
         md += ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""]
-    summary.warnings = report_warnings(observations, rms_mm, T) + summary.warnings
+    summary.warnings = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
     summary.markdown.write_text("\n".join(md) + "\n")

@@ -14,7 +14,8 @@ from calib_core.transforms import invert_T
 
 from .camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners, observe_board, render_board_image
 from .lidar import beam_bearings, cast_scan
-from .options import SimOptions, settings_hash
+from .options import SimOptions, contamination_hash, hashed_settings, settings_hash
+from .outliers import contaminate, contamination_rng
 from .scene import Scene, SceneError, sample_scene
 
 GENERATOR = "lidarcam.simulate/1"
@@ -80,9 +81,14 @@ def generate(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | N
     are estimated, ``pose_mode`` pixel or image) the true ``T_cam_board`` per board. In those modes every board
     also carries its image corners (``corners_px``, ``corners_board``) and the observations the camera
     (pinhole, no distortion). ``stream`` (common random numbers, see ``trial_rngs``) is in ``meta`` when given.
+    With contamination on (``simulate.outliers``), ``wrong_boards``: the boards whose scan is another object's
+    segment.
     """
     o = options
     scene, scans, cam_poses, corners = simulate_trial(o, seed, trial, stream)
+    wrong: list[int] = []
+    if hashed_settings(o.to_dict()) != o.to_dict():  # some contamination is on
+        scans, wrong = contaminate(scans, o, contamination_rng(seed, contamination_hash(o), trial))
     P = checkerboard_corners(o)
     boards = tuple(BoardObservation(T, scene.outline, s, uv, None if uv is None else P)
                    for T, s, uv in zip(cam_poses, scans, corners, strict=True))
@@ -92,6 +98,8 @@ def generate(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | N
             "settings_hash": settings_hash(options)}
     if stream is not None:
         meta["stream"] = int(stream)
+    if wrong:
+        meta["wrong_boards"] = wrong
     if options.pose_mode != "exact":
         meta["T_cam_board_true"] = scene.T_cam_board.tolist()
     return Observations(boards, scene.T_lidar_cam, meta, camera)

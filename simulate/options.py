@@ -46,6 +46,12 @@ class SimOptions:
 
     Sampling: each board is drawn by rejection, ``candidate_batch`` candidates at a time, at most
     ``max_attempts`` candidates per board; a board needs ``min_points_per_board`` lidar points.
+
+    Contamination (all off by default; see ``simulate.outliers``): ``wrong_segments`` boards get, instead of
+    their scan, a straight segment of another object at a similar range (what a segmenter returns when it picks
+    a cabinet next to the board); ``gross_outlier_frac`` adds that share of each board's point count as spurious
+    returns at 1-30 m on beams within the board's bearing span; ``mixed_pixel_frac`` adds that share as
+    mixed pixels on the beams just beyond the board's ends, between the board and a background 0.2-3 m behind.
     """
 
     n_boards: int = 6
@@ -79,6 +85,9 @@ class SimOptions:
     min_points_per_board: int = 10
     max_attempts: int = 1000
     candidate_batch: int = 64
+    wrong_segments: int = 0
+    gross_outlier_frac: float = 0.0
+    mixed_pixel_frac: float = 0.0
 
     def __post_init__(self) -> None:
         def need(cond: bool, msg: str) -> None:
@@ -130,6 +139,10 @@ class SimOptions:
         need(self.min_points_per_board >= 2, f"min_points_per_board must be >= 2, got {self.min_points_per_board}")
         need(self.max_attempts >= 1, f"max_attempts must be >= 1, got {self.max_attempts}")
         need(self.candidate_batch >= 1, f"candidate_batch must be >= 1, got {self.candidate_batch}")
+        need(0 <= self.wrong_segments <= self.n_boards,
+             f"wrong_segments must be in [0, n_boards], got {self.wrong_segments}")
+        need(0 <= self.gross_outlier_frac <= 1, f"gross_outlier_frac must be in [0, 1], got {self.gross_outlier_frac}")
+        need(0 <= self.mixed_pixel_frac <= 1, f"mixed_pixel_frac must be in [0, 1], got {self.mixed_pixel_frac}")
 
     def to_dict(self) -> dict:
         """The options as a plain JSON-able dict."""
@@ -145,7 +158,27 @@ class SimOptions:
         return cls(**d)
 
 
+CONTAMINATION_DEFAULTS = {"wrong_segments": 0, "gross_outlier_frac": 0.0, "mixed_pixel_frac": 0.0}
+"""The contamination options and their (off) defaults. ``settings_hash`` (the seed of a trial's geometry and
+noise) never includes them, so a contaminated trial is its clean twin plus the contamination, and settings
+without contamination keep the random streams they had before these options existed; result-folder keys
+include them only when on (``hashed_settings``)."""
+
+
+def hashed_settings(d: dict) -> dict:
+    """``d`` (SimOptions fields) without the contamination options that are at their off defaults."""
+    return {k: v for k, v in d.items() if not (k in CONTAMINATION_DEFAULTS and v == CONTAMINATION_DEFAULTS[k])}
+
+
 def settings_hash(options: SimOptions) -> int:
-    """Stable 32-bit hash of the options: CRC32 of their canonical JSON (sorted keys, repr floats)."""
-    text = json.dumps(options.to_dict(), sort_keys=True, separators=(",", ":"))
+    """Stable 32-bit hash of the options: CRC32 of their canonical JSON (sorted keys, repr floats), without the
+    contamination options (``CONTAMINATION_DEFAULTS``)."""
+    d = {k: v for k, v in options.to_dict().items() if k not in CONTAMINATION_DEFAULTS}
+    text = json.dumps(d, sort_keys=True, separators=(",", ":"))
     return zlib.crc32(text.encode("utf-8"))
+
+
+def contamination_hash(options: SimOptions) -> int:
+    """CRC32 of the contamination options alone (seeds the contamination stream of a trial)."""
+    d = {k: getattr(options, k) for k in sorted(CONTAMINATION_DEFAULTS)}
+    return zlib.crc32(json.dumps(d, sort_keys=True, separators=(",", ":")).encode("utf-8"))

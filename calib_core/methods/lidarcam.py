@@ -1,6 +1,7 @@
-"""Our method, ``lidarcam``: minimal-solver (+ Zhang & Pless) candidates, an all-evidence likelihood to choose
-among them, maximum-likelihood refinement of the best few, covariance, the directions a degenerate board set
-does not determine, and calibration of the rest with some mounting parameters fixed."""
+"""Our method, ``lidarcam``, an orchestration: point trimming and the consensus search over boards
+(``calib_core.search``), an all-evidence likelihood to choose among the consensus hypotheses, maximum-likelihood
+refinement of the best few, the final per-board and per-point tests, the directions a degenerate board set does
+not determine, covariance and warnings; and calibration of the rest with some mounting parameters fixed."""
 
 from __future__ import annotations
 
@@ -16,7 +17,6 @@ from ..degeneracy import (
     undetermined_directions,
 )
 from ..joint import RANGE_ONLY_MODEL, JointError, joint_step
-from ..lines import fit_line
 from ..mounting import parse_fixed
 from ..observations import Observations, ScanData
 from ..partial import calibrate_fixed, fixed_starts
@@ -24,40 +24,12 @@ from ..refine import refine
 from ..registry import Method
 from ..residuals import perturb
 from ..result import SolveFailure
+from ..search import consensus_search, finish_search
 from ..selection import EDGE_SIGMA_M, OUTLINE_SIGMA_M, lidarcam_residuals
 from ..selection import lidarcam as lidarcam_score
-from ..solvers.candidates import minimal_candidates
-from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
-from ..solvers.zhang_pless import zhang_pless_linear
 from ..transforms import matrix_to_rotvec
 from ..uncertainty import UncertaintyError, conditioning, refinement_covariance, scan_noise_estimate
 from .suffixes import F_SCALE_SIGMAS
-
-
-def candidate_pool(obs: Observations, use_zhang_pless: bool = True, **solver_options) -> tuple[np.ndarray, list[str]]:
-    """Candidates (M,4,4): the minimal solver on all triples of the boards whose scan is line-like, plus the
-    linear Zhang & Pless solution from 5 boards on; and the reasons for what was left out."""
-    reasons, pools = [], []
-    good = []
-    for i, b in enumerate(obs.boards):
-        try:
-            fit_line(b.scan)
-            good.append(i)
-        except SolveFailure as fail:
-            reasons.append(f"board {i}: {fail.reason}")
-    try:
-        cands = minimal_candidates(obs.subset(good), **solver_options)
-        pools.append(cands.T_lidar_cam)
-        if len(cands.T_lidar_cam) == 0:
-            reasons.append(f"minimal solver: {cands.summary()}")
-    except SolveFailure as fail:
-        reasons.append(f"minimal solver: {fail.reason}")
-    if use_zhang_pless and obs.n_boards >= ZP_MIN_BOARDS:
-        try:
-            pools.append(zhang_pless_linear(obs)[None])
-        except SolveFailure as fail:
-            reasons.append(f"zhang_pless_linear: {fail.reason}")
-    return (np.concatenate(pools) if pools else np.zeros((0, 4, 4))), reasons
 
 
 def _distinct(T: np.ndarray, chosen: list[np.ndarray], rot_deg: float, trans_m: float) -> bool:
@@ -106,36 +78,53 @@ def refine_start(obs: Observations, data: ScanData, T0: np.ndarray, sopts: dict,
     return final, r, T1, False
 
 
+def select_and_refine(obs: Observations, C: np.ndarray, sopts: dict, *, n_refine: int, loss: str, f_scale: float,
+                      max_nfev: int, do_polish: bool, polish_threshold: float, distinct_rot_deg: float,
+                      distinct_trans_m: float):
+    """Score candidates ``C`` with ``selection.lidarcam`` on ``obs``, refine the ``n_refine`` best distinct ones
+    (``refine_start``) and return (score, RefineResult, T, polished, start T) of the best."""
+    starts = best_distinct(C, lidarcam_score(obs, C, **sopts), n_refine, distinct_rot_deg, distinct_trans_m)
+    if not starts:
+        raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
+    data = obs.scan_data
+    tries = [(*refine_start(obs, data, T0, sopts, loss=loss, f_scale=f_scale, max_nfev=max_nfev,
+                            do_polish=do_polish, polish_threshold=polish_threshold), T0) for T0 in starts]
+    return min(tries, key=lambda x: x[0])
+
+
 def lidarcam(obs: Observations, *, fixed: dict | None = None, range_sigma_m: float | None = None, n_refine: int = 3,
              loss: str = "linear", f_scale: float | None = None, edge_sigma_m: float = EDGE_SIGMA_M,
              outline_sigma_m: float = OUTLINE_SIGMA_M, behind_penalty: float = np.inf, use_zhang_pless: bool = True,
              distinct_rot_deg: float = 1.0, distinct_trans_m: float = 0.05, min_conditioning: float = NULL_CONDITIONING,
              max_scaled_sigma: float = MAX_SCALED_SIGMA, max_nfev: int = 100, polish: bool = True,
-             polish_threshold: float = 10.0, use_corners: bool = True, corner_sigma_px: float | None = None,
-             **solver_options):
+             polish_threshold: float = 10.0, trim_points: bool = True, reject_boards: bool = True,
+             use_corners: bool = True, corner_sigma_px: float | None = None, **solver_options):
     """Our method.
 
-    1. Candidates (``candidate_pool``): the minimal solver on all board triples (``solver_options`` go to it),
-       plus the linear Zhang & Pless solution when there are >= 5 boards (``use_zhang_pless``).
-    2. Score every candidate with ``selection.lidarcam`` (range residuals in units of the noise std
-       ``range_sigma_m``, default estimated from the scan lines; endpoint and outline terms; boards behind the camera).
-    3. Refine the ``n_refine`` best distinct candidates (differing by ``distinct_rot_deg`` or
-       ``distinct_trans_m``) by maximum likelihood on the range residuals (``loss``, ``f_scale``); keep the one
-       whose refined pose scores least. With ``polish``, a refined pose whose endpoint and outline terms exceed
-       ``polish_threshold`` (the range optimum puts scan points off the boards) is refined further on the whole
-       ``selection.lidarcam`` cost (numerical Jacobian) and kept when that scores less.
-    4. Degeneracy (``calib_core.degeneracy.undetermined_directions``, thresholds ``min_conditioning`` and
+    1. Point-level trimming (``trim_points``; ``calib_core.inliers``): scan points off their board's robust line
+       (gross outliers, mixed pixels at the ends) are left out.
+    2. Consensus over boards (``reject_boards``; ``calib_core.consensus``): hypotheses from the minimal solver on
+       board triples (all while few, sampled adaptively beyond) and Zhang & Pless on sampled subsets, scored on
+       every board by a per-board chi-square test of the noise model; local optimisation of the best few on their
+       consensus sets. Boards that fail are left out (``info["boards_rejected"]``).
+    3. On the consensus boards: every hypothesis computed from them is scored with ``selection.lidarcam`` (range
+       residuals in units of the noise std ``range_sigma_m``, default estimated from the scan lines; endpoint and
+       outline terms; boards behind the camera); the ``n_refine`` best distinct ones (differing by
+       ``distinct_rot_deg`` or ``distinct_trans_m``) are refined by maximum likelihood on the range residuals
+       (``loss``, ``f_scale``), polished on the whole cost when the outlines disagree (``polish``,
+       ``polish_threshold``); the best is kept.
+    4. A final per-board test at the refined pose (boards that fail are left out and the pose refined again) and
+       a final point test (range residuals beyond ``inliers.TRIM_SIGMAS`` stds left out, refined again).
+    5. Degeneracy (``calib_core.degeneracy.undetermined_directions``, thresholds ``min_conditioning`` and
        ``max_scaled_sigma``): directions the board geometry leaves free (e.g. roll, pitch and height z when every
        board is vertical) are not presented as estimated: the result is ``ok=False``, its reason names them and
-       how to calibrate the rest, ``info["degeneracy"]`` holds the analysis and the candidates start with the
-       unconstrained optimum. Directions weak only for lack of data are named in ``info["warnings"]``.
-    5. When every board carries image corners (and ``use_corners``): the joint maximum likelihood over corners and
-       ranges from that answer (``calib_core.joint``; noise stds ``corner_sigma_px``, ``range_sigma_m`` or
-       estimated), with the extrinsic's covariance, board poses marginalised (``info["covariance_model"]`` "joint").
-       Otherwise the range model's covariance ``sigma^2 (J^T J)^-1`` (``range_sigma_m`` or estimated from the final
-       residuals; "range-only, ignores camera noise"); after a polish it is still that of the range model at the
-       answer (it ignores the outline information: conservative). Conditioning and ``info["warnings"]``.
-       Fails with a reason when no candidate exists or none scores finite.
+       how to calibrate the rest. Directions weak only for lack of data are named in ``info["warnings"]``.
+    6. On the boards used: when every board carries image corners (and ``use_corners``), the joint maximum
+       likelihood over corners and ranges from that answer (``calib_core.joint``; noise stds ``corner_sigma_px``,
+       ``range_sigma_m`` or estimated), with the extrinsic's covariance, board poses marginalised
+       (``info["covariance_model"]`` "joint"); otherwise the range model's covariance ``sigma^2 (J^T J)^-1``
+       ("range-only, ignores camera noise"). Fails with a reason when no candidate exists or fewer than 3
+       consistent boards remain.
 
     ``fixed``: calibrate only the other mounting parameters (``calib_core.mounting``: the camera's pose in the
     lidar frame as roll, pitch, yaw and x, y, z), holding these at the given values, e.g.
@@ -143,34 +132,60 @@ def lidarcam(obs: Observations, *, fixed: dict | None = None, range_sigma_m: flo
     closed-form start when roll, pitch and z are given (else from the full method's answer), with the covariance
     of the free parameters (``calib_core.partial.calibrate_fixed``).
     """
-    sigma = range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs)
-    fs = f_scale if f_scale is not None else F_SCALE_SIGMAS * sigma
-    sopts = {"range_sigma_m": sigma, "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m,
-             "behind_penalty": behind_penalty}
-    ropts = {"n_refine": n_refine, "loss": loss, "f_scale": fs, "use_zhang_pless": use_zhang_pless,
-             "distinct_rot_deg": distinct_rot_deg, "distinct_trans_m": distinct_trans_m, "max_nfev": max_nfev,
-             "polish": polish, "polish_threshold": polish_threshold}
+    opts = {"range_sigma_m": range_sigma_m, "n_refine": n_refine, "loss": loss, "f_scale": f_scale,
+            "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m, "behind_penalty": behind_penalty,
+            "use_zhang_pless": use_zhang_pless, "distinct_rot_deg": distinct_rot_deg,
+            "distinct_trans_m": distinct_trans_m, "max_nfev": max_nfev, "polish": polish,
+            "polish_threshold": polish_threshold, "trim_points": trim_points, "reject_boards": reject_boards}
     if fixed is not None:
         mask, values = parse_fixed(fixed)
-        starts = fixed_starts(obs, mask, values, lambda: _solve(obs, sopts, ropts, solver_options)[0])
-        T, info = calibrate_fixed(obs, mask, values, starts, loss=loss, f_scale=fs, range_sigma_m=range_sigma_m,
-                                  max_nfev=max_nfev)
+        sigma = range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs)
+        starts = fixed_starts(obs, mask, values, lambda: _solve(obs, solver_options, **opts)[0])
+        T, info = calibrate_fixed(obs, mask, values, starts, loss=loss,
+                                  f_scale=f_scale if f_scale is not None else F_SCALE_SIGMAS * sigma,
+                                  range_sigma_m=range_sigma_m, max_nfev=max_nfev)
         return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "warnings": board_set_warnings(obs)}
     try:
-        T_best, C, info = _solve(obs, sopts, ropts, solver_options)
+        T_best, C, obs_u, info = _solve(obs, solver_options, **opts)
     except SolveFailure as fail:
         raise explain_failure(obs, fail, range_sigma_m) from None
-    deg = undetermined_directions(obs, T_best, range_sigma_m, max_scaled_sigma=max_scaled_sigma,
+    deg = undetermined_directions(obs_u, T_best, range_sigma_m, max_scaled_sigma=max_scaled_sigma,
                                   null_conditioning=min_conditioning)
     if not deg.determined:
         raise SolveFailure(f"lidarcam: {deg.message()}", np.concatenate([T_best[None], C]),
-                           {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
-    T_best, cov, jinfo = final_step(obs, T_best, C, use_corners, range_sigma_m=range_sigma_m,
+                           {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs_u)})
+    T_best, cov, jinfo = final_step(obs_u, T_best, C, use_corners, range_sigma_m=range_sigma_m,
                                     corner_sigma_px=corner_sigma_px, loss=loss)
-    warnings = jinfo.pop("warnings", []) + degeneracy_warnings(obs, T_best) + \
+    warnings = info.pop("warnings") + jinfo.pop("warnings", []) + degeneracy_warnings(obs_u, T_best) + \
         ([deg.message()] if len(deg.directions) else [])
-    return T_best, C, {**info, "covariance": cov, "conditioning": conditioning(obs, T_best), "warnings": warnings,
+    return T_best, C, {**info, "covariance": cov, "conditioning": conditioning(obs_u, T_best), "warnings": warnings,
                        **jinfo}
+
+
+def _solve(obs: Observations, solver_options: dict, *, range_sigma_m, n_refine, loss, f_scale, edge_sigma_m,
+           outline_sigma_m, behind_penalty, use_zhang_pless, distinct_rot_deg, distinct_trans_m, max_nfev, polish,
+           polish_threshold, trim_points, reject_boards):
+    """Steps 1-4 of ``lidarcam``: (the best refined ``T_lidar_cam``, all candidates, the observations of the boards
+    used, info)."""
+    search = consensus_search(obs, range_sigma_m=range_sigma_m, outline_sigma_m=outline_sigma_m,
+                              trim=trim_points, reject=reject_boards, use_zhang_pless=use_zhang_pless,
+                              **solver_options)
+    sigma = search.sigma_m
+    sopts = {"range_sigma_m": sigma, "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m,
+             "behind_penalty": behind_penalty}
+    fs = f_scale if f_scale is not None else F_SCALE_SIGMAS * sigma
+    ropts = {"n_refine": n_refine, "loss": loss, "f_scale": fs, "max_nfev": max_nfev, "do_polish": polish,
+             "polish_threshold": polish_threshold, "distinct_rot_deg": distinct_rot_deg,
+             "distinct_trans_m": distinct_trans_m}
+    final, r, T_best, polished, T0 = select_and_refine(search.obs_used, search.pool, sopts, **ropts)
+    fin = finish_search(search, T_best, reject=reject_boards, refit=lambda o, T: select_and_refine(
+        o, T[None], sopts, **{**ropts, "n_refine": 1}))
+    if fin.refit is not None:
+        final, r, T_best, polished, _ = fin.refit
+    start = float(lidarcam_score(search.obs_used, T0[None], **sopts)[0])
+    return T_best, search.all_candidates, fin.obs_used, {
+        "cost": final, "polished": polished, "score_start": start, "n_refined": n_refine, "sigma_m_selection": sigma,
+        "refine_cost": r.cost, "refine_nfev": r.nfev, "warnings": list(fin.warnings), **fin.info}
 
 
 def final_step(obs: Observations, T: np.ndarray, C: np.ndarray, use_corners: bool, *, range_sigma_m, corner_sigma_px,
@@ -190,24 +205,9 @@ def final_step(obs: Observations, T: np.ndarray, C: np.ndarray, use_corners: boo
     return T, cov, {"covariance_model": RANGE_ONLY_MODEL, **({"warnings": [why]} if why else {})}
 
 
-def _solve(obs: Observations, sopts: dict, ropts: dict, solver_options: dict):
-    """Steps 1-3 of ``lidarcam``: (the best refined ``T_lidar_cam``, all candidates, info)."""
-    C, reasons = candidate_pool(obs, ropts["use_zhang_pless"], **solver_options)
-    if len(C) == 0:
-        raise SolveFailure("no candidate: " + "; ".join(reasons))
-    starts = best_distinct(C, lidarcam_score(obs, C, **sopts), ropts["n_refine"], ropts["distinct_rot_deg"],
-                           ropts["distinct_trans_m"])
-    if not starts:
-        raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
-    tries = [(*refine_start(obs, obs.scan_data, T0, sopts, loss=ropts["loss"], f_scale=ropts["f_scale"],
-                            max_nfev=ropts["max_nfev"], do_polish=ropts["polish"],
-                            polish_threshold=ropts["polish_threshold"]), T0) for T0 in starts]
-    final, r, T_best, polished, T0 = min(tries, key=lambda x: x[0])
-    start = float(lidarcam_score(obs, T0[None], **sopts)[0])
-    return T_best, C, {"cost": final, "polished": polished, "score_start": start, "n_refined": len(starts),
-                       "sigma_m_selection": sopts["range_sigma_m"], "refine_cost": r.cost, "refine_nfev": r.nfev}
-
-
 LIDARCAM = Method("lidarcam", lidarcam, 3, "this project (lidarcam)",
-                  "minimal-solver (+ Zhang & Pless) candidates; all-evidence likelihood selection; ML refinement "
-                  "of the best few; covariance and degeneracy warnings", cost="O(N^4) candidate scoring")
+                  "point trimming; consensus over boards (minimal-solver triples + Zhang & Pless subsets, "
+                  "per-board chi-square tests; inconsistent boards rejected and named); all-evidence likelihood "
+                  "selection; ML refinement of the best few; covariance and degeneracy warnings",
+                  cost="about linear in N: all C(N,3) triples up to 12 boards, then an "
+                  "adaptively sampled, bounded set; per-board tests O(hypotheses x N)")

@@ -1,0 +1,137 @@
+"""Point-level robustness: which scan points of a board lie on its scan line, before any extrinsic is known.
+
+A board's scan is a straight segment in the lidar scan plane plus, in real data, points that are not on the
+board: gross outliers (spurious returns anywhere along a beam) and mixed pixels at the ends (a beam that
+straddles the board edge returns a range between the board and the background). Both are off the board's line
+along their beam. Per board: a least-median line over point pairs (robust to up to half the points being
+off), then a total-least-squares refit on the points near it; the range residual of every point against that
+line (the noise is along the beam) is tested against the pooled noise scale of all boards. Lidar frame, metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .lines import MIN_LINE_POINTS, tls_line
+from .observations import Observations
+
+TRIM_SIGMAS = 4.0
+"""A scan point whose range residual against its board's robust line exceeds this many pooled noise stds is
+left out (about 6e-5 of clean Gaussian points)."""
+
+MAX_TRIM_SHARE = 0.5
+"""A board that would lose more than this share of its points is not a single straight segment: it is kept
+whole and left to the board-level consensus, which then rejects it as a whole."""
+
+MAD_TO_SIGMA = 1.4826
+"""Median absolute deviation of a Gaussian sample to its standard deviation."""
+
+_PAIR_GAPS = (2, 3)
+_MAX_PAIRS = 24
+
+
+@dataclass(frozen=True)
+class TrimReport:
+    """What point-level trimming left out.
+
+    Attributes:
+        keep: per board, (K_i,) bool mask of the points kept.
+        off_line: per board, the number of points left out inside the scan (gross outliers).
+        at_ends: per board, the number left out in the leading or trailing run (mixed pixels at the ends).
+        sigma_m: pooled robust range-noise std (metres) the test used.
+        untrimmed: boards that were not trimmed (too few points, or more than ``MAX_TRIM_SHARE`` off).
+    """
+
+    keep: tuple[np.ndarray, ...]
+    off_line: tuple[int, ...]
+    at_ends: tuple[int, ...]
+    sigma_m: float
+    untrimmed: tuple[int, ...]
+
+    @property
+    def n_trimmed(self) -> int:
+        return int(sum(self.off_line) + sum(self.at_ends))
+
+    def summary(self) -> dict:
+        """JSON-able counts: total, off-line, at the ends, and per board (only boards that lost points)."""
+        per = {i: a + b for i, (a, b) in enumerate(zip(self.off_line, self.at_ends, strict=True)) if a + b}
+        return {"total": self.n_trimmed, "off_line": int(sum(self.off_line)), "at_ends": int(sum(self.at_ends)),
+                "per_board": {str(i): int(n) for i, n in per.items()}, "sigma_m": float(self.sigma_m)}
+
+
+def line_range_residuals(points: np.ndarray, normal: np.ndarray, offset) -> np.ndarray:
+    """Range residuals (metres) of (K,2) points against lines ``normal . x = offset``: measured range minus the
+    range at which each point's beam meets the line. ``normal`` (L,2) unit, ``offset`` (L,) -> (L,K); beams
+    parallel to a line get a residual of a kilometre or more."""
+    r = np.linalg.norm(points, axis=1)
+    b = points / np.where(r > 0, r, 1.0)[:, None]
+    nb = np.atleast_2d(normal) @ b.T                                          # (L,K)
+    nb = np.where(np.abs(nb) < 1e-6, np.copysign(1e-6, nb), nb)
+    return r[None] - np.asarray(offset, float).reshape(-1, 1) / nb
+
+
+def _pairs(K: int) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic point pairs spread along a scan of K points (gaps K/2 and K/3)."""
+    ii, jj = [], []
+    for g in _PAIR_GAPS:
+        gap = max(1, K // g)
+        starts = np.unique(np.linspace(0, K - 1 - gap, min(_MAX_PAIRS // len(_PAIR_GAPS), K - gap)).astype(int))
+        ii.append(starts)
+        jj.append(starts + gap)
+    return np.concatenate(ii), np.concatenate(jj)
+
+
+def robust_line_residuals(points: np.ndarray) -> np.ndarray:
+    """Range residuals (K,) of a board's points against its robust line: the least-median-of-|residual| line
+    through point pairs, refitted by total least squares on the points within 3 robust stds of it."""
+    P = np.asarray(points, float)
+    i, j = _pairs(len(P))
+    d = P[j] - P[i]
+    n = np.column_stack([-d[:, 1], d[:, 0]])
+    ln = np.linalg.norm(n, axis=1)
+    ok = ln > 0
+    n = n[ok] / ln[ok, None]
+    e = line_range_residuals(P, n, np.einsum("lc,lc->l", n, P[i[ok]]))
+    med = np.median(np.abs(e), axis=1)
+    e = e[int(np.argmin(med))]
+    scale = MAD_TO_SIGMA * max(float(np.min(med)), 1e-9)
+    near = np.abs(e) <= 3.0 * scale
+    if near.sum() >= MIN_LINE_POINTS:
+        c, u, _, _ = tls_line(P[near])
+        nrm = np.array([-u[1], u[0]])
+        e = line_range_residuals(P, nrm, [nrm @ c])[0]
+    return e
+
+
+def trim_points(obs: Observations, *, n_sigmas: float = TRIM_SIGMAS, max_share: float = MAX_TRIM_SHARE,
+                min_points: int = MIN_LINE_POINTS) -> TrimReport:
+    """Which scan points of each board lie on its line (``TrimReport``); the test scale is the pooled robust
+    std of all boards' residuals (one noise model for the lidar)."""
+    res = [robust_line_residuals(b.scan) if len(b.scan) > min_points else None for b in obs.boards]
+    pooled = np.concatenate([np.abs(e) for e in res if e is not None] or [np.zeros(1)])
+    sigma = MAD_TO_SIGMA * float(np.median(pooled)) if pooled.size else 0.0
+    sigma = max(sigma, 1e-6)
+    keep, off, ends, untrimmed = [], [], [], []
+    for i, (b, e) in enumerate(zip(obs.boards, res, strict=True)):
+        K = len(b.scan)
+        good = np.ones(K, bool) if e is None else np.abs(e) <= n_sigmas * sigma
+        if e is None or good.sum() < min_points or (K - good.sum()) > max_share * K:
+            untrimmed.append(i)
+            good = np.ones(K, bool)
+        keep.append(good)
+        first, last = (int(np.argmax(good)), K - int(np.argmax(good[::-1]))) if good.any() else (0, K)
+        n_end = first + (K - last)
+        ends.append(n_end)
+        off.append(int(K - good.sum()) - n_end)
+    return TrimReport(tuple(keep), tuple(off), tuple(ends), sigma, tuple(untrimmed))
+
+
+def apply_trim(obs: Observations, report: TrimReport) -> Observations:
+    """``obs`` with every board's scan reduced to its kept points (the same object when nothing was left out)."""
+    if report.n_trimmed == 0:
+        return obs
+    boards = tuple(b if k.all() else replace(b, scan=b.scan[k])
+                   for b, k in zip(obs.boards, report.keep, strict=True))
+    return replace(obs, boards=boards, meta=dict(obs.meta))
