@@ -180,10 +180,10 @@ def explain_contradiction(obs: Observations, T: np.ndarray, sigma: float) -> lis
     return causes
 
 
-def judge(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None = None) -> Verdict:
+def judge(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None = None, board_ids=None) -> Verdict:
     """``verdict.check`` of ``T``, with the likely causes of a contradiction added (``explain_contradiction``;
     skipped when a board is out of the camera's view: that explains itself)."""
-    v = check(obs, T, range_sigma_m=range_sigma_m)
+    v = check(obs, T, range_sigma_m=range_sigma_m, board_ids=board_ids)
     if v.consistent or min(s["depth_m"] for s in v.boards) < MIN_DEPTH_M:
         return v
     causes = explain_contradiction(obs, T, v.sigma_m)

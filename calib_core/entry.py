@@ -77,7 +77,9 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
     cov = info.pop("covariance", None)
     cov = None if cov is None else np.asarray(cov, float)
     if verdict:
-        v = judge(observations, T)
+        used = info.get("boards_used")  # a method that left boards out is judged on the boards it used
+        v = judge(observations, T) if used is None else \
+            judge(observations.subset(used), T, board_ids=list(used))
         info["verdict"] = v.to_dict()
         warnings = list(info.get("warnings", []))
         if not v.consistent:

@@ -215,11 +215,16 @@ def orientation_warnings(T: np.ndarray) -> list[tuple[str, str]]:
     return []
 
 
-def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | None = None) -> Verdict:
+def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | None = None,
+          board_ids=None) -> Verdict:
     """The verdict on ``T_lidar_cam`` for ``obs`` (no explanation: ``diagnose.judge`` adds the likely causes).
-    ``range_sigma_m``: the range-noise std, default estimated from the scan lines."""
+    ``range_sigma_m``: the range-noise std, default estimated from the scan lines. ``board_ids``: the boards'
+    numbers in the reasons (default 0..N-1; a method that left boards out is judged on those it used)."""
     sigma = effective_sigma(obs, range_sigma_m)
     stats = board_tests(obs, T_lidar_cam, sigma)
+    if board_ids is not None:
+        for st in stats:
+            st["board"] = int(board_ids[st["board"]])
     found = unit_causes(obs) + orientation_warnings(T_lidar_cam)
     warnings = [msg for _, msg in found]
     names = tuple(dict.fromkeys(n for n, _ in found))
