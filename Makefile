@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml
 setup: $(STAMP) ## Create .venv and install lidarcam with its dev tools
 
 test: $(STAMP) ## Run the fast test suite (< 5 min on 2 cores)
-	$(PY) -m pytest
+	$(PY) -m pytest -n 2
 
 test-slow: $(STAMP) ## Run only the slow, opt-in tests
 	$(PY) -m pytest -m slow

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from .observations import Observations
 from .registry import get_method
 from .result import CalibrationResult, SolveFailure
 from .uncertainty import UncertaintyError
-from .verdict import data_warnings
+from .verdict import check, data_warnings
 
 SEED_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022")
 """The paper's methods: their answers stand as their papers compute them; the verdict is reported beside them
@@ -78,8 +79,14 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
     cov = None if cov is None else np.asarray(cov, float)
     if verdict:
         used = info.get("boards_used")  # a method that left boards out is judged on the boards it used
-        v = judge(observations, T) if used is None else \
-            judge(observations.subset(used), T, board_ids=list(used))
+        obs_v, ids = (observations, None) if used is None else (observations.subset(used), list(used))
+        # the likely cause of a contradiction is searched for where it decides the answer (our methods); the
+        # paper's methods carry the contradiction itself, which costs no search
+        v = check(obs_v, T, board_ids=ids) if is_seed_method(method) else judge(obs_v, T, board_ids=ids)
+        if not v.consistent and ids is not None and not is_seed_method(method):
+            full = judge(observations, T)  # the likely cause may lie in the boards left out (a mispaired scan)
+            v = replace(v, warnings=tuple(dict.fromkeys([*v.warnings, *full.warnings])),
+                        causes=tuple(dict.fromkeys([*v.causes, *full.causes])))
         info["verdict"] = v.to_dict()
         warnings = list(info.get("warnings", []))
         if not v.consistent:
