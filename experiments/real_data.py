@@ -138,7 +138,9 @@ def run_kazmierczak(folder: Path, out: Path) -> tuple[list[str], dict]:
                                corners={k: v for k, v in corners.items() if v is not None})
     rs.camera = fit.camera
     ds = dataclasses.replace(rs.dataset, camera=fit.camera, poses=poses)
-    opts = ExtractOptions(outline_known=False, range_sigma_m=0.03)
+    # the Hokuyo's range depends on the square's colour, which bends the board's segment by a few cm: the arc
+    # test is loosened for this rig (its board segments score 19-33 against the default 15)
+    opts = ExtractOptions(outline_known=False, range_sigma_m=0.03, max_curvature_chi2=60.0)
     obs, diags = extract(ds, opts)
     print(format_diagnostics(diags), flush=True)
     sigma = range_noise_m(obs)

@@ -41,6 +41,11 @@ class AmbiguousSegment(ExtractionError):
         self.segments = segments
 
 
+CURVATURE_CHI2 = 15.14
+"""A segment is refused as not straight when a parabola along its line explains more of its scatter than a line
+by more than this chi-square(1) quantile (1 - 1e-4) in units of the range noise: an arc, not a board."""
+
+
 @dataclass(frozen=True)
 class ExtractOptions:
     """Thresholds of the extraction (metres, radians, pixels).
@@ -64,6 +69,9 @@ class ExtractOptions:
             + accuracy).
         auto_background: with no background.csv, drop the points that stay put across the poses (rig.multipose).
         static_tol_m: range agreement for a point to count as the same return in another pose.
+        max_curvature_chi2: a segment whose parabola fit beats the line by more than this (chi-square(1) units of
+            the range noise) is refused as an arc (``CURVATURE_CHI2``; raise it for a lidar whose range depends on
+            the surface's colour).
         outline_known: False when the physical board may be larger than ``board.outline`` (e.g. a printed sheet on
             a larger board): segments longer than the outline's chord are not penalised, up to ``max_board_m``.
         max_board_m: longest accepted segment when the outline is not known.
@@ -90,6 +98,7 @@ class ExtractOptions:
     auto_background: bool = True
     static_tol_m: float = 0.03
     outline_known: bool = True
+    max_curvature_chi2: float = CURVATURE_CHI2
     max_board_m: float = 2.0
     skip_ambiguous: bool = True
     ambiguity_margin: float = 0.1
@@ -353,11 +362,6 @@ class _Segment:
     score: float = math.inf
 
 
-CURVATURE_CHI2 = 15.14
-"""A segment is refused as not straight when a parabola along its line explains more of its scatter than a line
-by more than this chi-square(1) quantile (1 - 1e-4) in units of the range noise: an arc, not a board."""
-
-
 def curvature_statistic(P: np.ndarray, range_sigma_m: float) -> float:
     """How much better a parabola than a straight line fits the (K,2) points, in chi-square(1) units of the range
     noise across the line (``sigma |nu . beam|``); about chi-square(1) for a straight segment."""
@@ -422,8 +426,8 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
             why = f"length {length:.2f} m > diagonal {board.diagonal:.2f} m"
         elif length < min_len:
             why = f"length {length:.2f} m < {min_len:.2f} m"
-        elif (curv := curvature_statistic(scan.points[idx], opts.range_sigma_m)) > CURVATURE_CHI2:
-            why = (f"not straight within the noise (curvature statistic {curv:.3g} > {CURVATURE_CHI2:g}): "
+        elif (curv := curvature_statistic(scan.points[idx], opts.range_sigma_m)) > opts.max_curvature_chi2:
+            why = (f"not straight within the noise (curvature statistic {curv:.3g} > {opts.max_curvature_chi2:g}): "
                    "an arc (a pillar, a curved object), not a board")
         if why:
             rejected.append(why)
