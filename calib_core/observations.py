@@ -300,6 +300,14 @@ class Observations:
         d = np.array([b.offset_cam for b in self.boards])
         return n, d
 
+    def derived(self, key: str, fn):
+        """``fn(self)``, computed once per ``Observations`` and kept under ``key`` (data derived from the boards
+        alone, such as a noise estimate, that several steps read)."""
+        cache = self.__dict__.setdefault("_derived", {})
+        if key not in cache:
+            cache[key] = fn(self)
+        return cache[key]
+
     @cached_property
     def scan_data(self) -> ScanData:
         """All scan points flattened with their boards' planes (built once)."""

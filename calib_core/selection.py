@@ -142,12 +142,15 @@ def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigm
                        edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M) -> np.ndarray:
     """The residual vector of the ``lidarcam`` cost at one extrinsic (its squared norm / 2 is the cost without the
     behind-the-camera penalty): range residuals / sigma, endpoint errors / edge sigma, outline distances / outline
-    sigma."""
-    C = np.asarray(T_lidar_cam, float)[None]
-    parts = [range_residuals(C[0], obs.scan_data) / range_sigma_m, point_line_errors(obs, C)[0].ravel() / edge_sigma_m]
-    parts += [outside_outline(P[0, :, :2], b.outline) / outline_sigma_m
+    sigma. A (M,4,4) batch of extrinsics gives (M, n), one row each."""
+    T = np.asarray(T_lidar_cam, float)
+    C = T.reshape(-1, 4, 4)
+    parts = [range_residuals(C, obs.scan_data) / range_sigma_m,
+             point_line_errors(obs, C).reshape(len(C), -1) / edge_sigma_m]
+    parts += [outside_outline(P[..., :2], b.outline) / outline_sigma_m
               for b, P in zip(obs.boards, points_in_boards(obs, C), strict=True)]
-    return np.concatenate(parts)
+    out = np.concatenate(parts, axis=1)
+    return out[0] if T.ndim == 2 else out
 
 
 PENG2022_OPTIONS = ("delta_m", "normalise_candidates", "beta_norm", "beta_eps", "error", "weighting")

@@ -58,7 +58,11 @@ def line_noise_estimate(obs: Observations) -> float:
     """Range-noise std (metres) from the scan lines alone, robustly: each board's points (4 or more) are fitted
     with a 2D line (refitted once without points beyond 3 MADs); the orthogonal residual ``d`` of a point on
     beam ``b`` is its range error times ``|b . nu|``; the std is 1.4826 times the median of ``|d / (b . nu)|``
-    over all boards. NaN when no board has 4 points."""
+    over all boards. NaN when no board has 4 points. Computed once per ``Observations``."""
+    return obs.derived("verdict.line_noise_estimate", _line_noise_estimate)
+
+
+def _line_noise_estimate(obs: Observations) -> float:
     ratios = []
     for b in obs.boards:
         P = b.scan[np.linalg.norm(b.scan, axis=1) > MIN_RANGE_M]
@@ -175,8 +179,14 @@ MAX_PLAUSIBLE_RANGE_M = 200.0
 """Median scan range (metres) above which a 2D lidar's scan is taken to be in millimetres."""
 MAX_PLAUSIBLE_BOARD_M = 20.0
 """Board outline diameter (metres) above which the outline is taken to be in millimetres."""
+
+
 def unit_causes(obs: Observations) -> list[tuple[str, str]]:
-    """Unit mistakes visible in the data alone."""
+    """Unit mistakes visible in the data alone (computed once per ``Observations``)."""
+    return list(obs.derived("verdict.unit_causes", _unit_causes))
+
+
+def _unit_causes(obs: Observations) -> list[tuple[str, str]]:
     if not obs.n_boards:
         return []
     rng = np.median(np.concatenate([np.linalg.norm(b.scan, axis=1) for b in obs.boards]))

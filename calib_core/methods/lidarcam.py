@@ -51,12 +51,35 @@ def best_distinct(C: np.ndarray, score: np.ndarray, n: int, rot_deg: float, tran
     return starts
 
 
-def polish(obs: Observations, T0: np.ndarray, max_nfev: int, **score_options) -> np.ndarray:
-    """Minimise the whole ``lidarcam`` selection cost from ``T0`` (finite-difference Jacobian)."""
-    def fun(x):
-        return lidarcam_residuals(obs, perturb(T0, x), **score_options)
+def forward_difference_step(x: np.ndarray, rel_step: float) -> np.ndarray:
+    """The forward-difference steps ``scipy.optimize.least_squares`` takes for ``diff_step=rel_step``: ``rel_step
+    |x|`` signed as ``x`` (``+`` at 0), and ``sqrt(eps) max(1, |x|)`` where that step vanishes."""
+    sign = np.where(x >= 0, 1.0, -1.0)
+    h = rel_step * sign * np.abs(x)
+    return np.where((x + h) - x == 0, np.sqrt(np.finfo(float).eps) * sign * np.maximum(1.0, np.abs(x)), h)
 
-    sol = least_squares(fun, np.zeros(6), method="trf", diff_step=1e-7, max_nfev=max_nfev)
+
+POLISH_DIFF_STEP = 1e-7
+"""Relative finite-difference step of ``polish`` (parameters in radians and metres)."""
+
+
+def polish(obs: Observations, T0: np.ndarray, max_nfev: int, **score_options) -> np.ndarray:
+    """Minimise the whole ``lidarcam`` selection cost from ``T0``; its Jacobian by forward differences with the
+    steps of ``forward_difference_step``, the six perturbed extrinsics evaluated as one batch."""
+    last: dict = {}
+
+    def fun(x):
+        last["x"], last["f"] = x.copy(), lidarcam_residuals(obs, perturb(T0, x), **score_options)
+        return last["f"]
+
+    def jac(x):
+        f0 = last["f"] if np.array_equal(last.get("x"), x) else fun(x)
+        h = forward_difference_step(x, POLISH_DIFF_STEP)
+        X = x + np.diag(h)
+        F = lidarcam_residuals(obs, np.array([perturb(T0, xi) for xi in X]), **score_options)
+        return ((F - f0) / (np.diag(X) - x)[:, None]).T
+
+    sol = least_squares(fun, np.zeros(6), jac=jac, method="trf", max_nfev=max_nfev)
     return perturb(T0, sol.x)
 
 
