@@ -133,7 +133,12 @@ def consensus_search(obs: Observations, *, range_sigma_m: float | None, outline_
         # starts: the best MSAC hypotheses, and the best by the untruncated sum (all boards, no rejection)
         starts = [(j, False) for j in _distinct_order(H.T, cost, LO_STARTS)]
         starts += [(j, True) for j in _distinct_order(H.T, np.sum(H.q, axis=1), LO_STARTS_ALL)]
-        results = [local_optimise(obs_g, lines, H.T[j], H.q[j], sigma, outline_sigma_m, a) for j, a in starts]
+        done: dict = {}  # a start's result by (hypothesis, initial board set): the same start is optimised once
+        for j, a in starts:
+            key = (j, (np.isfinite(H.q[j]) if a else H.q[j] < SCORE_TAU).tobytes())
+            if key not in done:
+                done[key] = local_optimise(obs_g, lines, H.T[j], H.q[j], sigma, outline_sigma_m, a)
+        results = list(done.values())
         lo_T = [res[0] for res in results]
         # compare them at one truncation (the largest inflation among them): a solution must not win by
         # leaving out boards that inflate its own noise estimate
