@@ -9,27 +9,81 @@ paper's four methods (``methods=seed``: the claims compare only those), writes t
 ``<results>/<preset>/default/`` (seeded as ``make reproduce-paper``: the same simulated
 trials, so its first 100 trials give the default report's valid rates). ``REPORT.md`` judges every claim under
 both with paired 95% bootstrap intervals (``experiments.claim_stats``) and reads the search's tables
-(``<results>/search/``) for the sensitivity. Re-running resumes; ``timings.json`` keeps the measured wall
+(``<results>/search/``) for the sensitivity. Every setting runs at least ``--trials`` trials, more where a valid
+rate's or a paired valid-rate gap's 95% interval would be wider than +-5 points (``needed_trials``). Re-running
+resumes; ``timings.json`` keeps the measured wall
 times of each part.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shutil
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
-from .aggregate import write_tables
+from .aggregate import Z95, wilson_interval, write_tables
 from .figures import draw_sweep
+from .report import PAPER
 from .reproduce import PAPER_EXPERIMENTS, experiment_cells
-from .runner import load_cell, run_cells
+from .runner import Cell, load_cell, run_cells
 
 RUN_OVERRIDES = ("methods=seed", "metrics.uncertainty=false")  # the claims read neither the others nor CRLBs
+TARGET_HALF_WIDTH_PTS = 5.0
+"""Widest 95% interval (+- percentage points) allowed for a valid rate, and for a paired valid-rate gap of the
+paper's method over another, at any setting: cells wider than this get more trials."""
+SIZING_MARGIN = 0.95
+"""Trials are sized for this fraction of the target (the report's bootstrap intervals are a little wider or
+narrower than the normal approximation used to size them)."""
+MAX_TRIALS = 3000
+"""No setting runs more trials than this, whatever its interval."""
+
+
+def needed_trials(rows: pd.DataFrame, target_pts: float = TARGET_HALF_WIDTH_PTS) -> int:
+    """Trials one setting needs so that every method's valid rate (Wilson) and every paired gap ``peng2022 - m``
+    (normal approximation of the paired difference) has a 95% half-width of at most ``target_pts`` points,
+    judged on the ``rows`` already run (never fewer than their count; at most ``MAX_TRIALS``)."""
+    v = rows.pivot(index="trial", columns="method", values="valid").astype(float).fillna(0.0)
+    n = len(v)
+    if n < 2:
+        return n
+    lo, hi = wilson_interval(v.sum().to_numpy(), n)
+    widths = list(100 * (hi - lo) / 2)
+    if PAPER in v.columns:
+        gaps = v[PAPER].to_numpy()[:, None] - v.drop(columns=PAPER).to_numpy()
+        widths += list(100 * Z95 * gaps.std(axis=0, ddof=1) / np.sqrt(n))
+    worst, goal = max(widths, default=0.0), SIZING_MARGIN * target_pts
+    return n if worst <= goal else int(min(MAX_TRIALS, max(n, np.ceil(n * (worst / goal) ** 2))))
+
+
+def run_sized(cells: list[Cell], n_jobs: int, label: str, rounds: int = 3, run: bool = True) -> list[Cell]:
+    """Run ``cells``, then give every setting whose intervals are wider than the target the trials it needs
+    (``needed_trials``; the runner extends a cell, its earlier trials kept), up to ``rounds`` times; returns the
+    cells with their final trial counts. ``run=False``: the same sizing on the trials already stored."""
+    if run:
+        run_cells(cells, n_jobs=n_jobs, label=label)
+    for _ in range(rounds):
+        grown = [dataclasses.replace(c, n_trials=max(c.n_trials, needed_trials(load_cell(c)))) for c in cells]
+        more = [g for c, g in zip(cells, grown, strict=True) if g.n_trials > c.n_trials]
+        cells = grown
+        if not more:
+            break
+        if run:
+            run_cells(more, n_jobs=n_jobs, label=f"{label}, more trials where an interval is wide")
+    return cells
+
+
+def _offsets(cells: dict[str, list]):
+    i = 0
+    for e, cs in cells.items():
+        yield e, cs, i
+        i += len(cs)
 
 
 def run_preset(preset: str | None, trials: int, results_dir: str, out: Path, n_jobs: int,
@@ -41,8 +95,8 @@ def run_preset(preset: str | None, trials: int, results_dir: str, out: Path, n_j
     if preset:
         extra.append(f"preset={preset}")
     cells = {e: experiment_cells(e, extra) for e in PAPER_EXPERIMENTS}
-    if run:
-        run_cells([c for cs in cells.values() for c in cs], n_jobs=n_jobs, label=f"reproduce {preset or 'default'}")
+    flat = run_sized([c for cs in cells.values() for c in cs], n_jobs, f"reproduce {preset or 'default'}", run=run)
+    cells = {e: flat[i:i + len(cs)] for e, cs, i in _offsets(cells)}
     for sweep, cs in cells.items():
         write_tables(pd.concat([load_cell(c) for c in cs], ignore_index=True), sweep, out)
         if figures:

@@ -23,7 +23,7 @@ from .claim_stats import claim_values, interval_verdict, sweep_arrays, term_name
 from .figures import PAPER_SWEEPS
 from .objective import load_search_conf, objective_lines, score
 from .report import _fmt, _method_table, _valid_cell, paper_claims
-from .search import SPACE_KEYS
+from .search import SPACE_KEYS, sensitivity_ranges
 
 N_BOOT = 2000
 LABELS = {"max_tilt_deg": "tilt (deg)", "board_size_m": "board (m)", "bearing_spread_deg": "spread (deg)",
@@ -79,6 +79,37 @@ def claims_section(ct: pd.DataFrame, presets: list[str], verdicts: pd.DataFrame 
     return lines
 
 
+def _values(vals: list, key: str) -> str:
+    return ", ".join(f"{v:g}" for v in vals) + (" px" if key == "corner_noise_px" else "")
+
+
+def sensitivity_section(sens: pd.DataFrame | None, conf) -> list[str]:
+    """Per claim and setting: the values (the others at the winner's) at which the claim holds."""
+    if sens is None:
+        return ["The sensitivity stage has not run (`python -m experiments.search --stage sensitivity`)."]
+    ranges = sensitivity_ranges(sens)
+    n = int(conf.sensitivity.trials)
+    lines = [f"One setting at a time through the matched preset (the others at its values), {conf.sensitivity.levels} "
+             f"values over each setting's searched range, {n} trials per setting of the sweeps, common random numbers; "
+             "each claim judged as above (paired 95% intervals). A cell lists the values at which the claim holds: "
+             "*all* = over the whole range searched (the verdict does not hinge on that setting), *none* = at none.",
+             "", "| # | Paper's claim | vs | " + " | ".join(LABELS[k] for k in SPACE_KEYS) + " |",
+             "|---|---|---|" + "---|" * len(SPACE_KEYS)]
+    claims = paper_claims()
+    for i, claim in enumerate(claims, 1):
+        cells = []
+        for k in SPACE_KEYS:
+            r = ranges[(ranges["claim"] == i) & (ranges["setting"] == k)]
+            if r.empty:
+                cells.append("-")
+                continue
+            held, tried = r["holds_at"].iloc[0], r["tried"].iloc[0]
+            cells.append("all" if len(held) == len(tried) else "none" if not held else _values(held, k))
+        vs = method_label(claim.other) if claim.other else "-"
+        lines.append(f"| {i} | {claim.text} | {vs} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def meaning(ct: pd.DataFrame, presets: list[str], verdicts: pd.DataFrame | None) -> list[str]:
     """The generated reading: which claims hold where, and which under none of the settings searched."""
     v = {(r.preset, r.claim): r.verdict for r in ct.drop_duplicates(["preset", "claim"]).itertuples()}
@@ -100,13 +131,15 @@ def meaning(ct: pd.DataFrame, presets: list[str], verdicts: pd.DataFrame | None)
             f"{names(groups['both'])}.",
             f"- **Hold under the matched preset only**: {names(groups['matched'])}.",
             f"- **Hold under our default only**: {names(groups['default'])}.",
-            "- **Hold under neither preset but at some coarse search point** (point estimates at few trials: "
-            f"a lead, not a finding): {names(groups['searched'])}.",
+            "- **Hold under neither preset but at some search point** (a coarse point, judged on point estimates "
+            "at few trials, or a point of the sensitivity lines: a lead, not a finding): "
+            f"{names(groups['searched'])}.",
             f"- **Hold under none of the settings searched**: {names(groups['none'])}.",
-            "", "A verdict's sensitivity is the last column of the claims table: at how many of the coarse "
-            "search's points the claim holds (point estimates, common random numbers) and the range of each "
-            "setting over those points. A claim that holds over the whole range of a setting does not hinge on "
-            "it; one that holds only at a corner of the space does."]
+            "", "How sensitive a verdict is: the sensitivity table above (one setting at a time through the matched "
+            "preset, over each setting's whole range), and the last column of the claims table (at how many of the "
+            "coarse search's points the claim holds, point estimates, and the range of each setting over those "
+            "points). A claim that holds over the whole range of a setting does not hinge on it; one that holds "
+            "only at part of it does."]
 
 
 def _search_lines(search_dir: Path) -> list[str]:
@@ -135,9 +168,11 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
     ct = claims_table(folders)
     ct.to_csv(tables / "claims.csv", index=False, float_format="%.6g")
     conf = load_search_conf()
-    verdicts = None
+    verdicts = sens = None
     if (search_dir / "verdicts_coarse.csv").exists():
         verdicts = pd.read_csv(search_dir / "verdicts_coarse.csv")
+    if (search_dir / "verdicts_sensitivity.csv").exists():
+        sens = pd.read_csv(search_dir / "verdicts_sensitivity.csv")
     timings = json.loads((tables / "timings.json").read_text()) if (tables / "timings.json").exists() else {}
     preset_yaml = (Path(__file__).resolve().parent.parent / "conf" / "preset" / f"{preset}.yaml")
     lines = [f"# The paper's claims under the `{preset}` preset and our default (generated)", "",
@@ -149,8 +184,11 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
         wall = timings.get(f"{p}_s")
         lo, hi = int(s["n_trials"].min()), int(s["n_trials"].max())
         n = f"{lo}" if lo == hi else f"{lo}-{hi}"
-        lines.append(f"- `{p}`: {n} trials per setting; widest 95% Wilson interval of a valid "
-                     f"rate +-{half:.1f} points" + (f"; measured wall time {wall:.0f} s" if wall else "") + ".")
+        g = ct[(ct["preset"] == p) & ct["term"].str.contains(":points:")]
+        gap = float(((g["hi95"] - g["lo95"]) / 2).max()) if len(g) else float("nan")
+        lines.append(f"- `{p}`: {n} trials per setting; widest 95% interval of a valid rate +-{half:.1f} points "
+                     f"(Wilson), of a claimed valid-rate gap in points +-{gap:.1f} (paired bootstrap)"
+                     + (f"; measured wall time {wall:.0f} s" if wall else "") + ".")
     lines += ["", "## The presets", "", "`default`: conf/scene/paper.yaml and the simulator's defaults (board tilt <= "
               "45 deg, 1 m boards, bearings over 60 deg, exact camera poses). "
               f"`{preset}` (`conf/preset/{preset}.yaml`), on top of the default:", "", "```yaml",
@@ -179,7 +217,10 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
               "somewhere, or our value does not exist at a setting; *does not hold* = better nowhere. Per-setting "
               "numbers: `claims.csv`.", ""]
     lines += claims_section(ct, presets, verdicts)
-    lines += ["", "## What it means", ""] + meaning(ct, presets, verdicts)
+    lines += ["", f"## How sensitive each verdict is (`{search_dir.name}/verdicts_sensitivity.csv`)", ""]
+    lines += sensitivity_section(sens, conf)
+    held = verdicts if sens is None else pd.concat([d for d in (verdicts, sens) if d is not None])
+    lines += ["", "## What it means", ""] + meaning(ct, presets, held)
     for p, folder in folders.items():
         for sw, spec in PAPER_SWEEPS.items():
             lines += ["", f"## `{p}`, sweep {sw}: valid-solution probability, % [95% Wilson interval]", ""]

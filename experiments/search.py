@@ -1,11 +1,13 @@
 """``make search-paper``: search the settings the paper left unstated for those closest to its numbers.
 
-    python -m experiments.search [--stage coarse|fine|all] [--coarse-trials 16] [--fine-trials 1000]
-                                 [--best 3] [--results results] [--n-jobs -1] [--write-preset]
+    python -m experiments.search [--stage coarse|fine|sensitivity|all] [--coarse-trials 16] [--fine-trials 1000]
+                                 [--best 3] [--sensitivity-trials 100] [--results results] [--n-jobs -1]
+                                 [--write-preset]
 
 Everything is fixed in ``conf/search/paper.yaml`` before the run: the objective (``experiments.objective``),
 the space, the stages. Coarse: a scrambled Sobol design over the space plus the default preset, few trials
-per point; fine: the best coarse points and the default with many trials. Each point is the paper's two
+per point; fine: the best coarse points and the default with many trials; sensitivity: one setting at a time
+through the winner, each over its whole range, judged with paired intervals. Each point is the paper's two
 sweeps (``conf/experiment/boards.yaml`` and ``noise.yaml`` composed by Hydra, the point's settings on top), run
 by the ordinary runner in one process pool with common random numbers (``crn_stream``: trial t draws the
 same numbers at every point), so a fine stage extends the coarse cells and an interrupted run resumes.
@@ -30,7 +32,7 @@ from scipy.stats import qmc
 
 from simulate import SimOptions
 
-from .claim_stats import claim_values, point_verdict, sweep_arrays
+from .claim_stats import claim_values, interval_verdict, point_verdict, sweep_arrays
 from .figures import PAPER_SWEEPS
 from .objective import load_search_conf, score
 from .report import paper_claims
@@ -54,6 +56,39 @@ def design(conf) -> list[dict]:
         pt = {k: float(np.round(v / conf.rounding[k]) * conf.rounding[k]) for k, v in zip(SPACE_KEYS, row, strict=True)}
         points.append({"point": f"s{i:02d}", **{k: round(v, 4) for k, v in pt.items()}})
     return points
+
+
+def sensitivity_points(conf, centre: dict) -> list[dict]:
+    """One setting at a time through ``centre`` (the winner): ``conf.sensitivity.levels`` evenly spaced values
+    over each setting's range (rounded as the design), the others at the centre's values; the centre first, as
+    ``centre``, and each other point named ``<setting>=<value>``."""
+    points = [{"point": "centre", **{k: float(centre[k]) for k in SPACE_KEYS}}]
+    for k in SPACE_KEYS:
+        lo, hi = conf.space[k]
+        for v in np.linspace(lo, hi, int(conf.sensitivity.levels)):
+            v = round(float(np.round(v / conf.rounding[k]) * conf.rounding[k]), 4)
+            if not np.isclose(v, float(centre[k])):
+                points.append({"point": f"{k}={v:g}", **{q: float(centre[q]) for q in SPACE_KEYS}, k: v})
+    return points
+
+
+def sensitivity_ranges(verdicts: pd.DataFrame) -> pd.DataFrame:
+    """Per claim and setting, the values of that setting (others at the centre) at which the claim holds, from
+    the sensitivity stage's verdicts: columns ``claim``, ``setting``, ``holds_at`` (list), ``tried`` (list)."""
+    rows = []
+    for (claim, key), g in _one_at_a_time(verdicts):
+        g = g.sort_values(key)
+        rows.append({"claim": claim, "setting": key, "tried": g[key].tolist(),
+                     "holds_at": g.loc[g["verdict"] == "holds", key].tolist()})
+    return pd.DataFrame(rows, columns=["claim", "setting", "tried", "holds_at"])
+
+
+def _one_at_a_time(verdicts: pd.DataFrame):
+    for claim, v in verdicts.groupby("claim", sort=True):
+        centre = v[v["point"] == "centre"]
+        for k in SPACE_KEYS:
+            line = v[v["point"].str.startswith(f"{k}=")]
+            yield (claim, k), pd.concat([centre, line])
 
 
 def sim_fields(point: dict, conf) -> dict:
@@ -99,8 +134,10 @@ def run_points(points: list[dict], conf, trials: int, results_dir: str, n_jobs: 
     return per_point
 
 
-def evaluate_points(points: list[dict], per_point: list[dict], conf, stage: str) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """The objective per point (one row per point, best Zhang variant first) and each claim's point verdict."""
+def evaluate_points(points: list[dict], per_point: list[dict], conf, stage: str,
+                    n_boot: int = 0) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The objective per point (one row per point, best Zhang variant first) and each claim's verdict per point:
+    on point values, or with ``n_boot`` resamples on paired 95% intervals (as the matched report judges)."""
     rows, verdicts = [], []
     claims = paper_claims()
     for p, cells in zip(points, per_point, strict=True):
@@ -114,9 +151,11 @@ def evaluate_points(points: list[dict], per_point: list[dict], conf, stage: str)
                      **{k: best[k] for k in sc.columns if ":" in k and pd.notna(best[k])}})
         arrays = {e: sweep_arrays(t, PAPER_SWEEPS[e].x) for e, t in trials.items()}
         for i, claim in enumerate(claims, 1):
-            vals = claim_values(None, claim, PAPER_SWEEPS[claim.sweep].x, arrays=arrays[claim.sweep])
+            vals = claim_values(None, claim, PAPER_SWEEPS[claim.sweep].x, n_boot=n_boot, arrays=arrays[claim.sweep])
+            verdict = (interval_verdict(claim, vals["value"], vals["lo95"], vals["hi95"]) if n_boot else
+                       point_verdict(claim, vals["value"].to_numpy()))
             verdicts.append({"stage": stage, "point": p["point"], **{k: p[k] for k in SPACE_KEYS}, "claim": i,
-                             "verdict": point_verdict(claim, vals["value"].to_numpy())})
+                             "verdict": verdict})
     table = pd.DataFrame(rows).sort_values("objective").reset_index(drop=True)
     return table, pd.DataFrame(verdicts)
 
@@ -143,7 +182,8 @@ def write_preset(row: pd.Series, conf, path: Path = PRESET) -> Path:
 
 
 def search(stage: str = "all", coarse_trials: int | None = None, fine_trials: int | None = None,
-           best: int | None = None, results_dir: str = "results", n_jobs: int = -1, preset: bool = False) -> dict:
+           best: int | None = None, results_dir: str = "results", n_jobs: int = -1, preset: bool = False,
+           sens_trials: int | None = None) -> dict:
     conf = load_search_conf()
     out = Path(results_dir) / str(conf.sweep)
     out.mkdir(parents=True, exist_ok=True)
@@ -171,20 +211,33 @@ def search(stage: str = "all", coarse_trials: int | None = None, fine_trials: in
         if preset:
             write_preset(win, conf)
         timings["fine_s"] = time.perf_counter() - t0
+    if stage in ("sensitivity", "all"):
+        t0 = time.perf_counter()
+        centre = json.loads((out / "best.json").read_text())
+        chosen = sensitivity_points(conf, centre)
+        per = run_points(chosen, conf, sens_trials or int(conf.sensitivity.trials), results_dir, n_jobs,
+                         "search sensitivity")
+        table, verdicts = evaluate_points(chosen, per, conf, "sensitivity", n_boot=int(conf.sensitivity.n_boot))
+        table.to_csv(out / "points_sensitivity.csv", index=False, float_format="%.6g")
+        verdicts.to_csv(out / "verdicts_sensitivity.csv", index=False)
+        timings["sensitivity_s"] = time.perf_counter() - t0
     return {"out": out, **timings}
 
 
 def main(argv: Sequence[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--stage", choices=("coarse", "fine", "all"), default="all")
+    ap.add_argument("--stage", choices=("coarse", "fine", "sensitivity", "all"), default="all")
     ap.add_argument("--coarse-trials", type=int, default=None, help="trials per coarse point (config: 16)")
     ap.add_argument("--fine-trials", type=int, default=None, help="trials per fine point (config: 1000)")
     ap.add_argument("--best", type=int, default=None, help="coarse points taken to the fine stage (config: 3)")
+    ap.add_argument("--sensitivity-trials", type=int, default=None,
+                    help="trials per point of the one-at-a-time lines through the winner (config: 100)")
     ap.add_argument("--results", default="results")
     ap.add_argument("--n-jobs", type=int, default=-1)
     ap.add_argument("--write-preset", action="store_true", help="write conf/preset/paper-matched.yaml")
     a = ap.parse_args(argv)
-    r = search(a.stage, a.coarse_trials, a.fine_trials, a.best, a.results, a.n_jobs, a.write_preset)
+    r = search(a.stage, a.coarse_trials, a.fine_trials, a.best, a.results, a.n_jobs, a.write_preset,
+               a.sensitivity_trials)
     print(", ".join(f"{k} {v:.1f}" for k, v in r.items() if k.endswith("_s")), f"-> {r['out']}")
 
 

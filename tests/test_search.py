@@ -137,3 +137,44 @@ def test_tiny_search_and_matched_run(tmp_path):
     text = write_matched_report(out, "paper-matched", tmp_path / "search").read_text()
     assert text.count("\n| ") >= len(paper_claims())
     assert (out / "claims.csv").exists()
+
+
+@pytest.mark.parametrize("p_other", [0.5, 0.8, 0.97])
+def test_needed_trials_brings_every_interval_within_five_points(p_other):
+    """Sized on a pilot, a rerun at the suggested count has every valid rate's Wilson interval and the paired
+    gap's interval within +-5 points; a setting that is already narrow keeps its count."""
+    from experiments.aggregate import wilson_interval
+    from experiments.matched import TARGET_HALF_WIDTH_PTS, needed_trials
+
+    pilot = _trials(100, p_other, seed=1)
+    n = needed_trials(pilot)
+    assert n >= 100
+    full = _trials(n, p_other, seed=2)
+    v = full.pivot(index="trial", columns="method", values="valid").astype(float)
+    lo, hi = wilson_interval(v.sum().to_numpy(), n)
+    gap = v["peng2022"] - v["vasconcelos"]
+    half = max(100 * np.max(hi - lo) / 2, 100 * 1.96 * gap.std(ddof=1) / np.sqrt(n))
+    assert half <= TARGET_HALF_WIDTH_PTS * 1.08  # sampling noise of the pilot's estimate
+    assert needed_trials(full) <= max(n, 1.25 * n)
+    assert needed_trials(_trials(3000, 1.0)) == 3000
+
+
+def test_sensitivity_lines_vary_one_setting_through_the_centre():
+    from experiments.search import SPACE_KEYS, sensitivity_points, sensitivity_ranges
+
+    conf = load_search_conf()
+    centre = {"max_tilt_deg": 35.0, "board_size_m": 0.85, "bearing_spread_deg": 55.0, "corner_noise_px": 0.75}
+    pts = sensitivity_points(conf, centre)
+    assert pts[0]["point"] == "centre" and len({p["point"] for p in pts}) == len(pts)
+    for p in pts[1:]:
+        moved = [k for k in SPACE_KEYS if not np.isclose(p[k], centre[k])]
+        assert len(moved) == 1 and p["point"].startswith(moved[0] + "=")
+        lo, hi = conf.space[moved[0]]
+        assert lo - 1e-9 <= p[moved[0]] <= hi + 1e-9
+    # a claim that holds below 0.9 m boards only, and everywhere along the other settings
+    rows = [{"point": p["point"], **{k: p[k] for k in SPACE_KEYS}, "claim": 1,
+             "verdict": "holds" if p["board_size_m"] < 0.9 else "mixed"} for p in pts]
+    r = sensitivity_ranges(pd.DataFrame(rows)).set_index("setting")
+    board = r.loc["board_size_m"]
+    assert board["holds_at"] == [v for v in board["tried"] if v < 0.9] and len(board["tried"]) >= 5
+    assert r.loc["max_tilt_deg", "holds_at"] == r.loc["max_tilt_deg", "tried"]
