@@ -25,7 +25,9 @@ from calib_core.observations import BoardObservation
 from . import stills, timesync
 from .bag import BagError, BagSource, iter_images, iter_scans, read_camera_info
 from .dataset import BoardSpec, CameraModel, load_board, load_camera, make_scan
-from .extract import ExtractionError, ExtractOptions, detect_board, find_board_segment
+from .detect import detect_board
+from .extract_options import ExtractionError, ExtractOptions
+from .segment import find_board_segment
 
 
 @dataclass

@@ -14,7 +14,8 @@ import pytest
 from calib_core.metrics import pose_errors
 from calib_core.transforms import invert_T, make_T, rotvec_to_matrix, transform_points
 from rig.dataset import DatasetError, load_board, load_camera, load_dataset, make_scan, read_scan_csv
-from rig.extract import ExtractionError, ExtractOptions, extract, find_board_segment, format_diagnostics
+from rig.extract import ExtractionError, ExtractOptions, extract, format_diagnostics
+from rig.segment import find_board_segment
 
 R_NOMINAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # camera axes -> lidar axes
 

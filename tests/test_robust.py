@@ -130,7 +130,8 @@ def test_contamination_keeps_the_clean_twin_and_is_off_by_default():
 
 
 def test_extraction_refuses_an_arc():
-    from rig.extract import CURVATURE_CHI2, curvature_statistic
+    from rig.extract_options import CURVATURE_CHI2
+    from rig.segment import curvature_statistic
 
     rng = np.random.default_rng(0)
     b = np.radians(np.arange(-6, 6, 0.25))
