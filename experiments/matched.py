@@ -126,9 +126,10 @@ def matched(preset: str = "paper-matched", trials: int = 500, compare_trials: in
             if f.name.startswith(("summary_", "trials_", "settings_")):
                 shutil.copy(f, out / "default" / f.name)
     elif compare_trials:
-        timings["default_s"] = run_preset(None, compare_trials, results_dir, out / "default", n_jobs, overrides,
-                                          figures=False)
-        timings["default_trials"] = compare_trials
+        wall = run_preset(None, compare_trials, results_dir, out / "default", n_jobs, overrides, figures=False,
+                          run=run)
+        if run:
+            timings["default_s"], timings["default_trials"] = wall, compare_trials
     timings_path.write_text(json.dumps(timings, indent=1) + "\n")
     t0 = time.perf_counter()
     report = write_matched_report(out, preset, Path(results_dir) / "search")

@@ -162,6 +162,31 @@ def _search_lines(search_dir: Path) -> list[str]:
     return lines
 
 
+EDGE_FRACTION = 0.05
+"""A winning setting within this fraction of its range from a bound of the searched space is flagged."""
+
+
+def edge_lines(search_dir: Path, conf) -> list[str]:
+    """A note for every setting at which the winner (``best.json``) sits at the edge of the searched range: the
+    best match may lie beyond it."""
+    path = search_dir / "best.json"
+    if not path.exists():
+        return []
+    best = json.loads(path.read_text())
+    notes = []
+    for k in SPACE_KEYS:
+        lo, hi = (float(v) for v in conf.space[k])
+        for bound, name in ((lo, "lower"), (hi, "upper")):
+            if abs(float(best[k]) - bound) <= EDGE_FRACTION * (hi - lo):
+                notes.append(f"{LABELS[k]} {float(best[k]):g} is at the {name} end of the searched range "
+                             f"({lo:g}-{hi:g})")
+    if not notes:
+        return []
+    return ["**The winner sits at the edge of the space** (the best match may lie beyond it, so this preset is "
+            "the closest among the settings searched, not necessarily the closest overall): " + "; ".join(notes)
+            + ".", ""]
+
+
 def build(tables: Path, preset: str, search_dir: Path) -> str:
     presets = [preset] + (["default"] if (tables / "default" / "summary_boards.csv").exists() else [])
     folders = {preset: tables, **({"default": tables / "default"} if "default" in presets else {})}
@@ -208,6 +233,7 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
               "reproduce-paper` is, so the winner is judged on fresh data (no winner's curse from the search's "
               "noise).", ""]
     lines += _search_lines(search_dir)
+    lines += edge_lines(search_dir, conf)
     lines += ["## Every claim under both presets", "",
               "Ours = Peng 2022 over the named method, per setting, with its paired 95% bootstrap interval "
               f"({N_BOOT} resamples of the trials). Verdicts with intervals (`experiments/claim_stats.py`): a "

@@ -221,6 +221,8 @@ def search(stage: str = "all", coarse_trials: int | None = None, fine_trials: in
         table.to_csv(out / "points_sensitivity.csv", index=False, float_format="%.6g")
         verdicts.to_csv(out / "verdicts_sensitivity.csv", index=False)
         timings["sensitivity_s"] = time.perf_counter() - t0
+    path = out / "timings.json"  # measured wall times of the stages, kept across runs of single stages
+    path.write_text(json.dumps({**(json.loads(path.read_text()) if path.exists() else {}), **timings}, indent=1) + "\n")
     return {"out": out, **timings}
 
 
