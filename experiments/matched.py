@@ -79,13 +79,6 @@ def run_sized(cells: list[Cell], n_jobs: int, label: str, rounds: int = 3, run: 
     return cells
 
 
-def _offsets(cells: dict[str, list]):
-    i = 0
-    for e, cs in cells.items():
-        yield e, cs, i
-        i += len(cs)
-
-
 def run_preset(preset: str | None, trials: int, results_dir: str, out: Path, n_jobs: int,
                overrides: Sequence[str] = (), figures: bool = True, run: bool = True) -> float:
     """Run both paper sweeps under ``preset`` (None: the default), write their tables into ``out``; seconds.
@@ -95,8 +88,9 @@ def run_preset(preset: str | None, trials: int, results_dir: str, out: Path, n_j
     if preset:
         extra.append(f"preset={preset}")
     cells = {e: experiment_cells(e, extra) for e in PAPER_EXPERIMENTS}
+    sweeps = [e for e, cs in cells.items() for _ in cs]
     flat = run_sized([c for cs in cells.values() for c in cs], n_jobs, f"reproduce {preset or 'default'}", run=run)
-    cells = {e: flat[i:i + len(cs)] for e, cs, i in _offsets(cells)}
+    cells = {e: [c for s, c in zip(sweeps, flat, strict=True) if s == e] for e in cells}
     for sweep, cs in cells.items():
         write_tables(pd.concat([load_cell(c) for c in cs], ignore_index=True), sweep, out)
         if figures:

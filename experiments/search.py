@@ -76,19 +76,13 @@ def sensitivity_ranges(verdicts: pd.DataFrame) -> pd.DataFrame:
     """Per claim and setting, the values of that setting (others at the centre) at which the claim holds, from
     the sensitivity stage's verdicts: columns ``claim``, ``setting``, ``holds_at`` (list), ``tried`` (list)."""
     rows = []
-    for (claim, key), g in _one_at_a_time(verdicts):
-        g = g.sort_values(key)
-        rows.append({"claim": claim, "setting": key, "tried": g[key].tolist(),
-                     "holds_at": g.loc[g["verdict"] == "holds", key].tolist()})
-    return pd.DataFrame(rows, columns=["claim", "setting", "tried", "holds_at"])
-
-
-def _one_at_a_time(verdicts: pd.DataFrame):
     for claim, v in verdicts.groupby("claim", sort=True):
         centre = v[v["point"] == "centre"]
         for k in SPACE_KEYS:
-            line = v[v["point"].str.startswith(f"{k}=")]
-            yield (claim, k), pd.concat([centre, line])
+            g = pd.concat([centre, v[v["point"].str.startswith(f"{k}=")]]).sort_values(k)
+            rows.append({"claim": claim, "setting": k, "tried": g[k].tolist(),
+                         "holds_at": g.loc[g["verdict"] == "holds", k].tolist()})
+    return pd.DataFrame(rows, columns=["claim", "setting", "tried", "holds_at"])
 
 
 def sim_fields(point: dict, conf) -> dict:
