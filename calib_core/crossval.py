@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .data.observations import Observations
+from .data.residuals import plane_residuals
 from .entry import calibrate
-from .observations import Observations
-from .residuals import plane_residuals
-from .uncertainty import scan_noise_estimate
+from .refine.uncertainty import scan_noise_estimate
 
 
 @dataclass(frozen=True, eq=False)

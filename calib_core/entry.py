@@ -7,13 +7,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from .diagnose import data_causes, judge
+from .checks.diagnose import data_causes, judge
+from .checks.verdict import check, data_warnings
+from .data.observations import Observations
+from .data.result import CalibrationResult, SolveFailure
 from .errors import CalibrationError
-from .observations import Observations
+from .refine.uncertainty import UncertaintyError
 from .registry import get_method
-from .result import CalibrationResult, SolveFailure
-from .uncertainty import UncertaintyError
-from .verdict import check, data_warnings
 
 SEED_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022")
 """The paper's methods: their answers stand as their papers compute them; the verdict is reported beside them
@@ -50,7 +50,7 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
 
     Returns a ``CalibrationResult``; a method that cannot solve (too few boards, degenerate data) gives
     ``ok=False`` and a reason, never a guess. Every answer is then tested against the data
-    (``calib_core.verdict``, in ``info["verdict"]``, its warnings in ``info["warnings"]``): an answer the data
+    (``calib_core.checks.verdict``, in ``info["verdict"]``, its warnings in ``info["warnings"]``): an answer the data
     contradict is ``ok=False`` with the reason, except for the paper's methods (``SEED_METHODS``), whose answer
     stands with the contradiction as a warning. ``verdict=False`` skips the test. Unknown methods or options
     raise ``CalibrationError``.

@@ -45,7 +45,7 @@ def _recording(args, work: Path):
 
 def measure(args) -> dict:
     from calib_core import calibrate
-    from calib_core.metrics import pose_errors
+    from calib_core.geometry.metrics import pose_errors
     from rig.dataset import load_dataset
     from rig.extract import ExtractOptions, extract
     from rig.frombag import bag_to_dataset

@@ -2,7 +2,7 @@
 repetitions), how the default method's time grows with the number of boards (8, 20, 40, 100), the minimal
 solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``) and its accuracy on noise-free
 simulated triples (closed-form and eigenvalue quartic roots), and the joint model over image corners and ranges at
-8 and 40 boards (0.5 px corner noise): the joint refinement alone (``calib_core.joint.joint_refine`` from the
+8 and 40 boards (0.5 px corner noise): the joint refinement alone (``calib_core.refine.joint.joint_refine`` from the
 range-only answer) and whole ``calibrate`` calls that end in it.
 
     python -m experiments.bench [--boards 8] [--problems 10] [--repeats 20] [--triples 10000] [--joint-boards 8 40]
@@ -20,8 +20,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from calib_core import METHODS, calibrate
-from calib_core.lines import fit_lines
-from calib_core.metrics import is_valid, pose_errors
+from calib_core.data.lines import fit_lines
+from calib_core.geometry.metrics import is_valid, pose_errors
 from simulate import SimOptions, generate
 
 from .catalog import method_order
@@ -142,7 +142,7 @@ def time_joint(n_boards: int, count: int, repeats: int, seed: int = 12345) -> di
     """Median ms of the joint refinement alone, of ``calibrate(lidarcam)`` and of ``zhang_pless_linear+joint`` on
     ``count`` problems of ``n_boards`` boards with image corners (0.5 px); ``lidarcam`` only up to 12 boards (its
     candidate scoring is O(N^4))."""
-    from calib_core.joint import joint_refine
+    from calib_core.refine.joint import joint_refine
 
     opts = SimOptions(n_boards=n_boards, pose_mode="pixel", pixel_noise_px=0.5)
     obs_list = [generate(opts, seed=seed, trial=i) for i in range(count)]

@@ -20,8 +20,8 @@ def clean_check(trials: int, boards: Sequence[int] = (3, 4, 5, 6, 7, 8), method:
     """The paper's board sweep (20 mm, seed 0, trials 0..trials-1: the same data as ``results/paper``) with the
     default method: valid rate, RMS e_R over the mean CRLB, mean NEES, trials with a board rejected."""
     from calib_core import calibrate
-    from calib_core.metrics import is_valid, nees, pose_errors
-    from calib_core.uncertainty import crlb
+    from calib_core.geometry.metrics import is_valid, nees, pose_errors
+    from calib_core.refine.uncertainty import crlb
     from simulate import SimOptions, generate
 
     rows = []

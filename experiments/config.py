@@ -18,7 +18,7 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
-from calib_core.metrics import TRUTH_MAX_ROT_DEG, TRUTH_MAX_TRANS_M, VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
+from calib_core.geometry.metrics import TRUTH_MAX_ROT_DEG, TRUTH_MAX_TRANS_M, VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
 from simulate import SimOptions
 
 from .catalog import PAPER_METHODS

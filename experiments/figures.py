@@ -21,7 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from calib_core.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M  # noqa: E402
+from calib_core.geometry.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M  # noqa: E402
 
 from .aggregate import load_summary, load_trials  # noqa: E402
 from .catalog import method_colour, method_label, method_order  # noqa: E402

@@ -31,7 +31,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from calib_core import CalibrationError, LidarcamError, calibrate, load_observations
-from calib_core.io import OBS_SCHEMA
+from calib_core.data.io import OBS_SCHEMA
 from calib_core.plugins import load_plugins
 from calib_core.registry import METHODS, get_method
 

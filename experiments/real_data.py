@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_core.transforms import invert_T
+from calib_core.geometry.transforms import invert_T
 from rig.dataset import DatasetError
 from rig.extract import ExtractOptions, extract, format_diagnostics
 from rig.intrinsics import calibrate_intrinsics, find_corners, format_intrinsics
@@ -192,7 +192,7 @@ def run_acfr(folder: Path, out: Path) -> tuple[list[str], dict]:
 def _verdict_axes(obs, T, sigma) -> tuple[str, ...]:
     """The mounting axes the library's degeneracy analysis names as not determined (empty without it)."""
     try:
-        from calib_core.degeneracy import undetermined_directions
+        from calib_core.checks.degeneracy import undetermined_directions
     except ImportError:
         return ()
     d = undetermined_directions(obs, T, sigma)

@@ -1,6 +1,6 @@
 """Evaluation of methods on one real rig without ground truth: full fit, leave-one-pose-out residual, agreement
 with a published result, time, and the degeneracy verdict. Uses ``calib_core.crossval`` and
-``calib_core.degeneracy`` when the library has them; otherwise the small fallbacks below (marked in the report).
+``calib_core.checks.degeneracy`` when the library has them; otherwise the small fallbacks below (marked in the report).
 """
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ import time
 import numpy as np
 
 import calib_core
-from calib_core.metrics import pose_errors
-from calib_core.observations import Observations
-from calib_core.transforms import invert_T
+from calib_core.data.observations import Observations
+from calib_core.geometry.metrics import pose_errors
+from calib_core.geometry.transforms import invert_T
 from rig.report import board_plane_distances as plane_distances
 
 try:  # leave-one-pose-out cross-validation of the library
@@ -21,11 +21,11 @@ try:  # leave-one-pose-out cross-validation of the library
 except ImportError:  # pragma: no cover - depends on the library version
     _library_loo = None
 try:
-    from calib_core.degeneracy import undetermined_directions as _library_degeneracy
+    from calib_core.checks.degeneracy import undetermined_directions as _library_degeneracy
 except ImportError:  # pragma: no cover
     _library_degeneracy = None
 try:
-    from calib_core.uncertainty import scan_noise_estimate as _library_noise
+    from calib_core.refine.uncertainty import scan_noise_estimate as _library_noise
 except ImportError:  # pragma: no cover
     _library_noise = None
 
@@ -37,7 +37,7 @@ def range_noise_m(obs: Observations) -> float:
     else the pooled total-least-squares line residual over the boards (2 degrees of freedom per line removed)."""
     if _library_noise is not None:
         return float(_library_noise(obs))
-    from calib_core.lines import tls_line
+    from calib_core.data.lines import tls_line
 
     num = den = 0.0
     for b in obs.boards:
@@ -105,8 +105,8 @@ def degeneracy_verdict(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: floa
     if _library_degeneracy is not None:
         d = _library_degeneracy(obs, T_lidar_cam, sigma_m)
         return d.message(), d.determined
-    from calib_core.degeneracy import pair_angle_deg
-    from calib_core.uncertainty import normal_spread_deg
+    from calib_core.checks.degeneracy import pair_angle_deg
+    from calib_core.refine.uncertainty import normal_spread_deg
 
     return (f"not assessed by an information-matrix analysis here; board normals: largest pair angle "
             f"{pair_angle_deg(obs):.1f} deg, spread {normal_spread_deg(obs):.1f} deg"), None
@@ -148,7 +148,7 @@ def planar_calibration(obs: Observations, verdict_axes, given: dict | None = Non
     """(Markdown lines, T_lidar_cam or None): ``lidarcam`` with the undetermined mounting parameters fixed
     (``calibrate(..., fixed=)``; ``given`` values, else 0) and the estimated ones with their 1-sigma."""
     try:
-        from calib_core.mounting import UNIT_NAMES
+        from calib_core.geometry.mounting import UNIT_NAMES
     except ImportError:
         return ["Calibration with fixed mounting parameters: not available in this build of the library."], None
     names = [f"{a}_deg" if f"{a}_deg" in UNIT_NAMES else f"{a}_m" for a in verdict_axes]

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calib_core.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
+from calib_core.geometry.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
 
 from .aggregate import load_settings, load_summary
 from .catalog import method_label, method_order

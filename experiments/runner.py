@@ -32,8 +32,7 @@ import pandas as pd
 
 from calib_core import CalibrationError, calibrate, get_method
 from calib_core.entry import is_seed_method
-from calib_core.joint import corner_residuals, joint_crlb
-from calib_core.metrics import (
+from calib_core.geometry.metrics import (
     TRUTH_MAX_ROT_DEG,
     TRUTH_MAX_TRANS_M,
     VALID_MAX_ROT_DEG,
@@ -43,7 +42,8 @@ from calib_core.metrics import (
     pose_errors,
 )
 from calib_core.plugins import load_plugins
-from calib_core.uncertainty import conditioning, crlb
+from calib_core.refine.joint import corner_residuals, joint_crlb
+from calib_core.refine.uncertainty import conditioning, crlb
 from simulate.options import hashed_settings
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")

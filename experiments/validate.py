@@ -11,7 +11,7 @@ from typing import Any
 
 from calib_core import CalibrationError, get_method
 from calib_core.methods.suffixes import REFINE_OPTIONS
-from calib_core.selection import PENG2022_OPTIONS
+from calib_core.robust.scorers import PENG2022_OPTIONS
 
 
 class ConfigError(CalibrationError, ValueError):

@@ -44,9 +44,9 @@ def _print_ros(ros) -> None:
 
 def _cmd_calibrate(args) -> int:
     from calib_core import calibrate
-    from calib_core.exports import frame_export
-    from calib_core.io import extrinsic_yaml, load_observations
-    from calib_core.metrics import pose_errors
+    from calib_core.data.exports import frame_export
+    from calib_core.data.io import extrinsic_yaml, load_observations
+    from calib_core.geometry.metrics import pose_errors
 
     frames = _frames(args)
     obs = load_observations(args.observations)
@@ -115,7 +115,7 @@ def parse_fix(text: str) -> dict:
     """``"z=0.12,roll=0"`` -> ``{"z_m": 0.12, "roll_deg": 0.0}`` (units: degrees for angles, metres for
     offsets); CalibrationError naming a bad item."""
     from calib_core.errors import CalibrationError
-    from calib_core.mounting import PARAMS, UNIT_NAMES
+    from calib_core.geometry.mounting import PARAMS, UNIT_NAMES
 
     out = {}
     for item in filter(None, (p.strip() for p in text.split(","))):

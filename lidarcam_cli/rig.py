@@ -30,7 +30,7 @@ def cmd_extract(args) -> int:
     import json
     from pathlib import Path
 
-    from calib_core.io import save_observations
+    from calib_core.data.io import save_observations
     from rig.dataset import DatasetError, load_dataset
     from rig.extract import extract, format_diagnostics
 
@@ -49,8 +49,8 @@ def cmd_extract(args) -> int:
 
 def cmd_report(args) -> int:
     """``lidarcam report``: overlays, residual plots and report.md for a result on a dataset."""
-    from calib_core.io import load_observations
-    from calib_core.result import load_result
+    from calib_core.data.io import load_observations
+    from calib_core.data.result import load_result
     from rig.dataset import load_dataset
     from rig.extract import extract
     from rig.report import write_report

@@ -42,7 +42,7 @@ def add_parsers(subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Generate and save; errors in the options or the sampling go to stderr with exit status 2."""
-    from calib_core.io import save_observations
+    from calib_core.data.io import save_observations
     from simulate import generate
     from simulate.scene import SceneError
 

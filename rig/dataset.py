@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from calib_core.data.observations import check_simple_polygon
 from calib_core.errors import LidarcamError
-from calib_core.observations import check_simple_polygon
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 RESERVED_STEMS = {"camera", "board", "background", "scans", "windows", "ground_truth"}

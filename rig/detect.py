@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib_core.transforms import make_T
+from calib_core.geometry.transforms import make_T
 
 from .dataset import BoardSpec, CameraModel
 from .extract_options import ExtractionError

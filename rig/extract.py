@@ -18,10 +18,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from calib_core.camera import Camera
+from calib_core.data.camera import Camera
+from calib_core.data.observations import BoardObservation, Observations
 from calib_core.errors import ObservationError
-from calib_core.observations import BoardObservation, Observations
-from calib_core.transforms import transform_points
+from calib_core.geometry.transforms import transform_points
 
 from .dataset import Dataset, DatasetError, Pose, Scan
 from .detect import BoardDetection, detect_board
@@ -109,7 +109,7 @@ def _resolve_ambiguous(dataset: Dataset, boards: list, diags: list[PoseDiagnosti
     if not todo or len(good) < 3:
         return
     from calib_core.entry import calibrate
-    from calib_core.transforms import invert_T
+    from calib_core.geometry.transforms import invert_T
 
     res = calibrate(Observations(tuple(good)), "zhang_pless") if len(good) >= 5 else None
     if res is None or not res.ok:
@@ -176,7 +176,7 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
     ``reproj_rms_px`` per board and ``dataset`` (the folder). Every board carries its detected corners (distorted
     pixels, canonical order) and their board-frame positions, and the observations the camera intrinsics, so the
     joint model over corners and ranges applies (``meta["camera_note"]`` says why not when the intrinsics do not
-    fit ``calib_core.camera.Camera``). The ground truth of a simulated dataset
+    fit ``calib_core.data.camera.Camera``). The ground truth of a simulated dataset
     (ground_truth.yaml ``T_lidar_cam``) becomes ``T_lidar_cam_true``.
     """
     from .multipose import duplicate_groups, static_masks

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_core.observations import BoardObservation
+from calib_core.data.observations import BoardObservation
 
 from . import stills, timesync
 from .bag import BagError, BagSource, iter_images, iter_scans, read_camera_info

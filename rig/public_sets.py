@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_core.observations import BoardObservation, Observations
+from calib_core.data.observations import BoardObservation, Observations
 
 from .dataset import BoardSpec, CameraModel, Dataset, DatasetError, Pose
 from .importers.bouguet import grid_outline, read_bouguet

@@ -13,15 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_core.degeneracy import degeneracy_warnings, pair_angle_deg
+from calib_core.checks.degeneracy import degeneracy_warnings, pair_angle_deg
+from calib_core.data.io import extrinsic_yaml
+from calib_core.data.observations import Observations, ScanData
+from calib_core.data.residuals import plane_residuals
+from calib_core.data.result import JSON_INFO, CalibrationResult
 from calib_core.errors import LidarcamError
-from calib_core.io import extrinsic_yaml
-from calib_core.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
-from calib_core.observations import Observations, ScanData
-from calib_core.residuals import plane_residuals
-from calib_core.result import JSON_INFO, CalibrationResult
-from calib_core.transforms import invert_T, quaternion_xyzw, transform_points
-from calib_core.uncertainty import normal_spread_deg
+from calib_core.geometry.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
+from calib_core.geometry.transforms import invert_T, quaternion_xyzw, transform_points
+from calib_core.refine.uncertainty import normal_spread_deg
 
 from .dataset import CameraModel, Dataset
 
@@ -43,7 +43,7 @@ class ReportSummary:
 def _as_result(result) -> dict:
     """A CalibrationResult, a ``load_result`` dict or a path -> dict with method, ok, reason, T, covariance."""
     if isinstance(result, (str, Path)):
-        from calib_core.result import load_result
+        from calib_core.data.result import load_result
 
         result = load_result(result)
     if isinstance(result, CalibrationResult):
@@ -59,7 +59,7 @@ def _as_result(result) -> dict:
 
 def board_plane_distances(T_cam_lidar: np.ndarray, T_cam_board: np.ndarray, scan: np.ndarray) -> np.ndarray:
     """Signed distances (m) of lidar points ``scan`` (K,2) to the board plane, along the board's +z
-    (``calib_core.residuals.plane_residuals`` of one board)."""
+    (``calib_core.data.residuals.plane_residuals`` of one board)."""
     n = T_cam_board[:3, 2]
     data = ScanData(np.column_stack([scan, np.zeros(len(scan))]), np.zeros(len(scan), int), n[None],
                     np.array([n @ T_cam_board[:3, 3]]))
@@ -96,7 +96,7 @@ def project_scan(camera: CameraModel, T_cam_lidar: np.ndarray, scan: np.ndarray,
 def report_warnings(observations: Observations, rms_mm: list[float], T_lidar_cam: np.ndarray | None = None
                     ) -> list[str]:
     """Warnings on a board set and its residuals: the library's board-set warnings
-    (``calib_core.degeneracy.degeneracy_warnings``, one set of thresholds) and outlier boards."""
+    (``calib_core.checks.degeneracy.degeneracy_warnings``, one set of thresholds) and outlier boards."""
     out = degeneracy_warnings(observations, T_lidar_cam)
     finite = [r for r in rms_mm if math.isfinite(r)]
     if finite:
@@ -109,13 +109,13 @@ def report_warnings(observations: Observations, rms_mm: list[float], T_lidar_cam
 
 
 def _mounting_md(res: dict) -> list[str]:
-    """The mounting parameters of a calibration with fixed parameters (``calib_core.partial``), as a table."""
+    """The mounting parameters of a calibration with fixed parameters (``calib_core.refine.partial``), as a table."""
     if not res.get("mounting"):
         return []
     sig, fixed = res.get("mounting_sigma") or {}, res.get("fixed") or {}
     rows = [f"| {k} | {v:.4f} | {'given (fixed)' if k in fixed else f'{sig[k]:.4f}' if k in sig else '-'} |"
             for k, v in res["mounting"].items()]
-    return ["### Mounting parameters", "", "The camera's pose in the lidar frame (`calib_core.mounting`: x, y, z "
+    return ["### Mounting parameters", "", "The camera's pose in the lidar frame (`geometry.mounting`: x, y, z "
             "the camera centre; roll, pitch, yaw of its body frame, Z-Y-X). " + str(res.get("note") or ""), "",
             "| parameter | value | 1-sigma |", "|---|---:|---:|"] + rows + [""]
 

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib_core.lines import tls_line
-from calib_core.transforms import transform_points
+from calib_core.data.lines import tls_line
+from calib_core.geometry.transforms import transform_points
 
 from .dataset import BoardSpec, Scan
 from .extract_options import AmbiguousSegment, ExtractionError, ExtractOptions, PoseDiagnostics

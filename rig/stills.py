@@ -6,7 +6,7 @@ is the run's candidate (the others are its near-duplicates); a candidate is stil
 detected in it and tracked into both neighbouring frames (``track_corners``), move less than ``still_px``
 (``corner_motion``) and its scan segment stays put (``scan_segment_shift``); ``too_close`` drops a pose within
 ``min_angle_deg`` and ``min_move_m`` of one already kept; ``spread_order`` chooses up to ``max_poses`` that
-spread the board normals (``calib_core.uncertainty.normal_spread_deg``).
+spread the board normals (``calib_core.refine.uncertainty.normal_spread_deg``).
 Pixels, metres, degrees at the option edges; radians and metres inside.
 """
 
@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib_core.observations import BoardObservation, Observations
-from calib_core.uncertainty import normal_spread_deg
+from calib_core.data.observations import BoardObservation, Observations
+from calib_core.refine.uncertainty import normal_spread_deg
 
 
 @dataclass(frozen=True)

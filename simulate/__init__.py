@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from calib_core.camera import Camera
-from calib_core.observations import BoardObservation, Observations
-from calib_core.transforms import invert_T
+from calib_core.data.camera import Camera
+from calib_core.data.observations import BoardObservation, Observations
+from calib_core.geometry.transforms import invert_T
 
 from .camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners, observe_board, render_board_image
 from .lidar import beam_bearings, cast_scan

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from calib_core.transforms import make_T
+from calib_core.geometry.transforms import make_T
 
 WHITE, BLACK, BACKGROUND = 230.0, 25.0, 110.0  # grey levels of the board, its black squares, the world
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from calib_core.transforms import invert_T, make_T
+from calib_core.geometry.transforms import invert_T, make_T
 
 from . import trial_rngs
 from .camera import BACKGROUND, BoardSpec, camera_matrix, checkerboard_corners, render_board_image

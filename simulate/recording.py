@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from calib_core.transforms import invert_T
+from calib_core.geometry.transforms import invert_T
 
 from . import trial_rngs
 from .camera import BoardSpec, CameraError, camera_matrix, render_board_image

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calib_core.transforms import invert_T, make_T, rotvec_to_matrix
+from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix
 
 from .camera import BoardSpec, camera_matrix
 from .lidar import beam_bearings, board_ranges, scan_chords

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from calib_core import observations_to_dict
-from calib_core.observations import MAX_BOARDS, MAX_OUTLINE_VERTICES, MAX_SCAN_POINTS
+from calib_core.data.observations import MAX_BOARDS, MAX_OUTLINE_VERTICES, MAX_SCAN_POINTS
 from simulate import SimOptions, generate
 
 

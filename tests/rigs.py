@@ -5,8 +5,8 @@ on the floor), optionally leaning back by a few degrees, and general rigs from `
 
 import numpy as np
 
-from calib_core.observations import BoardObservation, Observations
-from calib_core.transforms import invert_T, make_T, rotvec_to_matrix
+from calib_core.data.observations import BoardObservation, Observations
+from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix
 from simulate import SimOptions, generate
 from simulate.camera import BoardSpec
 from simulate.lidar import beam_bearings, cast_scan

@@ -4,8 +4,8 @@ beam, exact camera-side board poses."""
 
 import numpy as np
 
-from calib_core.observations import BoardObservation, Observations
-from calib_core.transforms import invert_T, make_T, rotvec_to_matrix
+from calib_core.data.observations import BoardObservation, Observations
+from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix
 
 # camera z -> lidar x, camera x -> lidar -y, camera y -> lidar -z
 R_NOMINAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from calib_core import calibrate
-from calib_core.metrics import pose_errors
+from calib_core.geometry.metrics import pose_errors
 from lidarcam_cli import main as cli_main
 from rig import stills, timesync
 from rig.bag import BagError, BagSource, iter_scans, scan_arrays
@@ -207,8 +207,8 @@ def test_a_2_gib_bag_is_read_in_under_1_gib_of_memory(tmp_path):
 
 
 def _board_with_normal(n, t=(0.0, 0.0, 3.0)):
-    from calib_core.observations import BoardObservation
-    from calib_core.transforms import make_T
+    from calib_core.data.observations import BoardObservation
+    from calib_core.geometry.transforms import make_T
 
     n = np.asarray(n, float) / np.linalg.norm(n)
     x = np.cross([0.0, 1.0, 0.0], n)

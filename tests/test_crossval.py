@@ -6,9 +6,9 @@ import numpy as np
 from rigs import general_rig, vertical_rig
 
 from calib_core.crossval import held_out_residuals, leave_one_out
-from calib_core.mounting import params_from_T
-from calib_core.observations import BoardObservation, Observations
-from calib_core.transforms import make_T
+from calib_core.data.observations import BoardObservation, Observations
+from calib_core.geometry.mounting import params_from_T
+from calib_core.geometry.transforms import make_T
 
 
 def test_clean_rig_held_out_rms_is_the_noise():

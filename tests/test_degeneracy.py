@@ -1,12 +1,12 @@
 """The directions a board set cannot fix, named in lidar axes, and the one home of the board-set warnings
-(calib_core.degeneracy)."""
+(calib_core.checks.degeneracy)."""
 
 import numpy as np
 import pytest
 from rigs import VERTICAL_OPTIONS, facing_board, general_rig, rig_from_boards, vertical_rig
 
 from calib_core import calibrate
-from calib_core.degeneracy import (
+from calib_core.checks.degeneracy import (
     AXES,
     MIN_BOARDS,
     MIN_NORMAL_SPREAD_DEG,
@@ -15,9 +15,9 @@ from calib_core.degeneracy import (
     origin_jacobian,
     undetermined_directions,
 )
-from calib_core.residuals import range_residuals
-from calib_core.transforms import make_T, rotvec_to_matrix
-from calib_core.uncertainty import normal_spread_deg
+from calib_core.data.residuals import range_residuals
+from calib_core.geometry.transforms import make_T, rotvec_to_matrix
+from calib_core.refine.uncertainty import normal_spread_deg
 from rig.report import report_warnings
 
 SEEDS = range(5)

@@ -9,10 +9,10 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
+from calib_core.data.exports import frame_export
+from calib_core.data.io import extrinsic_yaml
 from calib_core.errors import CalibrationError
-from calib_core.exports import frame_export
-from calib_core.io import extrinsic_yaml
-from calib_core.transforms import invert_T, make_T, transform_points
+from calib_core.geometry.transforms import invert_T, make_T, transform_points
 from lidarcam_cli import main
 
 TOL = 1e-9

@@ -7,7 +7,7 @@ import pytest
 from fuzz_corpus import corpus
 
 from calib_core import ObservationError, calibrate, load_observations
-from calib_core.metrics import is_valid, pose_errors
+from calib_core.geometry.metrics import is_valid, pose_errors
 
 CASES = corpus(physics_seeds=2)
 FILE_CASES = [c for c in CASES if c.kind != "physics"]

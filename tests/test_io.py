@@ -9,10 +9,10 @@ import zlib
 import numpy as np
 import pytest
 
+from calib_core.data.io import OBS_SCHEMA, load_observations, observations_to_dict, save_observations
+from calib_core.data.observations import BoardObservation, Observations
 from calib_core.errors import ObservationError
-from calib_core.io import OBS_SCHEMA, load_observations, observations_to_dict, save_observations
-from calib_core.observations import BoardObservation, Observations
-from calib_core.transforms import make_T, rotvec_to_matrix
+from calib_core.geometry.transforms import make_T, rotvec_to_matrix
 
 
 def rng_for(name: str) -> np.random.Generator:

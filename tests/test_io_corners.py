@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
+from calib_core.data.io import load_observations, observations_to_dict, save_observations
 from calib_core.errors import ObservationError
-from calib_core.io import load_observations, observations_to_dict, save_observations
 from simulate import SimOptions, generate
 
 

@@ -1,4 +1,4 @@
-"""The joint model over image corners and lidar ranges (calib_core.camera, calib_core.joint): projection against
+"""The joint model over image corners and lidar ranges (data.camera, refine.joint): projection against
 OpenCV, Jacobians against finite differences, exact recovery, covariance against the Monte-Carlo spread."""
 
 from dataclasses import replace
@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 
 from calib_core import calibrate
-from calib_core.camera import Camera, project
-from calib_core.joint import (
+from calib_core.data.camera import Camera, project
+from calib_core.data.observations import Observations
+from calib_core.data.residuals import perturb
+from calib_core.geometry.transforms import matrix_to_rotvec, rotvec_to_matrix
+from calib_core.refine.joint import (
     JOINT_MODEL,
     RANGE_ONLY_MODEL,
     board_poses,
@@ -18,9 +21,6 @@ from calib_core.joint import (
     joint_range_residuals,
     joint_refine,
 )
-from calib_core.observations import Observations
-from calib_core.residuals import perturb
-from calib_core.transforms import matrix_to_rotvec, rotvec_to_matrix
 from simulate import SimOptions, generate
 
 K = [[800.0, 0.0, 399.5], [0.0, 790.0, 299.5], [0.0, 0.0, 1.0]]
@@ -162,7 +162,7 @@ def test_x_joint_refines_any_method_and_says_when_it_cannot():
 
 
 def test_joint_crlb_reduces_to_the_range_bound_without_corner_noise():
-    from calib_core.uncertainty import crlb
+    from calib_core.refine.uncertainty import crlb
 
     obs = pixel_problem(px=0.0)
     np.testing.assert_allclose(joint_crlb(obs, 0.02, 0.0).cov, crlb(obs, 0.02).cov, rtol=1e-8)

@@ -8,12 +8,12 @@ from scenes import make_observations, random_extrinsic
 from test_uncertainty import error_vector, vertical_board_poses
 
 from calib_core import METHODS, calibrate, get_method, load_result
+from calib_core.data.io import save_observations
+from calib_core.data.residuals import range_residuals
 from calib_core.errors import CalibrationError
-from calib_core.io import save_observations
-from calib_core.metrics import pose_errors
-from calib_core.refine import robust_cost
-from calib_core.residuals import range_residuals
-from calib_core.transforms import make_T
+from calib_core.geometry.metrics import pose_errors
+from calib_core.geometry.transforms import make_T
+from calib_core.refine.refine import robust_cost
 from lidarcam_cli import main
 
 BASES = ["zhang_pless_linear", "vasconcelos", "peng2022"]
@@ -155,9 +155,9 @@ def test_polish_batched_jacobian_equals_scipy_forward_differences(seed):
     forward-difference Jacobian at the same steps, so the polished answer is the one of ``diff_step``."""
     from scipy.optimize import least_squares
 
+    from calib_core.data.residuals import perturb
     from calib_core.methods.lidarcam import POLISH_DIFF_STEP, polish
-    from calib_core.residuals import perturb
-    from calib_core.selection import lidarcam_residuals
+    from calib_core.robust.scorers import lidarcam_residuals
 
     rng = np.random.default_rng(seed)
     obs = make_observations(rng, 3 + seed % 3, 0.02)

@@ -5,10 +5,10 @@ import pytest
 
 import simulate
 from calib_core import BoardObservation, Observations, calibrate
-from calib_core.metrics import pose_errors
-from calib_core.selection import point_to_plane
+from calib_core.geometry.metrics import pose_errors
+from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix
+from calib_core.robust.scorers import point_to_plane
 from calib_core.solvers.candidates import minimal_candidates
-from calib_core.transforms import invert_T, make_T, rotvec_to_matrix
 
 SEED_METHODS = ["zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022"]
 

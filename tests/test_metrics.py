@@ -6,7 +6,7 @@ import zlib
 
 import numpy as np
 
-from calib_core.metrics import (
+from calib_core.geometry.metrics import (
     VALID_MAX_ROT_DEG,
     VALID_MAX_TRANS_M,
     is_valid,
@@ -16,7 +16,7 @@ from calib_core.metrics import (
     theta_R_deg,
     translation_error_m,
 )
-from calib_core.transforms import make_T, rotvec_to_matrix
+from calib_core.geometry.transforms import make_T, rotvec_to_matrix
 
 
 def rng_for(name: str) -> np.random.Generator:

@@ -8,6 +8,7 @@ import zlib
 import numpy as np
 import pytest
 
+from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix
 from calib_core.solvers.orientation import kabsch
 from calib_core.solvers.vasconcelos import (
     MAX_SOLUTIONS,
@@ -19,7 +20,6 @@ from calib_core.solvers.vasconcelos import (
     solve_triple,
     solve_triples,
 )
-from calib_core.transforms import invert_T, make_T, rotvec_to_matrix
 
 N_SEEDS = 250
 TOL = 1e-9

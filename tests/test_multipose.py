@@ -152,7 +152,7 @@ def test_acfr_without_the_learnt_background_is_worse():
 @pytest.mark.skipif(not (REAL / "rplidar-a1-tx2-edenshin").is_dir(), reason="../shared/real-data not present")
 def test_edenshin_zhang_pless_reproduces_the_published_extrinsic():
     import calib_core
-    from calib_core.metrics import pose_errors
+    from calib_core.geometry.metrics import pose_errors
     from rig.public_sets import load_edenshin
 
     rs = load_edenshin(REAL / "rplidar-a1-tx2-edenshin")

@@ -1,5 +1,5 @@
-"""Calibrating only what the data determine: mounting parameters (calib_core.mounting), calibration with some of
-them fixed (calib_core.partial via calibrate(..., fixed=...)) and the CLI's --fix."""
+"""Calibrating only what the data determine: mounting parameters (geometry.mounting), calibration with some of
+them fixed (calib_core.refine.partial via calibrate(..., fixed=...)) and the CLI's --fix."""
 
 import json
 
@@ -8,11 +8,11 @@ import pytest
 from rigs import VERTICAL_OPTIONS, general_rig, vertical_rig, with_range_noise
 
 from calib_core import calibrate
+from calib_core.data.io import save_observations
+from calib_core.data.residuals import perturb, range_residuals
 from calib_core.errors import CalibrationError
-from calib_core.io import save_observations
-from calib_core.mounting import PARAMS, T_from_params, params_from_T, params_jacobian, parse_fixed
-from calib_core.residuals import perturb, range_residuals
-from calib_core.transforms import rotvec_to_matrix
+from calib_core.geometry.mounting import PARAMS, T_from_params, params_from_T, params_jacobian, parse_fixed
+from calib_core.geometry.transforms import rotvec_to_matrix
 from lidarcam_cli import main
 from simulate import SimOptions
 
@@ -52,7 +52,7 @@ def test_params_jacobian_matches_finite_differences(rng):
             fd = (range_residuals(T_from_params(theta + d), obs.scan_data)
                   - range_residuals(T_from_params(theta - d), obs.scan_data)) / (2 * h)
             np.testing.assert_allclose(Jt[:, k], fd, rtol=1e-5, atol=1e-6)
-        # and the (w, dt) it maps to is the left perturbation of calib_core.residuals
+        # and the (w, dt) it maps to is the left perturbation of calib_core.data.residuals
         w = params_jacobian(theta) @ d
         np.testing.assert_allclose(perturb(T, w * 1e3)[:3, :3], rotvec_to_matrix(w[:3] * 1e3) @ T[:3, :3])
 

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from calib_core.refine import refine, robust_cost, so3_left_jacobian
-from calib_core.residuals import RESIDUALS, ScanData, perturb
-from calib_core.transforms import make_T, rotvec_to_matrix
+from calib_core.data.residuals import RESIDUALS, ScanData, perturb
+from calib_core.geometry.transforms import make_T, rotvec_to_matrix
+from calib_core.refine.refine import refine, robust_cost, so3_left_jacobian
 
 
 def random_problem(rng, n_boards=5, k=40, noise=0.0):

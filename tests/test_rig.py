@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from calib_core.metrics import pose_errors
-from calib_core.transforms import invert_T, make_T, rotvec_to_matrix, transform_points
+from calib_core.geometry.metrics import pose_errors
+from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix, transform_points
 from rig.dataset import DatasetError, load_board, load_camera, load_dataset, make_scan, read_scan_csv
 from rig.extract import ExtractionError, ExtractOptions, extract, format_diagnostics
 from rig.segment import find_board_segment
@@ -320,7 +320,7 @@ def test_cli_extract_and_report(rig, tmp_path, capsys):
     assert main(["extract", str(ds.root), "--out", str(out), "--range-sigma", "0.01"]) == 0
     text = capsys.readouterr().out
     assert "6 of 6 poses used" in text and out.exists()
-    from calib_core.io import load_observations
+    from calib_core.data.io import load_observations
 
     obs2 = load_observations(out)
     assert obs2.n_boards == 6 and obs2.meta["poses"] == obs.meta["poses"]

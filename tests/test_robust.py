@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from calib_core import calibrate
-from calib_core.consensus import board_lines, board_statistics, needed_samples
-from calib_core.inliers import trim_points
-from calib_core.metrics import pose_errors
-from calib_core.result import load_result
+from calib_core.data.result import load_result
+from calib_core.geometry.metrics import pose_errors
+from calib_core.robust.consensus import board_lines, board_statistics, needed_samples
+from calib_core.robust.inliers import trim_points
 from simulate import SimOptions, generate
 
 
@@ -146,7 +146,7 @@ def test_extraction_refuses_an_arc():
 
 
 def test_cli_prints_rejected_boards(tmp_path, capsys):
-    from calib_core.io import save_observations
+    from calib_core.data.io import save_observations
     from lidarcam_cli import main
 
     obs = generate(SimOptions(n_boards=8, wrong_segments=1), seed=2, trial=0)

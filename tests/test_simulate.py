@@ -9,9 +9,9 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
-from calib_core.io import load_observations
-from calib_core.metrics import rotation_error_deg
-from calib_core.transforms import invert_T, make_T, rotvec_to_matrix, transform_points
+from calib_core.data.io import load_observations
+from calib_core.geometry.metrics import rotation_error_deg
+from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix, transform_points
 from simulate import SceneError, SimOptions, generate, simulate_trial
 from simulate.camera import (
     BoardSpec,

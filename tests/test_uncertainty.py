@@ -1,16 +1,15 @@
-"""Covariance, Fisher information / CRLB, conditioning and degeneracy warnings (calib_core.uncertainty)."""
+"""Covariance, Fisher information / CRLB, conditioning and degeneracy warnings (calib_core.refine.uncertainty)."""
 
 import numpy as np
 import pytest
 from scenes import OUTLINE, make_observations, random_extrinsic
 
-from calib_core.degeneracy import degeneracy_warnings
-from calib_core.io import extrinsic_yaml
-from calib_core.refine import refine
-from calib_core.residuals import outside_outline, perturb, range_residuals
-from calib_core.selection import lidarcam as lidarcam_score
-from calib_core.transforms import make_T, matrix_to_rotvec, rotvec_to_matrix
-from calib_core.uncertainty import (
+from calib_core.checks.degeneracy import degeneracy_warnings
+from calib_core.data.io import extrinsic_yaml
+from calib_core.data.residuals import outside_outline, perturb, range_residuals
+from calib_core.geometry.transforms import make_T, matrix_to_rotvec, rotvec_to_matrix
+from calib_core.refine.refine import refine
+from calib_core.refine.uncertainty import (
     UncertaintyError,
     conditioning,
     covariance,
@@ -20,6 +19,7 @@ from calib_core.uncertainty import (
     refinement_covariance,
     scan_noise_estimate,
 )
+from calib_core.robust.scorers import lidarcam as lidarcam_score
 
 
 def vertical_board_poses(n):
@@ -37,7 +37,7 @@ def vertical_board_poses(n):
 
 
 def error_vector(T, T_true):
-    """(rotation-vector error in the lidar frame, translation error): the parameters of calib_core.residuals."""
+    """(rotation-vector error in the lidar frame, translation error): the parameters of calib_core.data.residuals."""
     return np.r_[matrix_to_rotvec(T[:3, :3] @ T_true[:3, :3].T), T[:3, 3] - T_true[:3, 3]]
 
 
@@ -142,7 +142,7 @@ def test_conditioning_is_scale_free(rng):
     c = conditioning(obs)
     # a rotation of the camera frame and of the whole scene about the lidar does not change it
     Rz = make_T(rotvec_to_matrix(np.array([0, 0, 0.3])), np.zeros(3))
-    from calib_core.observations import BoardObservation, Observations
+    from calib_core.data.observations import BoardObservation, Observations
     moved = Observations(tuple(BoardObservation(b.T_cam_board, b.outline, b.scan @ Rz[:2, :2].T) for b in obs.boards),
                          Rz @ obs.T_lidar_cam_true)
     assert conditioning(moved) == pytest.approx(c, rel=1e-6)

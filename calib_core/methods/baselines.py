@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..observations import Observations
-from ..refine import refine
+from ..data.observations import Observations
+from ..data.result import SolveFailure
+from ..refine.refine import refine
 from ..registry import Method
-from ..result import SolveFailure
-from ..selection import PENG2022_OPTIONS, SCORERS
+from ..robust.scorers import PENG2022_OPTIONS, SCORERS
 from ..solvers.candidates import minimal_candidates
 from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
 from ..solvers.zhang_pless import zhang_pless_linear as _zp_linear

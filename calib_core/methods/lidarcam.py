@@ -1,5 +1,5 @@
 """Our method, ``lidarcam``, an orchestration: point trimming and the consensus search over boards
-(``calib_core.search``), an all-evidence likelihood to choose among the consensus hypotheses, maximum-likelihood
+(``calib_core.robust.search``), an all-evidence likelihood to choose among the consensus hypotheses, maximum-likelihood
 refinement of the best few, the final per-board and per-point tests, the directions a degenerate board set does
 not determine, covariance and warnings; and calibration of the rest with some mounting parameters fixed."""
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..degeneracy import (
+from ..checks.degeneracy import (
     MAX_SCALED_SIGMA,
     NULL_CONDITIONING,
     board_set_warnings,
@@ -16,19 +16,19 @@ from ..degeneracy import (
     explain_failure,
     undetermined_directions,
 )
-from ..joint import RANGE_ONLY_MODEL, JointError, joint_step
-from ..mounting import parse_fixed
-from ..observations import Observations, ScanData
-from ..partial import calibrate_fixed, fixed_starts
-from ..refine import refine
+from ..data.observations import Observations, ScanData
+from ..data.residuals import perturb
+from ..data.result import SolveFailure
+from ..geometry.mounting import parse_fixed
+from ..geometry.transforms import matrix_to_rotvec
+from ..refine.joint import RANGE_ONLY_MODEL, JointError, joint_step
+from ..refine.partial import calibrate_fixed, fixed_starts
+from ..refine.refine import refine
+from ..refine.uncertainty import UncertaintyError, conditioning, refinement_covariance, scan_noise_estimate
 from ..registry import Method
-from ..residuals import perturb
-from ..result import SolveFailure
-from ..search import consensus_search, finish_search
-from ..selection import EDGE_SIGMA_M, OUTLINE_SIGMA_M, lidarcam_residuals
-from ..selection import lidarcam as lidarcam_score
-from ..transforms import matrix_to_rotvec
-from ..uncertainty import UncertaintyError, conditioning, refinement_covariance, scan_noise_estimate
+from ..robust.scorers import EDGE_SIGMA_M, OUTLINE_SIGMA_M, lidarcam_residuals
+from ..robust.scorers import lidarcam as lidarcam_score
+from ..robust.search import consensus_search, finish_search
 from .suffixes import F_SCALE_SIGMAS
 
 
@@ -124,9 +124,9 @@ def lidarcam(obs: Observations, *, fixed: dict | None = None, range_sigma_m: flo
              use_corners: bool = True, corner_sigma_px: float | None = None, **solver_options):
     """Our method.
 
-    1. Point-level trimming (``trim_points``; ``calib_core.inliers``): scan points off their board's robust line
+    1. Point-level trimming (``trim_points``; ``calib_core.robust.inliers``): scan points off their board's robust line
        (gross outliers, mixed pixels at the ends) are left out.
-    2. Consensus over boards (``reject_boards``; ``calib_core.consensus``): hypotheses from the minimal solver on
+    2. Consensus over boards (``reject_boards``; ``calib_core.robust.consensus``): hypotheses from the minimal solver on
        board triples (all while few, sampled adaptively beyond) and Zhang & Pless on sampled subsets, scored on
        every board by a per-board chi-square test of the noise model; local optimisation of the best few on their
        consensus sets. Boards that fail are left out (``info["boards_rejected"]``).
@@ -138,22 +138,22 @@ def lidarcam(obs: Observations, *, fixed: dict | None = None, range_sigma_m: flo
        ``polish_threshold``); the best is kept.
     4. A final per-board test at the refined pose (boards that fail are left out and the pose refined again) and
        a final point test (range residuals beyond ``inliers.TRIM_SIGMAS`` stds left out, refined again).
-    5. Degeneracy (``calib_core.degeneracy.undetermined_directions``, thresholds ``min_conditioning`` and
+    5. Degeneracy (``calib_core.checks.degeneracy.undetermined_directions``, thresholds ``min_conditioning`` and
        ``max_scaled_sigma``): directions the board geometry leaves free (e.g. roll, pitch and height z when every
        board is vertical) are not presented as estimated: the result is ``ok=False``, its reason names them and
        how to calibrate the rest. Directions weak only for lack of data are named in ``info["warnings"]``.
     6. On the boards used: when every board carries image corners (and ``use_corners``), the joint maximum
-       likelihood over corners and ranges from that answer (``calib_core.joint``; noise stds ``corner_sigma_px``,
+       likelihood over corners and ranges from that answer (``calib_core.refine.joint``; noise stds ``corner_sigma_px``,
        ``range_sigma_m`` or estimated), with the extrinsic's covariance, board poses marginalised
        (``info["covariance_model"]`` "joint"); otherwise the range model's covariance ``sigma^2 (J^T J)^-1``
        ("range-only, ignores camera noise"). Fails with a reason when no candidate exists or fewer than 3
        consistent boards remain.
 
-    ``fixed``: calibrate only the other mounting parameters (``calib_core.mounting``: the camera's pose in the
+    ``fixed``: calibrate only the other mounting parameters (``calib_core.geometry.mounting``: the camera's pose in the
     lidar frame as roll, pitch, yaw and x, y, z), holding these at the given values, e.g.
     ``{"z_m": 0.12, "roll_deg": 0.0, "pitch_deg": 0.0}``; maximum likelihood on the range residuals from a
     closed-form start when roll, pitch and z are given (else from the full method's answer), with the covariance
-    of the free parameters (``calib_core.partial.calibrate_fixed``).
+    of the free parameters (``calib_core.refine.partial.calibrate_fixed``).
     """
     opts = {"range_sigma_m": range_sigma_m, "n_refine": n_refine, "loss": loss, "f_scale": f_scale,
             "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m, "behind_penalty": behind_penalty,
@@ -213,7 +213,7 @@ def _solve(obs: Observations, solver_options: dict, *, range_sigma_m, n_refine, 
 
 def final_step(obs: Observations, T: np.ndarray, C: np.ndarray, use_corners: bool, *, range_sigma_m, corner_sigma_px,
                loss: str) -> tuple[np.ndarray, np.ndarray, dict]:
-    """The answer and its covariance: the joint ML over corners and ranges (``calib_core.joint``) when every board
+    """The answer and its covariance: the joint ML over corners and ranges (``refine.joint``) when every board
     carries image corners, else the range model's covariance at ``T`` (it ignores the camera's noise)."""
     why = None
     if use_corners and obs.has_corners:

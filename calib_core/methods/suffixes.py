@@ -1,20 +1,20 @@
 """Derived methods by name suffix: ``X+ml`` (maximum-likelihood refinement on the range residuals), ``X+plane``
 (refinement on point-to-plane distances) and ``X+joint`` (joint maximum likelihood over image corners and ranges,
-``calib_core.joint``) for any method ``X``, each with a covariance and ``info["covariance_model"]``."""
+``calib_core.refine.joint``) for any method ``X``, each with a covariance and ``info["covariance_model"]``."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..degeneracy import board_set_warnings, explain_failure, undetermined_directions
-from ..joint import RANGE_ONLY_MODEL, JointError, joint_step
-from ..mounting import parse_fixed
-from ..observations import Observations
-from ..partial import calibrate_fixed, fixed_starts
-from ..refine import refine
+from ..checks.degeneracy import board_set_warnings, explain_failure, undetermined_directions
+from ..data.observations import Observations
+from ..data.result import SolveFailure
+from ..geometry.mounting import parse_fixed
+from ..refine.joint import RANGE_ONLY_MODEL, JointError, joint_step
+from ..refine.partial import calibrate_fixed, fixed_starts
+from ..refine.refine import refine
+from ..refine.uncertainty import UncertaintyError, conditioning, refinement_covariance, scan_noise_estimate
 from ..registry import Method, derived
-from ..result import SolveFailure
-from ..uncertainty import UncertaintyError, conditioning, refinement_covariance, scan_noise_estimate
 
 REFINE_OPTIONS = ("loss", "f_scale", "range_sigma_m", "max_nfev", "fixed")
 """Options of an ``X+ml`` / ``X+plane`` method that go to the refinement; all others go to ``X``."""
@@ -27,7 +27,7 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
                      f_scale: float | None = None, range_sigma_m: float | None = None, max_nfev: int = 100):
     """Refine ``T0`` on ``residual`` and compute the covariance; returns (RefineResult, covariance, info).
 
-    Directions the board geometry leaves free (``calib_core.degeneracy``) are not presented as estimated: a
+    Directions the board geometry leaves free (``calib_core.checks.degeneracy``) are not presented as estimated: a
     SolveFailure names them, with the analysis in its info."""
     data = obs.scan_data
     if f_scale is None:
@@ -51,7 +51,7 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
 
 def refine_fixed(base: Method, obs: Observations, residual: str, fixed: dict, options: dict, *, loss: str = "linear",
                  f_scale: float | None = None, range_sigma_m: float | None = None, max_nfev: int = 100):
-    """``X+ml`` / ``X+plane`` with ``fixed`` mounting parameters (``calib_core.partial``): the free ones refined
+    """``X+ml`` / ``X+plane`` with ``fixed`` mounting parameters (``calib_core.refine.partial``): the free ones refined
     on ``residual`` from a closed-form start (roll, pitch and z given) or from ``X``'s answer."""
     mask, values = parse_fixed(fixed)
     if f_scale is None:
@@ -94,7 +94,7 @@ JOINT_OPTIONS = ("loss", "f_scale", "range_sigma_m", "corner_sigma_px", "max_ite
 
 def joint_method(base: Method) -> Method:
     """The method ``base.name + "+joint"``: run ``base``, then the joint maximum likelihood over the image corners
-    and the ranges from its answer (``calib_core.joint.joint_step``; options ``JOINT_OPTIONS``, ``f_scale`` in noise
+    and the ranges from its answer (``refine.joint.joint_step``; options ``JOINT_OPTIONS``, ``f_scale`` in noise
     stds), with the extrinsic's covariance, board poses marginalised. Without corners on every board it is
     ``X+ml`` and says so in ``info["warnings"]`` (its covariance ignores the camera's noise)."""
     def func(obs: Observations, **options):

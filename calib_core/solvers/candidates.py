@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..lines import fit_lines
-from ..observations import Observations
-from ..result import SolveFailure
+from ..data.lines import fit_lines
+from ..data.observations import Observations
+from ..data.result import SolveFailure
 
 
 @dataclass(frozen=True, eq=False)

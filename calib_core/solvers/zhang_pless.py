@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..observations import Observations
-from ..result import SolveFailure
-from ..transforms import invert_T, make_T, project_to_so3
+from ..data.observations import Observations
+from ..data.result import SolveFailure
+from ..geometry.transforms import invert_T, make_T, project_to_so3
 
 MIN_BOARDS = 5
 

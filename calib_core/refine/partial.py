@@ -1,8 +1,8 @@
-"""Calibrating only what the data determine: the free mounting parameters (``calib_core.mounting``) refined on the
+"""Calibrating only what the data determine: the free mounting parameters (``geometry.mounting``) refined on the
 scan residuals with the others held at values the user gives, and the covariance of what was estimated.
 
 A rig whose boards all stand vertical determines yaw and the horizontal offsets x, y but not roll, pitch or the
-height z (``calib_core.degeneracy``): give those (e.g. a measured mounting height and a level mount) and the
+height z (``calib_core.checks.degeneracy``): give those (e.g. a measured mounting height and a level mount) and the
 planar part is estimated, with its covariance. ``vertical_start`` also gives such a rig a first extrinsic
 without any given value, for the degeneracy analysis.
 """
@@ -15,12 +15,12 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from .lines import tls_line
-from .mounting import PARAMS, UNIT_NAMES, T_from_params, params_from_T, params_jacobian, with_units
-from .observations import Observations
-from .residuals import RESIDUALS
-from .result import SolveFailure
-from .transforms import make_T
+from ..data.lines import tls_line
+from ..data.observations import Observations
+from ..data.residuals import RESIDUALS
+from ..data.result import SolveFailure
+from ..geometry.mounting import PARAMS, UNIT_NAMES, T_from_params, params_from_T, params_jacobian, with_units
+from ..geometry.transforms import make_T
 from .uncertainty import UncertaintyError, refinement_covariance
 
 PLANAR_FIXED = np.array([True, True, False, False, False, True])
@@ -123,7 +123,7 @@ def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.
     """Refine the free mounting parameters from each start (its fixed parameters replaced by the given values)
     and keep the least cost; returns ``T_lidar_cam`` and ``info``.
 
-    ``info``: ``covariance`` (6x6 in the parameters of ``calib_core.residuals``, of rank = the number of free
+    ``info``: ``covariance`` (6x6 in the parameters of ``calib_core.data.residuals``, of rank = the number of free
     parameters), ``covariance_mounting`` (6x6 over ``mounting.PARAMS`` in radians and metres, zero rows and
     columns for the fixed ones), ``mounting`` (all six values, labelled units), ``mounting_sigma`` (1-sigma of
     the free ones, labelled units), ``fixed`` (the given values, labelled units), ``free`` (their names),

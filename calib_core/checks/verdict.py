@@ -12,8 +12,8 @@ Every answer of ``calibrate`` is tested against its observations, whatever the m
 - boards in front of both sensors: every board's centre in front of the camera (its pose alone), and under the
   answer every board's scan in front of the camera; scan points away from the lidar origin.
 
-A board that fails any test contradicts the answer. ``calib_core.diagnose.judge`` then looks for a likely cause
-(units, mispaired or mirrored scans, scaled board poses). Frames and units as in ``calib_core.observations``.
+A board that fails any test contradicts the answer. ``calib_core.checks.diagnose.judge`` then looks for a likely cause
+(units, mispaired or mirrored scans, scaled board poses). Frames and units as in ``calib_core.data.observations``.
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from .lines import tls_line
-from .observations import Observations, ScanData
-from .residuals import outside_outline, points_in_boards, range_residuals
+from ..data.lines import tls_line
+from ..data.observations import Observations, ScanData
+from ..data.residuals import outside_outline, points_in_boards, range_residuals
 
 CLIP_Z = 3.0
 """Residuals beyond this many noise stds count as ``CLIP_Z^2`` in the clipped chi-square."""

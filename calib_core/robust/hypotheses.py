@@ -11,6 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..data.observations import Observations
+from ..data.result import SolveFailure
+from ..solvers.vasconcelos import board_triples, solve_triples
+from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
+from ..solvers.zhang_pless import zhang_pless_linear
 from .consensus import (
     EXHAUSTIVE_TRIPLES,
     MAX_SAMPLED_TRIPLES,
@@ -23,11 +28,6 @@ from .consensus import (
     needed_samples,
     sample_triples,
 )
-from .observations import Observations
-from .result import SolveFailure
-from .solvers.vasconcelos import board_triples, solve_triples
-from .solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
-from .solvers.zhang_pless import zhang_pless_linear
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,8 +1,8 @@
 """Uncertainty of the extrinsic: covariance at an optimum, Fisher information and CRLB of the range-noise model,
 a scale-free conditioning measure and the spread of the board normals (the warnings built on them are in
-``calib_core.degeneracy``).
+``calib_core.checks.degeneracy``).
 
-Parameters are those of ``calib_core.residuals``: ``x = (w, dt)``, ``w`` a left rotation perturbation in the
+Parameters are those of ``calib_core.data.residuals``: ``x = (w, dt)``, ``w`` a left rotation perturbation in the
 lidar frame (radians), ``dt`` the translation (metres). A 6x6 covariance is ordered rotation then translation.
 Noise model: every scan point is its beam times the true range plus zero-mean Gaussian noise of std ``sigma``
 along the beam (the simulator's and the paper's model); camera-side board poses are taken as exact.
@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import LidarcamError
-from .lines import fit_line
-from .metrics import sigma_rot_deg, sigma_trans_m
-from .observations import Observations, ScanData
-from .residuals import range_residuals
+from ..data.lines import fit_line
+from ..data.observations import Observations, ScanData
+from ..data.residuals import range_residuals
+from ..errors import LidarcamError
+from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 
 
 class UncertaintyError(LidarcamError):
@@ -43,7 +43,7 @@ def covariance(jacobian: np.ndarray, residuals: np.ndarray, range_sigma_m: float
     """Gauss-Newton covariance ``sigma^2 (J^T J)^-1`` (6x6, rotation then translation) of a least-squares optimum.
 
     Args:
-        jacobian: (K,6) residual Jacobian at the optimum (parameters as in ``calib_core.residuals``).
+        jacobian: (K,6) residual Jacobian at the optimum (parameters as in ``calib_core.data.residuals``).
         residuals: (K,) residuals at the optimum (metres).
         range_sigma_m: the residuals' noise std (metres); ``None`` estimates it as ``sqrt(|e|^2 / (K - 6))``.
     Raises:
@@ -173,8 +173,8 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
     the range residual times ``w = m . b``, so its noise is not identically distributed; the sandwich
     ``A^-1 J^T diag(sigma^2 w^2) J A^-1`` with ``A = J^T J`` of the plane residuals. ``range_sigma_m=None``: estimated
     from the range residuals at ``T_lidar_cam`` (``K - 6`` degrees of freedom). ``basis``: (6,k), the covariance of
-    k parameters that move ``(w, dt)`` by ``basis`` (e.g. the free mounting parameters, ``calib_core.partial``;
-    then ``K - k`` degrees of freedom); default the six of ``calib_core.residuals``.
+    k parameters that move ``(w, dt)`` by ``basis`` (e.g. the free mounting parameters, ``calib_core.refine.partial``;
+    then ``K - k`` degrees of freedom); default the six of ``calib_core.data.residuals``.
     """
     T = np.asarray(T_lidar_cam, float)
     e_r, J_r = range_residuals(T, data, jacobian=True)
@@ -184,7 +184,7 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
         return covariance(J_r, e_r, range_sigma_m)
     if residual != "plane":
         raise UncertaintyError(f"unknown residual {residual!r}; 'range' or 'plane'")
-    from .residuals import plane_residuals
+    from ..data.residuals import plane_residuals
 
     if range_sigma_m is None:
         if len(e_r) <= B.shape[1]:

@@ -6,7 +6,7 @@ Axes: a small rigid motion of the camera about the lidar's origin, in lidar axes
 [exp(w) | dt] T_lidar_cam``, ``w = (roll, pitch, yaw)`` rotations about the lidar's x, y, z axes (radians) and
 ``dt = (x, y, z)`` translations along them (metres). Equivalently the lidar turns about its own axes and shifts
 along them relative to the camera. In these axes a vertical-board rig is degenerate along exactly roll, pitch
-and z. (``calib_core.residuals`` turns the rotation about the camera's centre instead; ``origin_jacobian``
+and z. (``calib_core.data.residuals`` turns the rotation about the camera's centre instead; ``origin_jacobian``
 converts.) Translations are scaled by the typical range ``L`` so that radians and metres compare: a unit scaled
 direction moves scan points by about the same distance whatever it mixes.
 
@@ -27,12 +27,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .observations import Observations
-from .partial import vertical_start
-from .residuals import range_residuals
-from .result import SolveFailure
-from .transforms import skew
-from .uncertainty import conditioning, normal_spread_deg, typical_range
+from ..data.observations import Observations
+from ..data.residuals import range_residuals
+from ..data.result import SolveFailure
+from ..geometry.transforms import skew
+from ..refine.partial import vertical_start
+from ..refine.uncertainty import conditioning, normal_spread_deg, typical_range
 
 MIN_BOARDS = 4
 """Fewer boards than this is warned about: with 3 the minimal solver's candidates all fit the scan lines exactly
@@ -72,7 +72,7 @@ AXIS_WORDS = {"roll": "roll (rotation about the lidar x axis)", "pitch": "pitch 
 
 
 def origin_jacobian(J: np.ndarray, T_lidar_cam: np.ndarray) -> np.ndarray:
-    """A (K,6) residual Jacobian in the parameters of ``calib_core.residuals`` (rotation about the camera centre)
+    """A (K,6) residual Jacobian in the parameters of ``calib_core.data.residuals`` (rotation about the camera centre)
     turned into the lidar-origin axes of this module: ``d_t(residuals) = w x t + dt``."""
     J = np.asarray(J, float)
     t = np.asarray(T_lidar_cam, float)[:3, 3]

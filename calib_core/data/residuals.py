@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.transforms import rotvec_to_matrix
 from .observations import Observations, ScanData
-from .transforms import rotvec_to_matrix
 
 
 def perturb(T0: np.ndarray, x: np.ndarray) -> np.ndarray:

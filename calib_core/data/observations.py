@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import ObservationError
+from ..geometry.transforms import ROTATION_TOL, project_to_so3, rotation_defect
 from .camera import Camera
-from .errors import ObservationError
-from .transforms import ROTATION_TOL, project_to_so3, rotation_defect
 
 MIN_SCAN_POINTS = 2
 MIN_RANGE_M = 1e-3
@@ -250,7 +250,7 @@ class Observations:
         T_lidar_cam_true: optional 4x4 true extrinsic (maps camera points into the lidar frame;
             the paper's ``p_L = R p_C + t``).
         meta: free-form provenance (simulator settings, seed, source file); not used by the solvers.
-        camera: optional intrinsics (``calib_core.camera.Camera``); required when a board carries corners.
+        camera: optional intrinsics (``calib_core.data.camera.Camera``); required when a board carries corners.
     """
 
     boards: tuple[BoardObservation, ...]

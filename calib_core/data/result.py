@@ -9,16 +9,16 @@ from typing import Any
 
 import numpy as np
 
-from .errors import LidarcamError
-from .metrics import sigma_rot_deg, sigma_trans_m
-from .transforms import invert_T
+from ..errors import LidarcamError
+from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
+from ..geometry.transforms import invert_T
 
 RESULT_SCHEMA = "lidarcam.result/1"
 
 JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
-directions a board set does not determine (``calib_core.degeneracy``), and a calibration with fixed parameters
-(``calib_core.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note)."""
+directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
+(``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note)."""
 
 
 class SolveFailure(LidarcamError):
@@ -132,7 +132,7 @@ class CalibrationResult:
 
 def load_result(path) -> dict:
     """Read a ``lidarcam.result/1`` JSON file into a dict with numpy 4x4 arrays (None where not ok)."""
-    from .errors import ObservationError
+    from ..errors import ObservationError
 
     try:
         d = json.loads(Path(path).read_text())

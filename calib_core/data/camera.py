@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import ObservationError
+from ..errors import ObservationError
 
 DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
 """Lengths of an OpenCV distortion vector."""

@@ -12,16 +12,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..data.lines import fit_line
+from ..data.observations import Observations
+from ..data.residuals import range_residuals
+from ..data.result import SolveFailure
+from ..geometry.transforms import matrix_to_rotvec
+from ..refine.refine import refine
+from ..refine.uncertainty import scan_noise_estimate
 from .consensus import SCORE_TAU, TEST_CHI2, BoardLines, board_lines, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
 from .inliers import TRIM_SIGMAS, TrimReport, apply_trim, trim_points
-from .lines import fit_line
-from .observations import Observations
-from .refine import refine
-from .residuals import range_residuals
-from .result import SolveFailure
-from .transforms import matrix_to_rotvec
-from .uncertainty import scan_noise_estimate
 
 POOL_MAX = 64
 """The final selection scores at most this many hypotheses, the best by MSAC cost (the per-board statistics are

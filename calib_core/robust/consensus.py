@@ -14,7 +14,7 @@ each scan, so scoring M hypotheses on N boards costs O(M N) (not O(M x points)):
   it over ``outline_sigma`` squared.
 * a board whose scan centroid falls behind the camera gets ``inf``.
 
-Lidar frame ``{L}``, camera ``{C}``, board ``{W}_i`` as in ``calib_core.observations``; metres, radians.
+Lidar frame ``{L}``, camera ``{C}``, board ``{W}_i`` as in ``calib_core.data.observations``; metres, radians.
 """
 
 from __future__ import annotations
@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lines import fit_line
-from .observations import Observations
-from .residuals import outside_outline
+from ..data.lines import fit_line
+from ..data.observations import Observations
+from ..data.residuals import outside_outline
 
 EXHAUSTIVE_TRIPLES = 220
 """All board triples are solved while there are at most this many (12 boards); beyond, triples are sampled."""

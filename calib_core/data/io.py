@@ -9,12 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ObservationError
+from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
+from ..geometry.transforms import invert_T, quaternion_xyzw
 from .camera import Camera
-from .errors import ObservationError
 from .exports import FrameExport
-from .metrics import sigma_rot_deg, sigma_trans_m
 from .observations import MAX_BOARDS, BoardObservation, Observations, orthonormalised
-from .transforms import invert_T, quaternion_xyzw
 
 OBS_SCHEMA = "lidarcam.observations/1"
 
@@ -188,7 +188,7 @@ def extrinsic_yaml(T_lidar_cam: np.ndarray, extra: dict | None = None, covarianc
     ``extra`` adds top-level scalar keys (method name, 1-sigma figures, ...). ``covariance`` (6x6, rotation
     tangent of ``T_lidar_cam`` in the lidar frame (rad) then translation (m)) adds its 1-sigma figures
     ``sigma_rot_deg`` and ``sigma_trans_mm`` (unless in ``extra``) and the matrix. ``ros``
-    (``calib_core.exports.frame_export``) adds a ``ros:`` block: frame names, the direction published, the
+    (``calib_core.data.exports.frame_export``) adds a ``ros:`` block: frame names, the direction published, the
     ``static_transform_publisher`` lines for ROS 1 and ROS 2 and the URDF joint.
     """
     extra = dict(extra or {})

@@ -14,8 +14,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .lines import MIN_LINE_POINTS, tls_line
-from .observations import Observations
+from ..data.lines import MIN_LINE_POINTS, tls_line
+from ..data.observations import Observations
 
 TRIM_SIGMAS = 4.0
 """A scan point whose range residual against its board's robust line exceeds this many pooled noise stds is

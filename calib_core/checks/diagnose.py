@@ -1,4 +1,4 @@
-"""Likely causes of an answer the data contradict (see ``calib_core.verdict``): each returns (name, message).
+"""Likely causes of an answer the data contradict (see ``calib_core.checks.verdict``): each returns (name, message).
 
 - ``units``: scan coordinates, board positions or outlines about 1000x too large (millimetres written as metres),
   judged from the data alone (ranges, board distances and sizes against each other and against plausible rigs);
@@ -18,10 +18,10 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import linear_sum_assignment, minimize_scalar
 
-from .observations import BoardObservation, Observations
-from .refine import refine
-from .residuals import range_residuals
-from .result import SolveFailure
+from ..data.observations import BoardObservation, Observations
+from ..data.residuals import range_residuals
+from ..data.result import SolveFailure
+from ..refine.refine import refine
 from .verdict import (
     CLIP_Z,
     MIN_DEPTH_M,
@@ -73,8 +73,8 @@ def _candidates(obs: Observations, exhaustive: bool) -> np.ndarray:
     triple of scans when ``exhaustive``)."""
     from itertools import permutations
 
-    from .lines import fit_lines
-    from .solvers.vasconcelos import board_triples, solve_triples
+    from ..data.lines import fit_lines
+    from ..solvers.vasconcelos import board_triples, solve_triples
 
     lines = fit_lines(obs)
     n, d = obs.planes_cam()

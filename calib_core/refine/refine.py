@@ -7,10 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from .errors import CalibrationError
-from .observations import ScanData
-from .residuals import RESIDUALS, perturb
-from .transforms import skew
+from ..data.observations import ScanData
+from ..data.residuals import RESIDUALS, perturb
+from ..errors import CalibrationError
+from ..geometry.transforms import skew
 
 
 @dataclass(frozen=True, eq=False)
@@ -20,7 +20,7 @@ class RefineResult:
     Attributes:
         T_lidar_cam: refined 4x4 extrinsic. cost: final ``0.5 * sum(rho(e^2))``; initial_cost likewise at
         the start. residuals: (K,) final residuals (metres). jacobian: (K,6) at the optimum, parameters
-        (w, dt) as in ``calib_core.residuals``. success, message, nfev: from scipy.
+        (w, dt) as in ``calib_core.data.residuals``. success, message, nfev: from scipy.
     """
 
     T_lidar_cam: np.ndarray

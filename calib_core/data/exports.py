@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .errors import CalibrationError
-from .transforms import invert_T, is_rigid, quaternion_xyzw
+from ..errors import CalibrationError
+from ..geometry.transforms import invert_T, is_rigid, quaternion_xyzw
 
 SENSORS = ("lidar", "camera")
 FRAME_NAME = re.compile(r"[A-Za-z_/][A-Za-z0-9_/.\-]*")

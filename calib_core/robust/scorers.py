@@ -12,9 +12,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import logsumexp
 
-from .errors import CalibrationError
-from .observations import Observations
-from .residuals import (
+from ..data.observations import Observations
+from ..data.residuals import (
     candidate_chunk,
     in_chunks,
     outside_outline,
@@ -23,6 +22,7 @@ from .residuals import (
     points_in_boards,
     range_residuals,
 )
+from ..errors import CalibrationError
 
 EDGE_SIGMA_M = 0.03
 """Scale (metres) of the endpoint-against-edge term of the ``lidarcam`` score: absorbs the range noise and the beam

@@ -3,11 +3,11 @@ and the lidar ranges together, with the extrinsic's covariance with the board po
 Cramer-Rao bound of that model.
 
 Unknowns: ``T_lidar_cam = (exp([w]x) R0, t0 + dt)`` (left rotation perturbation in the lidar frame, as in
-``calib_core.residuals``) and per board ``T_cam_board_i = (exp([phi_i]x) Phi0_i, Delta0_i + d_i)`` (left
+``calib_core.data.residuals``) and per board ``T_cam_board_i = (exp([phi_i]x) Phi0_i, Delta0_i + d_i)`` (left
 perturbation in the camera frame); the parameter vector is ``(w, dt, phi_0, d_0, phi_1, d_1, ...)``.
-Residuals: every corner's reprojection through the OpenCV model (``calib_core.camera.project``) minus its
+Residuals: every corner's reprojection through the OpenCV model (``calib_core.data.camera.project``) minus its
 detection, divided by the corner noise std ``corner_sigma_px`` (pixels, per coordinate), and every scan point's
-range residual (``calib_core.residuals.range_residuals`` against its board's current plane) divided by the range
+range residual (``calib_core.data.residuals.range_residuals`` against its board's current plane) divided by the range
 noise std ``range_sigma_m``. Each board's residuals touch only its own pose and the extrinsic, so the Jacobian is
 block sparse: the Levenberg-Marquardt steps and the covariance both eliminate the board poses by the Schur
 complement, so the cost of an iteration is linear in the number of boards.
@@ -19,13 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import project
-from .errors import LidarcamError
-from .metrics import sigma_rot_deg, sigma_trans_m
-from .observations import Observations, ScanData
+from ..data.camera import project
+from ..data.observations import Observations, ScanData
+from ..data.residuals import MIN_BEAM_INCIDENCE, perturb, range_residuals
+from ..errors import LidarcamError
+from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
+from ..geometry.transforms import rotvec_to_matrix, skew
 from .refine import robust_cost
-from .residuals import MIN_BEAM_INCIDENCE, perturb, range_residuals
-from .transforms import rotvec_to_matrix, skew
 from .uncertainty import Crlb, UncertaintyError, _inverse_information, scan_noise_estimate
 
 JOINT_MODEL = "joint"

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .errors import CalibrationError
+from ..errors import CalibrationError
 from .transforms import make_T
 
 PARAMS = ("roll", "pitch", "yaw", "x", "y", "z")
@@ -48,7 +48,7 @@ def T_from_params(theta: np.ndarray) -> np.ndarray:
 
 
 def params_jacobian(theta: np.ndarray) -> np.ndarray:
-    """(6,6) ``d(w, dt) / d theta``: how the parameters of ``calib_core.residuals`` (left rotation perturbation
+    """(6,6) ``d(w, dt) / d theta``: how the parameters of ``calib_core.data.residuals`` (left rotation perturbation
     ``w`` in the lidar frame, translation ``dt``) move with ``theta``; a residual Jacobian in ``theta`` is the
     residual Jacobian in ``(w, dt)`` times this matrix.
 
