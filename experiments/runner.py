@@ -15,6 +15,7 @@ and the reason (a ``CalibrationError`` -- unknown method or option -- is a confi
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -239,7 +240,14 @@ def simulate_trial(cell: Cell, trial: int, methods: Sequence[str]) -> list[dict[
 TrialFn = Callable[[Cell, int, Sequence[str]], list[dict[str, Any]]]
 
 
-def _run_chunk(trial_fn: TrialFn, cell: Cell, trials: Sequence[int], methods: Sequence[str]):
+def _run_chunk(trial_fn: TrialFn, cell: Cell, trials: Sequence[int], methods: Sequence[str],
+               search_path: Sequence[str] = ()):
+    """One chunk of trials. ``search_path`` is the parent's ``sys.path``: a reused worker may have started
+    before a plugin's folder joined it, so the worker takes the parent's path before loading the plugins."""
+    missing = [p for p in search_path if p not in sys.path]
+    if missing:
+        sys.path[:0] = missing
+        importlib.invalidate_caches()
     load_plugins(cell.plugins)  # a worker process starts with the package's methods only (idempotent)
     rows = []
     for t in trials:
@@ -474,7 +482,8 @@ def run_cells(cells: Sequence[Cell], *, n_jobs: int = -1, chunk_size: int = 0, p
                 os.environ.setdefault(var, "1")
             with parallel_config(backend="loky", inner_max_num_threads=1):
                 par = Parallel(n_jobs=workers, return_as="generator_unordered", batch_size=1)
-                _consume(par(delayed(_run_chunk)(trial_fn, *task) for task in tasks), bar)
+                search_path = tuple(sys.path)
+                _consume(par(delayed(_run_chunk)(trial_fn, *task, search_path) for task in tasks), bar)
     finally:
         bar.close()
     frames = [load_cell(c) for c in cells]
