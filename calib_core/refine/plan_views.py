@@ -154,22 +154,28 @@ def rig_from_observations(obs: Observations, T_lidar_cam: np.ndarray, range_sigm
     if obs.camera is None and base is None:
         raise ValueError("the observations carry no camera intrinsics: give a rig description too")
     b0 = obs.boards[0]
-    corners = b0.corners_board if b0.corners_board is not None else np.column_stack([b0.outline,
-                                                                                     np.zeros(len(b0.outline))])
+    outline = b0.outline
+    if outline is None:                 # no outline known: the corners' extent
+        if b0.corners_board is None:
+            raise ValueError("the first board has neither an outline nor corners: give a rig description")
+        lo, hi = b0.corners_board[:, :2].min(axis=0), b0.corners_board[:, :2].max(axis=0)
+        outline = np.array([lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]])
+    corners = b0.corners_board if b0.corners_board is not None else np.column_stack([outline,
+                                                                                     np.zeros(len(outline))])
     T = np.asarray(T_lidar_cam, float)
     camera = obs.camera if obs.camera is not None else base.camera
     if base is not None:
-        return PlanRig(camera, T, b0.outline, corners, base.lidar_fov_deg, base.lidar_res_deg, base.lidar_max_range_m,
+        return PlanRig(camera, T, outline, corners, base.lidar_fov_deg, base.lidar_res_deg, base.lidar_max_range_m,
                        range_sigma_m, corner_sigma_px, base.image_margin_px, base.min_depth_m, base.min_points,
                        base.workspace)
     steps = [np.diff(np.sort(np.arctan2(b.scan[:, 1], b.scan[:, 0]))) for b in obs.boards]
     steps = np.concatenate(steps)
     res_deg = float(np.degrees(np.median(steps[steps > 1e-6]))) if np.any(steps > 1e-6) else 0.25
     T_lb = T[None] @ np.array([bd.T_cam_board for bd in obs.boards])
-    c = T_lb[:, :3, :3] @ np.r_[b0.outline.mean(axis=0), 0.0] + T_lb[:, :3, 3]
+    c = T_lb[:, :3, :3] @ np.r_[outline.mean(axis=0), 0.0] + T_lb[:, :3, 3]
     dist, bearing = np.linalg.norm(c[:, :2], axis=1), np.degrees(np.arctan2(c[:, 1], c[:, 0]))
     ws = Workspace(distance_m=(0.9 * dist.min(), 1.1 * dist.max()),
                    bearing_deg=(bearing.min() - 10.0, bearing.max() + 10.0))
     fov = min(360.0, 2.0 * max(abs(ws.bearing_deg[0]), abs(ws.bearing_deg[1])) + 40.0)
-    return PlanRig(camera, T, b0.outline, corners, fov, res_deg, 1.5 * float(dist.max()) + 5.0, range_sigma_m,
+    return PlanRig(camera, T, outline, corners, fov, res_deg, 1.5 * float(dist.max()) + 5.0, range_sigma_m,
                    corner_sigma_px, workspace=ws)
