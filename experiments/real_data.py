@@ -26,7 +26,7 @@ from rig.dataset import DatasetError
 from rig.extract import ExtractOptions, extract, format_diagnostics
 from rig.intrinsics import calibrate_intrinsics, find_corners, format_intrinsics
 from rig.public_sets import ACFR, EDENSHIN, KAZMIERCZAK, load_acfr, load_edenshin, load_kazmierczak
-from rig.report import save_overlay
+from rig.report import capture_verdict, save_overlay
 
 from .real_eval import (
     HAVE_LIBRARY_CV,
@@ -84,6 +84,7 @@ def _section(rs, obs, rows, sigma, verdict, extra_md, overlays_md, published: bo
     md = [f"## {rs.name}", "", *[f"- {n}" for n in rs.notes], ""] + extra_md
     md += ["### Leaderboard", ""] + leaderboard_md(rows, sigma, published) + [""]
     md += ["### Degeneracy", "", verdict[0], ""]
+    md += ["### Capture plan", "", capture_verdict(obs, _best_T(rows)[0]), ""]
     md += ["### Scan on the image", "", "Through the extrinsic named in each title (`lidarcam` where it solves); "
            "colour: distance to the board plane (mm); large dots: the board's segment; yellow: the board outline "
            "from the camera.", ""]
