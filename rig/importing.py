@@ -22,7 +22,7 @@ from calib_core.data.camera import Camera
 from calib_core.data.observations import BoardObservation, Observations, check_outline_kind
 from calib_core.errors import ObservationError
 
-from .dataset import IMAGE_SUFFIXES, BoardSpec, CameraModel, Dataset, DatasetError, Pose, Scan, _rows
+from .dataset import IMAGE_SUFFIXES, BoardSpec, CameraModel, Dataset, DatasetError, Pose, Scan, csv_rows
 from .importers.bouguet import grid_outline, read_bouguet
 from .importers.camera_yaml import read_camera_file
 from .importers.pcd import read_pcd_scan
@@ -187,7 +187,7 @@ def read_board_poses(path) -> dict[str, np.ndarray]:
     """Pose name -> 4x4 ``T_cam_board`` (metres) from a CSV with ``pose`` and ``POSE_COLUMNS``; DatasetError naming
     the file, line and field."""
     path = Path(path)
-    rows = _rows(path)
+    rows = csv_rows(path)
     if not rows:
         raise DatasetError("empty file", file=path)
     (_, header), body = rows[0], rows[1:]
