@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import DatasetError, Scan, make_scan
+from .radlocc import data_lines
 
 UNITS_M = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 """Range units accepted, in metres."""
@@ -23,15 +24,8 @@ def read_range_log(path, start_rad: float, step_rad: float, unit: str = "mm") ->
         raise DatasetError(f"range unit {unit!r} is not one of {', '.join(UNITS_M)}", file=path)
     if not (math.isfinite(step_rad) and step_rad != 0):
         raise DatasetError(f"bearing step {step_rad!r} must be a non-zero number", file=path)
-    try:
-        lines = path.read_text().splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read as text ({exc})", file=path) from None
     values = []
-    for k, s in enumerate(lines, start=1):
-        s = s.strip()
-        if not s or s.startswith("#"):
-            continue
+    for k, s in data_lines(path):
         try:
             values.append(float(s))
         except ValueError:
