@@ -7,7 +7,7 @@ import sys
 
 from calib_core.errors import LidarcamError
 
-from . import bag, importer, rig, simulate
+from . import bag, importer, plan, rig, simulate
 
 
 def _cmd_methods(args) -> int:
@@ -171,6 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
     rig.add_parsers(sub)
     importer.add_parsers(sub)
     bag.add_parsers(sub)
+    plan.add_parsers(sub)
     return p
 
 
