@@ -61,6 +61,7 @@ def cmd_extract(args) -> int:
     from calib_core.data.io import save_observations
     from rig.dataset import DatasetError
     from rig.extract import extract, format_diagnostics
+    from rig.report import capture_verdict
 
     ds = _dataset(args)
     obs, diags = extract(ds, _options(args))
@@ -72,6 +73,7 @@ def cmd_extract(args) -> int:
         raise DatasetError("no usable pose (see the skip reasons above)", file=args.dataset)
     save_observations(obs, args.out)
     print(f"wrote {args.out} ({obs.n_boards} boards)")
+    print(f"capture plan: {capture_verdict(obs)}")
     return 0
 
 
