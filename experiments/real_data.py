@@ -141,7 +141,7 @@ def run_kazmierczak(folder: Path, out: Path) -> tuple[list[str], dict]:
     ds = dataclasses.replace(rs.dataset, camera=fit.camera, poses=poses)
     # the Hokuyo's range depends on the square's colour, which bends the board's segment by a few cm: the arc
     # test is loosened for this rig (its board segments score 19-33 against the default 15)
-    opts = ExtractOptions(outline_known=False, range_sigma_m=0.03, max_curvature_chi2=60.0)
+    opts = ExtractOptions(outline_kind="lower_bound", range_sigma_m=0.03, max_curvature_chi2=60.0)
     obs, diags = extract(ds, opts)
     print(format_diagnostics(diags), flush=True)
     sigma = range_noise_m(obs)
@@ -167,7 +167,7 @@ def run_acfr(folder: Path, out: Path) -> tuple[list[str], dict]:
     rs = load_acfr(folder)
     poses, _ = _with_corners(rs)
     ds = dataclasses.replace(rs.dataset, poses=poses)
-    obs, diags = extract(ds, ExtractOptions(outline_known=False))
+    obs, diags = extract(ds, ExtractOptions(outline_kind="lower_bound"))
     print(format_diagnostics(diags), flush=True)
     sigma = range_noise_m(obs)
     rows = leaderboard(obs, METHODS, sigma)
