@@ -28,6 +28,7 @@ from rig.intrinsics import calibrate_intrinsics, find_corners, format_intrinsics
 from rig.public_sets import ACFR, EDENSHIN, KAZMIERCZAK, load_acfr, load_edenshin, load_kazmierczak
 from rig.report import capture_verdict, save_overlay
 
+from .fingerprint import write_stamped
 from .real_eval import (
     degeneracy_verdict,
     leaderboard,
@@ -228,7 +229,7 @@ def main(argv=None) -> int:
         summary.setdefault(name, {})["seconds"] = time.perf_counter() - t1
         md += section + [f"({name}: {time.perf_counter() - t1:.0f} s)", ""]
     md += [f"Total: {time.perf_counter() - t0:.0f} s wall."]
-    (out / "REPORT.md").write_text("\n".join(md) + "\n")
+    write_stamped(out / "REPORT.md", "\n".join(md) + "\n")
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str) + "\n")
     print(f"wrote {out / 'REPORT.md'} ({time.perf_counter() - t0:.0f} s)")
     return 0

@@ -25,6 +25,7 @@ from .aggregate import load_settings, load_summary
 from .catalog import method_label, method_order
 from .claims import FRANCISCO, PAPER, ZHANGS, Claim, claim_value_text, claim_verdict, paper_claims
 from .figures import PAPER_SWEEPS
+from .fingerprint import write_stamped
 from .report_tables import error_cell, method_table, valid_cell
 
 
@@ -250,7 +251,7 @@ def build_paper_report(tables: str | Path) -> str:
 
 def write_paper_report(tables: str | Path) -> Path:
     path = Path(tables) / "REPORT.md"
-    path.write_text(build_paper_report(tables))
+    write_stamped(path, build_paper_report(tables))
     return path
 
 
