@@ -10,7 +10,8 @@ each scan, so scoring M hypotheses on N boards costs O(M N) (not O(M x points)):
   ``sigma_p^2 / K`` and ``sigma_p^2 / sum s_k^2`` (``s_k`` the points' positions along the line), so
   ``q_line = d_off^2 / var_off + sin^2(angle) / var_ang`` is chi-square with 2 degrees of freedom at the truth.
 * outline: the two scan ends, mapped into the board frame, lie inside the board outline; their distances outside
-  it over ``outline_sigma`` squared.
+  it over ``outline_sigma`` squared (boards with an exact outline only: a ``lower_bound`` or no outline is no
+  evidence against the scan ends).
 * a board whose scan centroid falls behind the camera gets ``inf``.
 
 This test (chi-square with an inflation for unmodelled noise) decides which boards the consensus keeps, at every

@@ -23,7 +23,7 @@ from ..data.residuals import (
     point_line_errors,
     range_residuals,
 )
-from ..errors import CalibrationError
+from ..errors import CalibrationError, SolveFailure
 
 EDGE_SIGMA_M = 0.03
 """Scale (metres) of the endpoint-against-edge term of the ``lidarcam`` score: absorbs the range noise and the beam
@@ -31,6 +31,32 @@ spacing at the board edges (0.25 deg at 5 m is 22 mm)."""
 
 OUTLINE_SIGMA_M = 0.03
 """Scale (metres) of the points-inside-the-outline term of the ``lidarcam`` score."""
+
+DEFAULT_RANGE_SIGMA_M = 0.02
+"""Range-noise std (metres) of the ``lidarcam`` scorer when its caller gives none (the simulator's default
+noise; the method always passes its own estimate)."""
+
+
+def exact_outline_boards(obs: Observations) -> np.ndarray:
+    """Indices of the boards whose outline is exact: the only ones the endpoint and outline terms read (a
+    ``lower_bound`` outline lets the scan run past it, ``none`` says nothing)."""
+    return np.flatnonzero(obs.exact_outlines)
+
+
+def peng2022_outline_warnings(obs: Observations) -> list[str]:
+    """The paper's point-line term needs every board's edges: ``SolveFailure`` naming the field when a board has
+    none (``outline_kind`` ``none``); a warning when some outlines are only lower bounds (the paper's model is
+    kept, and assumes they are the edges)."""
+    kinds = [b.outline_kind for b in obs.boards]
+    none = [i for i, k in enumerate(kinds) if k == "none"]
+    if none:
+        raise SolveFailure(f"peng2022: the point-line error needs the board edges, but boards {none} have "
+                           "outline_kind 'none' (no outline)")
+    low = [i for i, k in enumerate(kinds) if k == "lower_bound"]
+    if not low:
+        return []
+    return [f"peng2022: boards {low} have outline_kind 'lower_bound' (the physical board may be larger); the "
+            "paper's point-line error assumes the outline is the edge the lidar meets"]
 
 
 def point_to_plane(obs: Observations, candidates: np.ndarray) -> np.ndarray:
@@ -57,6 +83,7 @@ def peng2022(obs: Observations, candidates: np.ndarray, *, delta_m: float = 0.03
     """
     M = len(candidates)
     if error == "point_line":
+        peng2022_outline_warnings(obs)
         sq = in_chunks(lambda C: np.sum(point_line_errors(obs, C) ** 2, axis=-1), obs, candidates)  # (M,N)
     elif error == "point_plane":
         data = obs.scan_data
@@ -111,25 +138,29 @@ class ScoreOptions:
 
 
 def _evidence(obs: Observations, C: np.ndarray, range_sigma_m: float, edge_sigma_m: float, outline_sigma_m: float):
-    """The ``lidarcam`` score's normalised residuals of (M,4,4) candidates: range (M,K), endpoints (M,2N),
-    outline (M,K) (scan-data order), and the number of boards behind the camera (M,)."""
+    """The ``lidarcam`` score's normalised residuals of (M,4,4) candidates: range (M,K), endpoints and outline
+    distances of the boards with an exact outline (scan-data order), and the number of boards behind the camera
+    (M,)."""
     data = obs.scan_data
+    exact = exact_outline_boards(obs)
     rng = range_residuals(C, data) / range_sigma_m
-    edge = point_line_errors(obs, C).reshape(len(C), -1) / edge_sigma_m
-    out = outside_outlines(obs, C) / outline_sigma_m
+    edge = point_line_errors(obs, C)[:, exact].reshape(len(C), -1) / edge_sigma_m
+    out = outside_outlines(obs, C)[:, np.isin(data.board, exact)] / outline_sigma_m
     centres = np.array([b.scan_3d.mean(axis=0) for b in obs.boards])                  # (N,3)
     depth = np.einsum("mna,ma->mn", centres[None] - C[:, None, :3, 3], C[:, :3, 2])  # z of R^T (c - t)
     return rng, edge, out, np.sum(depth <= 0, axis=1).astype(float)
 
 
-def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float, edge_sigma_m: float = EDGE_SIGMA_M,
-             outline_sigma_m: float = OUTLINE_SIGMA_M, behind_penalty: float = np.inf, return_details: bool = False):
+def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
+             edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
+             behind_penalty: float = np.inf, return_details: bool = False):
     """Our selection cost: a negative log-likelihood over all the evidence, per candidate (lower is better).
 
     ``cost = 0.5 sum_k (e_k / sigma)^2 + 0.5 sum_{i,end} (d_{i,end} / edge_sigma)^2 + 0.5 sum_k (o_k / outline_sigma)^2
     + behind_penalty * (boards behind the camera)`` with ``e_k`` the range residual of every scan point against
     its board plane, ``d`` the point-line errors of the two endpoints of every board (docs/METHOD.md eq. 8-12), ``o_k``
-    the distance of every scan point, mapped into its board's frame, outside the board outline, and a board
+    the distance of every scan point, mapped into its board's frame, outside the board outline (``d`` and ``o`` on
+    boards with an exact outline only, ``exact_outline_boards``), and a board
     "behind the camera" when the centroid of its scan points mapped into the camera frame has depth <= 0.
 
     Args:
@@ -159,7 +190,7 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float,
     return cost
 
 
-def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float,
+def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
                        edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
                        behind_penalty: float = np.inf) -> np.ndarray:
     """The residual vector of the ``lidarcam`` cost at one extrinsic (its squared norm / 2 is the cost without the
