@@ -95,9 +95,14 @@ lower floor (the flow: data -> scan lines -> candidates -> refinement and robust
 the one entry). ``registry`` sits below the methods that register themselves in it."""
 
 
+PLACED_ABOVE_ITS_FOLDER = {"calib_core.refine.plan": "checks"}
+"""Modules that sit on a higher floor than their folder: the capture planner reads the degeneracy analysis (it
+belongs with the checks; it lives beside the information it sums)."""
+
+
 def _stage(name: str) -> str:
     parts = name.split(".")
-    return "__init__" if len(parts) == 1 else parts[1]
+    return "__init__" if len(parts) == 1 else PLACED_ABOVE_ITS_FOLDER.get(name, parts[1])
 
 
 def test_calib_core_stage_order():

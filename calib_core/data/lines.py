@@ -42,6 +42,8 @@ ROBUST_MIN_INCIDENCE = 0.2
 share up."""
 NOISE_FLOOR_M = 1e-6
 """The RMS estimate is at least this (metres): noise-free simulations stay well defined."""
+MIN_SPREAD_M = 1e-6
+"""Scan points whose RMS spread about their centroid is below this (metres) are one point repeated: no line."""
 
 
 def tls_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -66,10 +68,14 @@ def residual_sigma(residuals: np.ndarray, n_params: int) -> float:
     return float(np.sqrt(e @ e / max(len(e) - n_params, 1)))
 
 
-def _line_problem(P: np.ndarray, min_points: int, min_aspect: float) -> str | None:
+def line_problem(P: np.ndarray, min_points: int = MIN_LINE_POINTS, min_aspect: float = MIN_ASPECT) -> str | None:
+    """Why (K,2) scan points do not make a line (too few, one point repeated, not line-like), or None."""
+    P = np.asarray(P, float)
     if len(P) < min_points:
         return f"{len(P)} scan points, at least {min_points} are needed to fit a line"
     s = np.linalg.svd(P - P.mean(axis=0), compute_uv=False)
+    if s[0] < MIN_SPREAD_M * np.sqrt(len(P)):
+        return f"its {len(P)} scan points are one point repeated (spread {s[0] / np.sqrt(len(P)):.1e} m): no line"
     if s[0] <= 0 or (s[1] > 0 and s[0] < min_aspect * s[1]):
         return "scan points are not line-like (collinear-degenerate or scattered)"
     return None
@@ -125,7 +131,7 @@ class ScanLines:
         problems, ratios = [], []
         for i, b in enumerate(obs.boards):
             P = b.scan
-            problems.append(_line_problem(P, MIN_LINE_POINTS, MIN_ASPECT))
+            problems.append(line_problem(P))
             ratios.append(_robust_ratios(P))
             if len(P) < MIN_LINE_POINTS:
                 continue
