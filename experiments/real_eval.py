@@ -12,11 +12,11 @@ import numpy as np
 import calib_core
 from calib_core.checks.degeneracy import undetermined_directions
 from calib_core.crossval import leave_one_out
+from calib_core.data.lines import scan_noise_estimate
 from calib_core.data.observations import Observations
 from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.mounting import UNIT_NAMES
 from calib_core.geometry.transforms import invert_T
-from calib_core.refine.uncertainty import scan_noise_estimate
 from rig.markdown import md_table, num
 from rig.report import board_plane_distances as plane_distances
 
