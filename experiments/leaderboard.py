@@ -272,4 +272,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

@@ -218,4 +218,6 @@ def summarise(results: list[dict], pred: dict, conf) -> dict:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from .entry import run_main
+
+    run_main(main)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import difflib
+import re
 import sys
 
 from calib_core.errors import LidarcamError
@@ -43,7 +45,7 @@ def _print_ros(ros) -> None:
 
 
 def _cmd_calibrate(args) -> int:
-    from calib_core import calibrate
+    from calib_core import calibrate, get_method
     from calib_core.data.exports import frame_export
     from calib_core.data.io import extrinsic_yaml, load_observations
     from calib_core.geometry.metrics import pose_errors
@@ -51,10 +53,13 @@ def _cmd_calibrate(args) -> int:
     frames = _frames(args)
     obs = load_observations(args.observations)
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
-    res = calibrate(obs, method=args.method, **options)
+    res = calibrate(obs, method=get_method(args.method).name, **options)
     if not res.ok:
         print(f"{args.method}: failed: {res.reason}")
     else:
+        for w in res.warnings:  # before the answer: a contradicted answer is read with its warning
+            if not (res.boards_rejected and w.startswith("board ") and " left out: " in w):
+                print(f"warning: {w}")
         print(f"{args.method}: ok, {res.n_candidates} candidates, {1000 * res.seconds:.1f} ms")
         print("T_lidar_cam (maps camera points into the lidar frame, metres):")
         for row in res.T_lidar_cam:
@@ -76,9 +81,6 @@ def _cmd_calibrate(args) -> int:
             for r in res.boards_rejected:
                 stat = "" if r.get("statistic") is None else f" (statistic {r['statistic']:.3g})"
                 print(f"board {r['index']} rejected{stat}: {r['reason']}")
-        for w in res.warnings:
-            if not (res.boards_rejected and w.startswith("board ") and " left out: " in w):
-                print(f"warning: {w}")
         if obs.T_lidar_cam_true is not None:
             e_R, e_t = pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)
             print(f"against ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm")
@@ -147,17 +149,33 @@ def load_plugins(argv) -> None:
     load(pre.parse_known_args(argv)[0].plugin)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from calib_core.registry import METHODS
+EXIT_CODES = ("exit status: 0 an answer (or the verb's output), 1 no answer (the method could not solve, or no pose "
+              "passed), 2 bad input (file, option, method name), 130 interrupted (Ctrl-C)")
 
-    p = argparse.ArgumentParser(prog="lidarcam", description="2D lidar - camera extrinsic calibration")
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: a mistyped verb or choice gets the closest name ("did you mean ...")."""
+
+    def error(self, message: str):
+        m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if m:
+            names = [c.strip(" '") for c in m.group(2).split(",")]
+            close = difflib.get_close_matches(m.group(1), names, n=1)
+            message = (f"unknown {'verb' if message.startswith('argument VERB') else 'choice'} {m.group(1)!r}"
+                       + (f"; did you mean {close[0]!r}?" if close else f"; one of {', '.join(names)}"))
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = Parser(prog="lidarcam", description="2D lidar - camera extrinsic calibration", epilog=EXIT_CODES)
     _plugin_option(p)
     sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
     sp = sub.add_parser("methods", help="list the calibration methods")
     sp.set_defaults(func=_cmd_methods)
-    sp = sub.add_parser("calibrate", help="calibrate from an observation JSON file")
+    sp = sub.add_parser("calibrate", help="calibrate from an observation JSON file", epilog=EXIT_CODES)
     sp.add_argument("observations", help="lidarcam.observations/1 JSON file")
-    sp.add_argument("--method", default="lidarcam", choices=list(METHODS), help="method (default: %(default)s)")
+    sp.add_argument("--method", default="lidarcam", help="any name of `lidarcam methods`, X+ml, X+plane, X+joint, "
+                    "a plugin's method (default: %(default)s)")
     sp.add_argument("--out", help="write the result JSON (lidarcam.result/1) here")
     sp.add_argument("--yaml", help="write the extrinsic as YAML here")
     sp.add_argument("--fix", metavar="NAME=VALUE,...", help=FIX_HELP)
@@ -188,6 +206,10 @@ def main(argv=None) -> int:
     except LidarcamError as err:
         print(f"lidarcam {args.verb}: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"lidarcam {args.verb}: interrupted; nothing half-written is kept, run the same command again",
+              file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
