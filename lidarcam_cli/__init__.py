@@ -9,7 +9,7 @@ import sys
 
 from calib_core.errors import LidarcamError
 
-from . import bag, importer, plan, rig, simulate
+from . import bag, demo, importer, plan, rig, simulate
 
 
 def _cmd_methods(args) -> int:
@@ -189,6 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
     rig.add_parsers(sub)
     importer.add_parsers(sub)
     bag.add_parsers(sub)
+    demo.add_parsers(sub)
     plan.add_parsers(sub)
     return p
 
