@@ -79,7 +79,7 @@ def reproduce(trials: int = 100, results_dir: str = "results", n_jobs: int = -1,
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to both sweeps")
     ap.add_argument("--trials", type=int, default=100, help="trials per setting (paper: 100)")
     ap.add_argument("--results", default="results", help="results folder (default: results)")
