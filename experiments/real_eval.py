@@ -133,6 +133,12 @@ def uncertainty_md(rows: list[dict]) -> list[str]:
                    f"{fmt(r['loo_ratio_trans'], '.2f')} |")
     if len(out) == 2:
         return []
+    off = [f"`{r['method']}`'s reported 1-sigma is {r['loo_ratio_rot']:.1f} x too small in rotation and "
+           f"{r['loo_ratio_trans']:.1f} x in translation on this data (the leave-one-out answers scatter more than its "
+           "noise model predicts: errors it does not hold, such as intrinsics taken as exact or range biases, make up "
+           "the difference)" for r in rows if r.get("loo_ratio_rot") is not None
+           and max(r["loo_ratio_rot"], r["loo_ratio_trans"]) > 1.5]
+    out += [""] + [f"- {o}." for o in off] if off else []
     return out + ["", "Leave-one-out 1-sigma: the jackknife spread of the fold answers, "
                   "`(n-1)/n sum (x_i - mean)^2` over the poses left out (`calib_core.crossval.jackknife_covariance`); "
                   "ratio = leave-one-out / reported (within 1.5 of 1: the reported sigma holds on this data)."]
