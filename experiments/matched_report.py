@@ -22,6 +22,7 @@ from .catalog import method_label
 from .claim_stats import claim_values, sweep_arrays, term_name
 from .claims import claim_value_text, claim_verdict, paper_claims
 from .figures import PAPER_SWEEPS
+from .fingerprint import write_stamped
 from .objective import load_search_conf, objective_lines, score
 from .report_tables import method_table, valid_cell
 from .search import SPACE_KEYS, sensitivity_ranges
@@ -260,7 +261,7 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
 
 def write_matched_report(tables: str | Path, preset: str, search_dir: str | Path) -> Path:
     path = Path(tables) / "REPORT.md"
-    path.write_text(build(Path(tables), preset, Path(search_dir)))
+    write_stamped(path, build(Path(tables), preset, Path(search_dir)))
     return path
 
 

@@ -28,9 +28,10 @@ from rig import public_sets as ps
 from rig.dataset import DatasetError
 from rig.extract import extract, format_diagnostics
 from rig.intrinsics import format_intrinsics, refit_camera
-from rig.report import save_overlay
+from rig.report import capture_verdict, save_overlay
 
 from . import real_subsets as sub
+from .fingerprint import write_stamped
 from .real_eval import (
     degeneracy_verdict,
     leaderboard,
@@ -206,6 +207,7 @@ def run_set(name: str, folder: Path, out: Path, n_subsets: int, n_jobs: int) -> 
     md += ["### Leaderboard", ""] + leaderboard_md(rows, sigma, rs.published is not None) + [""]
     md += _covariance_md(rows) + uncertainty_md(rows) + [""]
     md += ["### Degeneracy", "", verdict[0], ""]
+    md += ["### Capture plan", "", capture_verdict(obs, T), ""]
     axes = _undetermined(obs, T, sigma) if verdict[1] is False else ()
     if axes:
         planar, T_planar = planar_calibration(obs, axes)
@@ -270,7 +272,7 @@ def main(argv=None) -> int:
         section, summary[name] = done[name]
         md += section + [f"({name}: {summary[name]['seconds']:.0f} s in one worker)", ""]
     md += [f"Total: {time.perf_counter() - t0:.0f} s wall ({args.jobs} workers, one data set each at a time)."]
-    (out / "REPORT.md").write_text("\n".join(md) + "\n")
+    write_stamped(out / "REPORT.md", "\n".join(md) + "\n")
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str) + "\n")
     print(f"wrote {out / 'REPORT.md'} ({time.perf_counter() - t0:.0f} s)")
     return 0

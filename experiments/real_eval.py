@@ -25,7 +25,7 @@ try:
 except ImportError:  # pragma: no cover
     _library_degeneracy = None
 try:
-    from calib_core.refine.uncertainty import scan_noise_estimate as _library_noise
+    from calib_core.data.lines import scan_noise_estimate as _library_noise
 except ImportError:  # pragma: no cover
     _library_noise = None
 

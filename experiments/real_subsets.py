@@ -47,7 +47,7 @@ def _run(obs: Observations, subset: tuple[int, ...], methods) -> list[dict]:
     out = []
     sub = obs.subset(list(subset))
     for m in methods:
-        res = calibrate_quiet(sub, m)
+        res = calib_core.calibrate(sub, m)
         row = {"n_boards": len(subset), "subset": " ".join(map(str, subset)), "method": m, "ok": res.ok,
                "seconds": res.seconds, "theta_R_deg": math.nan, "mu_t_m": math.nan, "T": ""}
         if res.ok:
@@ -57,18 +57,17 @@ def _run(obs: Observations, subset: tuple[int, ...], methods) -> list[dict]:
     return out
 
 
-def calibrate_quiet(obs: Observations, method: str):
-    return calib_core.calibrate(obs, method)
-
-
 def run_subsets(name: str, obs: Observations, methods, out: Path, n_jobs: int = 2, n: int = N_SUBSETS,
                 seed: int = 0) -> pd.DataFrame:
     """Every method on every subset of ``subsets(...)``; stored in ``out/subsets_<name>.csv`` with a key of the data
-    and settings, and read back instead of rerun when the key matches."""
+    and settings and of the library's code (``experiments.fingerprint``), read back instead of rerun when it matches."""
     from joblib import Parallel, delayed
 
+    from .fingerprint import package_hash
+
     key = hashlib.sha256(json.dumps([observations_to_dict(obs)["boards"], list(methods), n, seed,
-                                     list(BOARD_COUNTS)], sort_keys=True, default=str).encode()).hexdigest()[:16]
+                                     list(BOARD_COUNTS), package_hash("calib_core")], sort_keys=True,
+                                    default=str).encode()).hexdigest()[:16]
     path = out / f"subsets_{name}.csv"
     if path.exists():
         df = pd.read_csv(path, keep_default_na=False, na_values=[""])

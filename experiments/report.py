@@ -24,6 +24,7 @@ from .aggregate import load_settings, load_summary
 from .catalog import method_label, method_order
 from .claims import FRANCISCO, PAPER, ZHANGS, Claim, claim_value_text, claim_verdict, paper_claims
 from .figures import PAPER_SWEEPS
+from .fingerprint import write_stamped
 from .report_tables import error_cell, method_table, valid_cell
 
 
@@ -228,7 +229,7 @@ def build_report(tables: str | Path) -> str:
 
 def write_report(tables: str | Path) -> Path:
     path = Path(tables) / "REPORT.md"
-    path.write_text(build_report(tables))
+    write_stamped(path, build_report(tables))
     return path
 
 

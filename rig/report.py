@@ -117,9 +117,9 @@ def capture_verdict(observations: Observations, T_lidar_cam: np.ndarray | None =
     (None: the ``lidarcam`` calibration of the boards), with the noise it assumed: range noise from the scan
     lines, corner noise the extraction's median reprojection RMS (else ``DEFAULT_CORNER_SIGMA_PX``)."""
     from calib_core import calibrate
+    from calib_core.data.lines import scan_noise_estimate
     from calib_core.refine.plan import plan_capture, set_informations, verdict
     from calib_core.refine.plan_views import rig_from_observations
-    from calib_core.refine.uncertainty import scan_noise_estimate
 
     try:
         if T_lidar_cam is None:

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import LidarcamError
+from ..errors import SolveFailure  # noqa: F401 -- re-exported: result.SolveFailure is public
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import invert_T
 
@@ -19,20 +19,6 @@ JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "n
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note)."""
-
-
-class SolveFailure(LidarcamError):
-    """Raised inside a method when it cannot solve; ``calibrate`` turns it into ``ok=False`` with the reason.
-
-    ``candidates`` (M,4,4) are the candidates considered before failing, kept for the benchmark; ``info``
-    diagnostics for the result (e.g. the directions a degenerate board set does not determine).
-    """
-
-    def __init__(self, reason: str, candidates: np.ndarray | None = None, info: dict | None = None) -> None:
-        super().__init__(reason)
-        self.reason = reason
-        self.candidates = np.zeros((0, 4, 4)) if candidates is None else np.asarray(candidates, float)
-        self.info = dict(info or {})
 
 
 @dataclass(frozen=True, eq=False)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..data.lines import fit_lines
+from ..data.lines import scan_lines, triple_inputs
 from ..data.observations import Observations
 from ..data.result import SolveFailure
 
@@ -42,10 +42,7 @@ def minimal_candidates(obs: Observations, **solver_options) -> CandidateSet:
         raise SolveFailure(f"the minimal solver needs at least 3 boards, got {obs.n_boards}")
     from .vasconcelos import board_triples, solve_triples  # the solver module is the heavy part: load on use
 
-    lines = fit_lines(obs)
-    n, d = obs.planes_cam()
-    p = np.array([ln.point for ln in lines])
-    u = np.array([ln.direction for ln in lines])
+    scan_lines(obs).require_line_like()
     tri = board_triples(obs.n_boards)
-    sol = solve_triples(n[tri], d[tri], p[tri], u[tri], **solver_options)
+    sol = solve_triples(*triple_inputs(obs, tri), **solver_options)
     return CandidateSet(sol.T_lidar_cam, sol.triple, tri, sol.reasons)
