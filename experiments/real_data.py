@@ -244,7 +244,7 @@ def _timed_set(name: str, folder: Path, out: Path, n_subsets: int) -> tuple[list
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "real-data"), help="folder of the data sets")
     ap.add_argument("--out", default=str(ROOT / "results" / "real"), help="output folder")
     ap.add_argument("--subsets", type=int, default=sub.N_SUBSETS, help="random subsets per board count (0: none)")
@@ -279,4 +279,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from .entry import run_main
+
+    run_main(main)
