@@ -21,6 +21,7 @@ import calib_core
 from calib_core.data.io import observations_to_dict
 from calib_core.data.observations import Observations
 from calib_core.geometry.metrics import pose_errors
+from rig.markdown import md_table
 
 BOARD_COUNTS = (3, 4, 5, 6, 7, 8)
 N_SUBSETS = 50
@@ -104,16 +105,15 @@ def valid_columns(df: pd.DataFrame, T_ref: np.ndarray, sigma_rot_deg: float | No
 def valid_table(df: pd.DataFrame, methods) -> list[str]:
     """Markdown: valid rate (8 deg / 0.8 m) and within 3 sigmas per method and board count."""
     counts = sorted(df["n_boards"].unique())
-    head = "| method | " + " | ".join(f"{k} boards" for k in counts) + " |"
-    lines = [head, "|---|" + "---:|" * len(counts)]
+    rows = []
     for m in methods:
         d = df[df["method"] == m]
         cells = []
         for k in counts:
             dk = d[d["n_boards"] == k]
             cells.append(f"{100 * dk['valid'].mean():.0f}% / {100 * dk['valid_3sigma'].mean():.0f}%")
-        lines.append(f"| `{m}` | " + " | ".join(cells) + " |")
-    return lines
+        rows.append([f"`{m}`", *cells])
+    return md_table(["method", *(f"{k} boards" for k in counts)], rows, "l" + "r" * len(counts))
 
 
 def fig9(df: pd.DataFrame, methods, path: Path, title: str) -> None:
