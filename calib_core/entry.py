@@ -15,8 +15,10 @@ from .errors import CalibrationError
 from .refine.uncertainty import UncertaintyError
 from .registry import get_method
 
-SEED_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022")
-"""The paper's methods: their answers stand as their papers compute them; the verdict is reported beside them
+SEED_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022", "vasconcelos_msac",
+                "vasconcelos_msac_refined", "zhou2014")
+"""The paper's methods (and the published methods reproduced beside them: Francisco's as its authors' code
+runs it, Zhou 2014): their answers stand as their papers compute them; the verdict is reported beside them
 (``info["verdict"]`` and warnings) and never turns them into ``ok=False``. Their ablations (``peng2022/...``)
 count as the same method; a derived variant (``X+ml``) is ours and is held to the verdict."""
 

@@ -9,6 +9,7 @@ import numpy as np
 from ..data.lines import fit_lines
 from ..data.observations import Observations
 from ..data.result import SolveFailure
+from ..errors import CalibrationError
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,19 +34,39 @@ class CandidateSet:
         return f"{len(self.triples)} triples, no real solution" + (f" ({'; '.join(parts)})" if parts else "")
 
 
-def minimal_candidates(obs: Observations, **solver_options) -> CandidateSet:
-    """Run the Vasconcelos minimal solver on all ``C(N,3)`` board triples and pool the solutions.
+MINIMAL_SOLVERS = ("vasconcelos", "zhou2014")
+"""The minimal solvers (modules of this package, each with ``solve_triples(n, d, p, u, **options)``)."""
+
+
+def minimal_candidates(obs: Observations, solver: str = "vasconcelos", **solver_options) -> CandidateSet:
+    """Run a minimal solver (``MINIMAL_SOLVERS``) on all ``C(N,3)`` board triples and pool the solutions.
 
     Raises SolveFailure for fewer than 3 boards or a board whose scan line cannot be fitted.
     """
     if obs.n_boards < 3:
         raise SolveFailure(f"the minimal solver needs at least 3 boards, got {obs.n_boards}")
-    from .vasconcelos import board_triples, solve_triples  # the solver module is the heavy part: load on use
+    if solver not in MINIMAL_SOLVERS:
+        raise CalibrationError(f"unknown minimal solver {solver!r}; choose from {', '.join(MINIMAL_SOLVERS)}")
+    # the solver modules are the heavy part: load on use
+    if solver == "zhou2014":
+        from .zhou2014 import solve_triples
+    else:
+        from .vasconcelos import solve_triples
+
+    tri, n, d, p, u = triple_inputs(obs)
+    sol = solve_triples(n, d, p, u, **solver_options)
+    return CandidateSet(sol.T_lidar_cam, sol.triple, tri, sol.reasons)
+
+
+def triple_inputs(obs: Observations):
+    """The minimal solvers' input for every board triple of ``obs``: the triples (C,3) and, per triple, the camera
+    planes ``n`` (C,3,3), ``d`` (C,3) and the scan lines' points ``p`` and directions ``u`` (C,3,2), lines fitted
+    once per board."""
+    from .vasconcelos import board_triples
 
     lines = fit_lines(obs)
     n, d = obs.planes_cam()
     p = np.array([ln.point for ln in lines])
     u = np.array([ln.direction for ln in lines])
     tri = board_triples(obs.n_boards)
-    sol = solve_triples(n[tri], d[tri], p[tri], u[tri], **solver_options)
-    return CandidateSet(sol.T_lidar_cam, sol.triple, tri, sol.reasons)
+    return tri, n[tri], d[tri], p[tri], u[tri]
