@@ -19,7 +19,8 @@ import numpy as np
 import pandas as pd
 
 from .catalog import method_order
-from .runner import RESULT_COLUMNS, load_sweep, read_table
+from .cell import RESULT_COLUMNS
+from .store import load_sweep, read_table
 
 Z95 = 1.959963984540054
 # Settings that always label a row (the two the paper sweeps), and those never used to group.

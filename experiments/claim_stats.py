@@ -1,11 +1,11 @@
-"""The paper's claims measured on trial rows, with paired bootstrap intervals, and verdicts that use them.
+"""The paper's claims measured on trial rows, with paired bootstrap intervals (judged by ``claims.claim_verdict``).
 
     values = claim_values(trials, claim, x, n_boot=2000)   # one row per setting: value, lo95, hi95
 
 ``trials`` holds the runner's rows of one paper sweep (``boards`` or ``noise``): ``trial``, ``method``,
 ``ok``, ``valid``, ``e_R_deg``, ``e_t_m`` and the swept column ``x``. Every method ran on the same simulated
 trials, so a resample draws trials, not rows: the interval of a difference is paired. Units follow
-``experiments.report.Claim``: points and percent for valid rates, degrees and millimetres for mean errors.
+``experiments.claims.Claim``: points and percent for valid rates, degrees and millimetres for mean errors.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .report import FRANCISCO, Claim
-from .report import PAPER as OURS
+from .claims import FRANCISCO, Claim
+from .claims import PAPER as OURS
 
 BOOT_SEED = 20220101
 
@@ -82,38 +82,6 @@ def claim_values(trials: pd.DataFrame | None, claim: Claim, x: str, n_boot: int 
                 lo, hi = np.quantile(boot, 0.025, method="lower"), np.quantile(boot, 0.975, method="higher")
         rows.append({x: xv, "n_trials": n, "value": value, "lo95": float(lo), "hi95": float(hi)})
     return pd.DataFrame(rows, columns=[x, "n_trials", "value", "lo95", "hi95"])
-
-
-def interval_verdict(claim: Claim, value, lo, hi) -> str:
-    """The verdict of ``claim`` with intervals: a setting counts as better (worse) only when its whole 95%
-    interval is above (below) zero, else as a tie.
-
-    *holds*: better at some setting, worse at none, and some interval overlaps the claimed band (a single
-    claimed number: a factor of two either way); *direction only*: so, but no interval reaches the band;
-    *mixed*: worse at some setting, or a setting where our value does not exist; *does not hold*: better
-    nowhere. *At least p*: holds unless some setting's interval lies wholly below p.
-    """
-    value, lo, hi = (np.asarray(a, float) for a in (value, lo, hi))
-    if len(value) == 0:
-        return "not run"
-    if claim.kind == "at_least":
-        return "does not hold" if np.any(hi < claim.lo) else "holds"
-    known = ~np.isnan(value)
-    if not known.any():
-        return "not computable"
-    better, worse = lo[known] > 0, hi[known] < 0
-    if not better.any():
-        return "does not hold"
-    if worse.any() or not known.all():
-        return "mixed"
-    band = (claim.lo / 2, claim.hi * 2) if claim.lo == claim.hi else (claim.lo, claim.hi)
-    return "holds" if lo[known].min() <= band[1] and hi[known].max() >= band[0] else "direction only"
-
-
-def point_verdict(claim: Claim, value) -> str:
-    """The verdict on point values alone (every interval of zero width): the coarse search's reading."""
-    v = np.asarray(value, float)
-    return interval_verdict(claim, v, v, v)
 
 
 def term_name(claim: Claim) -> str:

@@ -136,7 +136,7 @@ def cell_from_cfg(cfg: DictConfig):
     ConfigError naming the key; the simulator options by ``SimOptions``)."""
     from calib_core.plugins import load_plugins
 
-    from .runner import Cell, resolve_methods
+    from .cell import Cell, resolve_methods
     from .validate import ConfigError, check_methods, check_run, sim_error_key
 
     plugins = tuple(str(p) for p in cfg.methods.get("plugins", None) or ())

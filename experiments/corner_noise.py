@@ -29,7 +29,8 @@ import pandas as pd  # noqa: E402
 from .aggregate import summarise, write_tables  # noqa: E402
 from .catalog import PAPER_METHODS, method_colour, method_label, method_order  # noqa: E402
 from .reproduce import experiment_cells  # noqa: E402
-from .runner import load_cell, run_cells  # noqa: E402
+from .runner import run_cells  # noqa: E402
+from .store import load_cell  # noqa: E402
 
 EXPERIMENTS = ("corner_noise", "corner_boards")
 PX = "pixel_noise_px"

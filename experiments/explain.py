@@ -30,7 +30,8 @@ from calib_core.methods.ablations import ABLATIONS, INVARIANT, SCALE_ONLY  # noq
 from .aggregate import summarise, write_tables  # noqa: E402
 from .catalog import method_colour, method_label, method_order  # noqa: E402
 from .reproduce import experiment_cells  # noqa: E402
-from .runner import load_cell, run_cells  # noqa: E402
+from .runner import run_cells  # noqa: E402
+from .store import load_cell  # noqa: E402
 
 SENSITIVITY = {  # experiment -> (swept column, axis label)
     "sens_tilt": ("max_tilt_deg", "largest board tilt (deg)"),

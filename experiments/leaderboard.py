@@ -36,10 +36,13 @@ from calib_core.plugins import load_plugins
 from calib_core.registry import METHODS, get_method
 
 from .aggregate import summarise
+from .cell import Cell, resolve_methods
 from .config import register_configs
 from .leaderboard_table import figure, leaderboard_table, markdown_table, real_table
 from .reproduce import CONF_DIR, experiment_cells
-from .runner import Cell, evaluate, load_cell, resolve_methods, run_cells
+from .runner import run_cells
+from .store import load_cell
+from .trial import evaluate
 
 DEFAULT_SUITE = CONF_DIR / "leaderboard" / "v1.yaml"
 REAL_SWEEP = "leaderboard-real"

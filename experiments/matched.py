@@ -29,10 +29,12 @@ import numpy as np
 import pandas as pd
 
 from .aggregate import Z95, wilson_interval, write_tables
+from .cell import Cell
+from .claims import PAPER
 from .figures import draw_sweep
-from .report import PAPER
 from .reproduce import PAPER_EXPERIMENTS, experiment_cells
-from .runner import Cell, load_cell, run_cells
+from .runner import run_cells
+from .store import load_cell
 
 RUN_OVERRIDES = ("methods=seed", "metrics.uncertainty=false")  # the claims read neither the others nor CRLBs
 TARGET_HALF_WIDTH_PTS = 5.0

@@ -19,10 +19,11 @@ import pandas as pd
 
 from .aggregate import load_summary, load_trials
 from .catalog import method_label
-from .claim_stats import claim_values, interval_verdict, sweep_arrays, term_name
+from .claim_stats import claim_values, sweep_arrays, term_name
+from .claims import claim_value_text, claim_verdict, paper_claims
 from .figures import PAPER_SWEEPS
 from .objective import load_search_conf, objective_lines, score
-from .report import _fmt, _method_table, _valid_cell, paper_claims
+from .report_tables import method_table, valid_cell
 from .search import SPACE_KEYS, sensitivity_ranges
 
 N_BOOT = 2000
@@ -41,7 +42,7 @@ def claims_table(tables: dict[str, Path]) -> pd.DataFrame:
                 continue
             x = PAPER_SWEEPS[claim.sweep].x
             v = claim_values(None, claim, x, n_boot=N_BOOT, arrays=trials[claim.sweep])
-            verdict = interval_verdict(claim, v["value"], v["lo95"], v["hi95"])
+            verdict = claim_verdict(claim, v["value"], v["lo95"], v["hi95"])
             rows += [{"preset": preset, "claim": i, "term": term_name(claim), "x": r[x], "n_trials": r["n_trials"],
                       "value": r["value"], "lo95": r["lo95"], "hi95": r["hi95"], "verdict": verdict}
                      for _, r in v.iterrows()]
@@ -49,8 +50,10 @@ def claims_table(tables: dict[str, Path]) -> pd.DataFrame:
 
 
 def _cell(g: pd.DataFrame, kind: str) -> str:
-    per = "; ".join(f"{r.x:g}: {_fmt(r.value, kind)} [{_fmt(r.lo95, kind)}, {_fmt(r.hi95, kind)}]"
-                    for r in g.itertuples())
+    def text(v):
+        return claim_value_text(v, kind)
+
+    per = "; ".join(f"{r.x:g}: {text(r.value)} [{text(r.lo95)}, {text(r.hi95)}]" for r in g.itertuples())
     return f"{per} -> **{g['verdict'].iloc[0]}**"
 
 
@@ -236,7 +239,7 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
     lines += edge_lines(search_dir, conf)
     lines += ["## Every claim under both presets", "",
               "Ours = Peng 2022 over the named method, per setting, with its paired 95% bootstrap interval "
-              f"({N_BOOT} resamples of the trials). Verdicts with intervals (`experiments/claim_stats.py`): a "
+              f"({N_BOOT} resamples of the trials). Verdicts with intervals (`experiments/claims.py`): a "
               "setting counts as better or worse only when its whole interval is, else as a tie; *holds* = better "
               "somewhere, worse nowhere, and an interval reaches the claimed band (a single number: within a "
               "factor of two); *direction only* = so, but no interval reaches the band; *mixed* = worse "
@@ -250,7 +253,7 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
     for p, folder in folders.items():
         for sw, spec in PAPER_SWEEPS.items():
             lines += ["", f"## `{p}`, sweep {sw}: valid-solution probability, % [95% Wilson interval]", ""]
-            lines += _method_table(load_summary(folder, sw), spec.x, _valid_cell)
+            lines += method_table(load_summary(folder, sw), spec.x, valid_cell)
     lines += ["", f"Figures of `{preset}`: `figures/*.png` (the layout of the paper's Fig. 3-7)."]
     return "\n".join(lines).rstrip() + "\n"
 

@@ -1,6 +1,6 @@
 """The search's objective: how far our results are from the paper's numbers (``conf/search/paper.yaml``).
 
-The paper's numbers are ``experiments.report.paper_claims()``; the config gives each term's weight and the
+The paper's numbers are ``experiments.claims.paper_claims()``; the config gives each term's weight and the
 scale that reads one unit of miss. ``score(trials)`` returns the objective under each Zhang & Pless variant
 playing the paper's "Zhang", with the per-term misses, so a report can show where the distance comes from.
 """
@@ -14,8 +14,8 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from .claim_stats import claim_values, sweep_arrays, term_name
+from .claims import Claim, paper_claims
 from .figures import PAPER_SWEEPS
-from .report import Claim, paper_claims
 
 SEARCH_CONF = Path(__file__).resolve().parent.parent / "conf" / "search" / "paper.yaml"
 

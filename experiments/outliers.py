@@ -23,7 +23,8 @@ import pandas as pd
 from .aggregate import write_tables
 from .catalog import method_colour, method_label, method_order
 from .reproduce import experiment_cells
-from .runner import load_cell, run_cells
+from .runner import run_cells
+from .store import load_cell
 
 ACCURATE_ROT_DEG = 1.5
 ACCURATE_TRANS_M = 0.080

@@ -3,12 +3,8 @@ paragraph on where and why they differ, templated on the numbers.
 
     python -m experiments.report [--tables results/paper]
 
-Verdicts. A claim "ours beats X by a..b over the settings" **holds** when ours is at least as good at every
-setting (ties: both at 0% or 100%), better at one, and the range of our improvements overlaps [a, b];
-**direction only** when so but by amounts outside [a, b]; **mixed** when ours is worse at some setting;
-**does not hold** when better at none.
-A single claimed number (one setting) counts as matched within a factor of two. "At least p" holds when
-every setting reaches p. Which method plays "Zhang" is reported for both of our Zhang & Pless variants.
+The claims are data (``experiments.claims``), judged on the point values of the summary tables by
+``claims.claim_verdict`` (the same rule the matched report applies with intervals).
 """
 
 from __future__ import annotations
@@ -26,67 +22,15 @@ from calib_core.geometry.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
 
 from .aggregate import load_settings, load_summary
 from .catalog import method_label, method_order
+from .claims import FRANCISCO, PAPER, ZHANGS, Claim, claim_value_text, claim_verdict, paper_claims
 from .figures import PAPER_SWEEPS
-
-PAPER = "peng2022"  # the method whose claims this report checks
-FRANCISCO = "vasconcelos"
-ZHANGS = ("zhang_pless_linear", "zhang_pless")
+from .report_tables import error_cell, method_table, valid_cell
 
 
 @dataclass(frozen=True)
-class Claim:
-    """One claim of the paper, as a comparison the summary tables can check.
+class ClaimCheck:
+    """One claim checked on the summary tables: our value per setting of the swept column and its verdict."""
 
-    ``kind``: ``points`` (valid rate, ours - other, percentage points), ``relative`` (valid rate,
-    ours/other - 1, percent), ``err_deg`` / ``err_mm`` (mean e_R / e_t, other - ours), ``at_least``
-    (ours' valid rate >= lo percent). ``at``: restrict to one value of the swept setting.
-    """
-
-    sweep: str
-    text: str
-    source: str
-    kind: str
-    other: str | None
-    lo: float
-    hi: float
-    at: float | None = None
-
-
-def paper_claims() -> list[Claim]:
-    """docs/METHOD.md "The paper's claims" and the error claims of the paper's Section 3.1 text (Fig. 4, 6)."""
-    claims = [Claim("boards", "valid-solution probability +2 to +20 points vs Francisco (3-8 boards)",
-                    "abstract, Fig. 3a", "points", FRANCISCO, 2, 20)]
-    claims += [Claim("boards", "valid-solution probability +30% to +260% vs Zhang (relative, 3-8 boards)",
-                     "abstract, Fig. 3a", "relative", z, 30, 260) for z in ZHANGS]
-    claims += [Claim("noise", "valid-solution probability at least 90% at every noise level (6 boards)",
-                     "Fig. 3b", "at_least", None, 90, 100),
-               Claim("noise", "at 30 mm: +19 vs Francisco (read as points)", "Fig. 3b", "points", FRANCISCO,
-                     19, 19, at=30.0),
-               Claim("noise", "at 30 mm: +19% vs Francisco (read as relative)", "Fig. 3b", "relative", FRANCISCO,
-                     19, 19, at=30.0)]
-    claims += [Claim("noise", "at 30 mm: +150% vs Zhang (relative)", "Fig. 3b", "relative", z, 150, 150, at=30.0)
-               for z in ZHANGS]
-    claims += [Claim("noise", "mean e_R 1-5 deg lower than Francisco over noise levels", "abstract, Fig. 6",
-                     "err_deg", FRANCISCO, 1, 5)]
-    claims += [Claim("noise", "mean e_R 3-14 deg lower than Zhang over noise levels", "abstract, Fig. 6",
-                     "err_deg", z, 3, 14) for z in ZHANGS]
-    claims += [Claim("noise", "mean e_t 100-400 mm lower than Francisco over noise levels", "Fig. 6 text",
-                     "err_mm", FRANCISCO, 100, 400)]
-    claims += [Claim("noise", "mean e_t 300-1400 mm lower than Zhang over noise levels", "Fig. 6 text",
-                     "err_mm", z, 300, 1400) for z in ZHANGS]
-    claims += [Claim("boards", "mean e_R 2-42 deg lower than Francisco (3-8 boards)", "Fig. 4 text", "err_deg",
-                     FRANCISCO, 2, 42),
-               Claim("boards", "mean e_t 200-4000 mm lower than Francisco (3-8 boards)", "Fig. 4 text", "err_mm",
-                     FRANCISCO, 200, 4000)]
-    claims += [Claim("boards", "mean e_R 10-38 deg lower than Zhang (3-8 boards)", "Fig. 4 text", "err_deg", z,
-                     10, 38) for z in ZHANGS]
-    claims += [Claim("boards", "mean e_t 300-4200 mm lower than Zhang (3-8 boards)", "Fig. 4 text", "err_mm", z,
-                     300, 4200) for z in ZHANGS]
-    return claims
-
-
-@dataclass(frozen=True)
-class Verdict:
     claim: Claim
     xs: tuple
     values: tuple  # our improvement per setting (NaN: not computable, inf: other never valid)
@@ -112,86 +56,34 @@ def improvement(summary: pd.DataFrame, x: str, claim: Claim) -> pd.Series:
     return scale * (_series(summary, x, claim.other, col) - _series(summary, x, PAPER, col))
 
 
-def judge(claim: Claim, values: np.ndarray) -> str:
-    """The verdict of ``claim`` on our per-setting improvements (see the module docstring)."""
-    v = np.asarray(values, float)
-    if len(v) == 0:
-        return "not run"
-    if claim.kind == "at_least":
-        return "holds" if np.all(v >= claim.lo) else "does not hold"
-    known = v[~np.isnan(v)]
-    if len(known) == 0:
-        return "not computable"
-    if not (known > 0).any():
-        return "does not hold"
-    if (known < 0).any() or len(known) < len(v):
-        return "mixed"
-    lo, hi = (claim.lo / 2, claim.hi * 2) if claim.lo == claim.hi else (claim.lo, claim.hi)
-    return "holds" if known.min() <= hi and known.max() >= lo else "direction only"
-
-
-def check_claims(tables: Path, sweeps: dict[str, pd.DataFrame]) -> list[Verdict]:
+def check_claims(tables: Path, sweeps: dict[str, pd.DataFrame]) -> list[ClaimCheck]:
     out = []
     for claim in paper_claims():
         summary = sweeps.get(claim.sweep)
         methods = set() if summary is None else set(summary["method"])
         if summary is None or PAPER not in methods or (claim.other and claim.other not in methods):
-            out.append(Verdict(claim, (), (), "not run"))
+            out.append(ClaimCheck(claim, (), (), "not run"))
             continue
         x = PAPER_SWEEPS[claim.sweep].x
         imp = improvement(summary, x, claim)
         if claim.at is not None:
             imp = imp[np.isclose(imp.index.to_numpy(float), claim.at)]
-        out.append(Verdict(claim, tuple(imp.index), tuple(imp.to_numpy(float)), judge(claim, imp.to_numpy(float))))
+        vals = imp.to_numpy(float)
+        out.append(ClaimCheck(claim, tuple(imp.index), tuple(vals), claim_verdict(claim, vals)))
     return out
 
 
-def _fmt(v: float, kind: str) -> str:
-    if math.isnan(v):
-        return "n/a"
-    if math.isinf(v):
-        return "+inf"
-    unit = {"points": " pt", "relative": "%", "err_deg": " deg", "err_mm": " mm", "at_least": "%"}[kind]
-    if kind == "at_least":
-        return f"{v:.0f}{unit}"
-    return f"{v:+.1f}{unit}" if kind == "err_deg" else f"{v:+.0f}{unit}"
-
-
-def _claim_rows(verdicts: list[Verdict]) -> list[str]:
+def _claim_rows(verdicts: list[ClaimCheck]) -> list[str]:
     lines = ["| # | Paper's claim | Source | vs | Ours, per setting | Our range | Verdict |",
              "|---|---|---|---|---|---|---|"]
     for i, v in enumerate(verdicts, 1):
         c = v.claim
-        per = ", ".join(f"{x:g}: {_fmt(val, c.kind)}" for x, val in zip(v.xs, v.values, strict=True)) or "-"
+        per = ", ".join(f"{x:g}: {claim_value_text(val, c.kind)}" for x, val in zip(v.xs, v.values, strict=True)) or "-"
         finite = [val for val in v.values if not math.isnan(val)]
-        rng = f"{_fmt(min(finite), c.kind)} .. {_fmt(max(finite), c.kind)}" if finite else "-"
+        rng = f"{claim_value_text(min(finite), c.kind)} .. {claim_value_text(max(finite), c.kind)}" if finite else "-"
         vs = method_label(c.other) if c.other else "-"
         lines.append(f"| {i} | {c.text} | {c.source} | {vs} | {per} | {rng} | **{v.verdict}** |")
     return lines
-
-
-def _method_table(summary: pd.DataFrame, x: str, cell) -> list[str]:
-    """A markdown table: one row per value of ``x``, one column per method, ``cell(summary row)`` in each (``-``
-    where the method has no row, or ``cell`` returns None)."""
-    methods = method_order(summary["method"].unique())
-    lines = [f"| {x} | " + " | ".join(method_label(m) for m in methods) + " |",
-             "|---|" + "---|" * len(methods)]
-    for xv, g in summary.groupby(x, sort=True):
-        rows = [g[g["method"] == m] for m in methods]
-        cells = [(cell(r.iloc[0]) if not r.empty else None) or "-" for r in rows]
-        lines.append(f"| {xv:g} | " + " | ".join(cells) + " |")
-    return lines
-
-
-def _valid_cell(r) -> str:
-    return f"{100 * r.valid_rate:.0f}% [{100 * r.valid_lo95:.0f}, {100 * r.valid_hi95:.0f}]"
-
-
-def _error_cell(r) -> str | None:
-    if r.n_ok == 0:
-        return None
-    return (f"{r.mean_e_R_deg:.2f} / {1000 * r.mean_e_t_m:.0f} (med {r.median_e_R_deg:.2f} / "
-            f"{1000 * r.median_e_t_m:.0f})")
 
 
 def _mean_rate(summary: pd.DataFrame, method: str, col: str, mask=None) -> float:
@@ -201,7 +93,7 @@ def _mean_rate(summary: pd.DataFrame, method: str, col: str, mask=None) -> float
     return float(s[col].mean()) if len(s) else float("nan")
 
 
-def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verdicts: list[Verdict]) -> list[str]:
+def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verdicts: list[ClaimCheck]) -> list[str]:
     """Generated paragraphs on where and why our numbers differ from the paper's."""
     paras: list[str] = []
     boards, noise = sweeps.get("boards"), sweeps.get("noise")
@@ -281,7 +173,7 @@ def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verd
     return paras
 
 
-def _distance_to_claim(v: Verdict | None) -> float:
+def _distance_to_claim(v: ClaimCheck | None) -> float:
     if v is None:
         return float("inf")
     vals = [x for x in v.values if np.isfinite(x)]
@@ -314,7 +206,7 @@ def build_report(tables: str | Path) -> str:
              "- Verdict summary: " + ", ".join(f"{k}: {v}" for k, v in counts.items()) + ".", "",
              "## The paper's claims, one by one", "",
              "Improvements are Peng 2022 over the named method (positive = Peng 2022 better). Verdict rules are in "
-             "`experiments/report.py`: *holds* = never worse, better somewhere, and our range overlaps the "
+             "`experiments/claims.py`: *holds* = never worse, better somewhere, and our range overlaps the "
              "claimed one (a single number: within a factor of two); *direction only* = never worse, by other "
              "amounts; *mixed* = worse at some setting; *does not hold* = better nowhere.", ""]
     lines += _claim_rows(verdicts)
@@ -322,10 +214,10 @@ def build_report(tables: str | Path) -> str:
         spec = PAPER_SWEEPS[sweep]
         fig3 = spec.valid.split("_")[0]
         lines += ["", f"## Sweep {sweep}: valid-solution probability ({fig3}), % [95% Wilson interval]", ""]
-        lines += _method_table(summary, spec.x, _valid_cell)
+        lines += method_table(summary, spec.x, valid_cell)
         lines += ["", f"## Sweep {sweep}: mean / median errors, e_R deg / e_t mm "
                   f"({spec.mean.split('_')[0]}, {spec.box.split('_')[0]})", ""]
-        lines += _method_table(summary, spec.x, _error_cell)
+        lines += method_table(summary, spec.x, error_cell)
         lines += ["", f"Figures: `figures/{spec.valid}.png`, `figures/{spec.mean}.png`, `figures/{spec.box}.png` "
                   "(and PDF)."]
     lines += ["", "## Where and why we differ", ""]

@@ -20,10 +20,12 @@ from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from .aggregate import write_tables
+from .cell import Cell
 from .config import cell_from_cfg, register_configs
 from .figures import draw_sweep
 from .report import write_report
-from .runner import Cell, load_cell, run_cells
+from .runner import run_cells
+from .store import load_cell
 
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 PAPER_EXPERIMENTS = ("boards", "noise")

@@ -32,12 +32,14 @@ from scipy.stats import qmc
 
 from simulate import SimOptions
 
-from .claim_stats import claim_values, interval_verdict, point_verdict, sweep_arrays
+from .cell import Cell
+from .claim_stats import claim_values, sweep_arrays
+from .claims import claim_verdict, paper_claims
 from .figures import PAPER_SWEEPS
 from .objective import load_search_conf, score
-from .report import paper_claims
 from .reproduce import CONF_DIR, PAPER_EXPERIMENTS, experiment_cells
-from .runner import Cell, load_cell, run_cells
+from .runner import run_cells
+from .store import load_cell
 
 SPACE_KEYS = ("max_tilt_deg", "board_size_m", "bearing_spread_deg", "corner_noise_px")
 DEFAULT_POINT = {"max_tilt_deg": 45.0, "board_size_m": 1.0, "bearing_spread_deg": 60.0, "corner_noise_px": 0.0}
@@ -146,8 +148,8 @@ def evaluate_points(points: list[dict], per_point: list[dict], conf, stage: str,
         arrays = {e: sweep_arrays(t, PAPER_SWEEPS[e].x) for e, t in trials.items()}
         for i, claim in enumerate(claims, 1):
             vals = claim_values(None, claim, PAPER_SWEEPS[claim.sweep].x, n_boot=n_boot, arrays=arrays[claim.sweep])
-            verdict = (interval_verdict(claim, vals["value"], vals["lo95"], vals["hi95"]) if n_boot else
-                       point_verdict(claim, vals["value"].to_numpy()))
+            verdict = (claim_verdict(claim, vals["value"], vals["lo95"], vals["hi95"]) if n_boot else
+                       claim_verdict(claim, vals["value"].to_numpy()))
             verdicts.append({"stage": stage, "point": p["point"], **{k: p[k] for k in SPACE_KEYS}, "claim": i,
                              "verdict": verdict})
     table = pd.DataFrame(rows).sort_values("objective").reset_index(drop=True)

@@ -1,4 +1,4 @@
-"""Check a results store: every chunk file parses in full (see ``experiments.runner.verify_store``).
+"""Check a results store: every chunk file parses in full (see ``experiments.store.verify_store``).
 
     python -m experiments.verify [results_dir] [--sweep NAME]
 
@@ -13,7 +13,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from .runner import verify_store
+from .store import verify_store
 
 
 def main(argv: Sequence[str] | None = None) -> int:

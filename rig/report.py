@@ -144,9 +144,9 @@ def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_c
     ax.set_axis_off()
     import cv2
 
-    ring = np.column_stack([outline, np.zeros(len(outline))])
+    ring = np.zeros((0, 3)) if outline is None else np.column_stack([outline, np.zeros(len(outline))])
     ring = transform_points(T_cam_board, np.vstack([ring, ring[:1]]))
-    if np.all(ring[:, 2] > 0):
+    if len(ring) and np.all(ring[:, 2] > 0):  # no outline (outline_kind 'none'): nothing to draw
         uvb, _ = cv2.projectPoints(ring, np.zeros(3), np.zeros(3), camera.K, camera.dist)
         uvb = uvb.reshape(-1, 2)
         ax.plot(uvb[:, 0], uvb[:, 1], "-", color="yellow", lw=1.0, alpha=0.8)

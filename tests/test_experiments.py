@@ -15,10 +15,13 @@ import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
-from experiments import aggregate, figures, report
+from experiments import aggregate, claims, figures, report
+from experiments.cell import RESULT_COLUMNS, TIMING_COLUMNS, Cell
 from experiments.config import SIM_GROUPS, cell_from_cfg, register_configs, sim_group_of, sim_options
 from experiments.reproduce import CONF_DIR, expand_sweep_params, reproduce
-from experiments.runner import RESULT_COLUMNS, TIMING_COLUMNS, Cell, load_cell, run_cells, simulate_trial
+from experiments.runner import run_cells
+from experiments.store import load_cell
+from experiments.trial import simulate_trial
 from simulate import SimOptions
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -189,15 +192,17 @@ def test_aggregation_of_a_known_table():
         0.838875, abs=1e-6)
 
 
-def test_report_verdicts():
-    c = report.Claim("boards", "t", "s", "points", "x", 2, 20)
-    assert report.judge(c, np.array([5.0, 0.0, 12.0])) == "holds"
-    assert report.judge(c, np.array([30.0, 40.0])) == "direction only"
-    assert report.judge(c, np.array([5.0, -3.0])) == "mixed"
-    assert report.judge(c, np.array([0.0, -3.0])) == "does not hold"
-    one = report.Claim("noise", "t", "s", "relative", "x", 150, 150, at=30)
-    assert report.judge(one, np.array([100.0])) == "holds" and report.judge(one, np.array([20.0])) == "direction only"
-    assert report.judge(report.Claim("noise", "t", "s", "at_least", None, 90, 100), np.array([95, 89])) == \
+def test_claim_verdicts_on_point_values():
+    """The summary report's reading: point values, no intervals (the same rule as the matched report's)."""
+    c = claims.Claim("boards", "t", "s", "points", "x", 2, 20)
+    assert claims.claim_verdict(c, np.array([5.0, 0.0, 12.0])) == "holds"
+    assert claims.claim_verdict(c, np.array([30.0, 40.0])) == "direction only"
+    assert claims.claim_verdict(c, np.array([5.0, -3.0])) == "mixed"
+    assert claims.claim_verdict(c, np.array([0.0, -3.0])) == "does not hold"
+    one = claims.Claim("noise", "t", "s", "relative", "x", 150, 150, at=30)
+    assert claims.claim_verdict(one, np.array([100.0])) == "holds"
+    assert claims.claim_verdict(one, np.array([20.0])) == "direction only"
+    assert claims.claim_verdict(claims.Claim("noise", "t", "s", "at_least", None, 90, 100), np.array([95, 89])) == \
         "does not hold"
 
 
@@ -231,7 +236,7 @@ def test_tables_figures_report_from_a_small_sweep(tmp_path):
         assert {f"{fig}.png", f"{fig}.pdf"} <= names
     text = report.write_report(out).read_text()
     assert "valid-solution probability +2 to +20 points vs Francisco" in text
-    assert text.count("| **") == len(report.paper_claims())
+    assert text.count("| **") == len(claims.paper_claims())
     assert "## Where and why we differ" in text and "{" not in text.split("## Where and why we differ")[1]
 
 
@@ -260,7 +265,7 @@ def test_hydra_multirun_sweep(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    from experiments.runner import load_sweep
+    from experiments.store import load_sweep
 
     rows = load_sweep(tmp_path, "boards")
     assert sorted(rows["n_boards"].unique()) == [3, 5] and len(rows) == 2 * 3 * 2

@@ -11,7 +11,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.runner import Cell, DamagedChunk, load_cell_dir, run_cells, verify_store
+from experiments.cell import Cell
+from experiments.runner import run_cells
+from experiments.store import DamagedChunk, load_cell_dir, verify_store
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -42,7 +42,7 @@ def _rebuilt(obs: Observations, scans, trans_scale: float = 1.0) -> Observations
     for b, s in zip(obs.boards, scans, strict=True):
         T = np.array(b.T_cam_board)
         T[:3, 3] *= trans_scale
-        boards.append(BoardObservation(T, b.outline, s))
+        boards.append(BoardObservation(T, b.outline, s, outline_kind=b.outline_kind))
     return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta))
 
 

@@ -7,7 +7,8 @@ Every answer of ``calibrate`` is tested against its observations, whatever the m
   condemn a board) against its expectation under Gaussian noise, with room for a quarter of the points to be
   outliers; the noise std is estimated robustly from the scan lines alone (median absolute deviation, no
   extrinsic), plus a floor ``POSE_FLOOR_M`` for the camera-side board poses;
-- the board outline: scan points mapped into their board's frame must lie on the board (at most a quarter of a
+- the board outline (exact outlines only, ``outline_kind``): scan points mapped into their board's frame must lie on
+  the board (at most a quarter of a
   board's inlier points outside it by more than the tolerance);
 - boards in front of both sensors: every board's centre in front of the camera (its pose alone), and under the
   answer every board's scan in front of the camera; scan points away from the lidar origin.
@@ -121,10 +122,10 @@ def measured_points(obs: Observations) -> ScanData:
 
 
 def board_depths(obs: Observations) -> np.ndarray:
-    """(N,) depth (metres) of each board's outline centroid in the camera frame (camera z)."""
+    """(N,) depth (metres) of each board's centre (``BoardObservation.centre``) in the camera frame (camera z)."""
     out = []
     for b in obs.boards:
-        c = b.outline.mean(axis=0)
+        c = b.centre
         out.append(float(b.T_cam_board[2, :2] @ c + b.T_cam_board[2, 3]))
     return np.array(out)
 
@@ -156,7 +157,7 @@ def board_tests(obs: Observations, T: np.ndarray, sigma: float) -> list[dict]:
         pts = inb[i][0]
         keep = (np.linalg.norm(b.scan, axis=1) > MIN_RANGE_M)
         inl = np.abs(zi) < CLIP_Z
-        if inl.sum():
+        if inl.sum() and b.outline_exact:  # a lower-bound outline or none lets the scan run past it
             off = outside_outline(pts[keep][inl, :2], b.outline)
             frac = float(np.mean(off > tol))
             st["off_outline_fraction"] = frac
@@ -191,7 +192,7 @@ def _unit_causes(obs: Observations) -> list[tuple[str, str]]:
         return []
     rng = np.median(np.concatenate([np.linalg.norm(b.scan, axis=1) for b in obs.boards]))
     cam = np.median([np.linalg.norm(b.T_cam_board[:3, 3]) for b in obs.boards])
-    diam = np.median([np.ptp(b.outline, axis=0).max() for b in obs.boards])
+    diam = np.median([np.ptp(b.outline, axis=0).max() for b in obs.boards if b.outline is not None] or [np.nan])
     seg = np.median([np.linalg.norm(b.scan[-1] - b.scan[0]) for b in obs.boards])
     out = []
     scans_big = rng > MAX_PLAUSIBLE_RANGE_M or (rng > UNIT_RATIO * cam and seg > UNIT_RATIO * diam)

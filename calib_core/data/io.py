@@ -14,7 +14,7 @@ from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import invert_T, quaternion_xyzw
 from .camera import Camera
 from .exports import FrameExport
-from .observations import MAX_BOARDS, BoardObservation, Observations, orthonormalised
+from .observations import MAX_BOARDS, BoardObservation, Observations, check_outline_kind, orthonormalised
 
 OBS_SCHEMA = "lidarcam.observations/1"
 
@@ -22,7 +22,7 @@ OBS_SCHEMA = "lidarcam.observations/1"
 def observations_to_dict(obs: Observations) -> dict:
     """Plain-JSON form of ``obs`` under schema ``lidarcam.observations/1``."""
     d: dict = {"schema": OBS_SCHEMA,
-               "boards": [{"T_cam_board": b.T_cam_board.tolist(), "outline": b.outline.tolist(),
+               "boards": [{"T_cam_board": b.T_cam_board.tolist(), **_outline_dict(b),
                            "scan": b.scan.tolist(), **_corners_dict(b)} for b in obs.boards]}
     if obs.camera is not None:
         d["camera"] = obs.camera.to_dict()
@@ -34,7 +34,7 @@ def observations_to_dict(obs: Observations) -> dict:
 
 
 BOARD_KEYS = ("T_cam_board", "outline", "scan")
-"""Keys every board object must hold."""
+"""Keys every board object must hold (``outline`` may be left out when ``outline_kind`` is ``"none"``)."""
 MAX_FILE_BYTES = 256 * 2**20
 """Largest observation file read (bytes); larger ones are refused before reading."""
 MAX_JSON_DEPTH = 64
@@ -45,16 +45,27 @@ def _board_from_dict(rb, i: int, notes: list[str]) -> BoardObservation:
     """One board of the ``boards`` list (ObservationError naming the board and field)."""
     if not isinstance(rb, dict):
         raise ObservationError(f"must be an object, got {type(rb).__name__}", board=i)
+    try:
+        kind = check_outline_kind(rb.get("outline_kind", "exact"))
+    except ObservationError as err:
+        raise err.within(board=i) from None
     for key in BOARD_KEYS:
-        if key not in rb:
+        if key not in rb and not (key == "outline" and kind == "none"):
             raise ObservationError("missing key", board=i, field=key)
     try:
         T, note = orthonormalised(rb["T_cam_board"], "T_cam_board")
         if note:
             notes.append(f"board {i}: {note}")
-        return BoardObservation(T, rb["outline"], rb["scan"], rb.get("corners_px"), rb.get("corners_board"))
+        return BoardObservation(T, rb.get("outline"), rb["scan"], rb.get("corners_px"), rb.get("corners_board"),
+                                outline_kind=kind)
     except ObservationError as err:
         raise err.within(board=i) from None
+
+
+def _outline_dict(b: BoardObservation) -> dict:
+    """``outline`` (when known) and ``outline_kind`` (when not the default ``exact``) of one board."""
+    d = {} if b.outline is None else {"outline": b.outline.tolist()}
+    return d if b.outline_exact else {**d, "outline_kind": b.outline_kind}
 
 
 def _corners_dict(b: BoardObservation) -> dict:

@@ -23,6 +23,12 @@ MIN_CORNERS = 4
 """Fewest image corners a board may carry (a planar pose needs 4)."""
 
 
+OUTLINE_KINDS = ("exact", "lower_bound", "none")
+"""What a board's ``outline`` says of the physical board: ``exact`` (the edges the lidar meets; the default),
+``lower_bound`` (the physical board contains this outline: scan points may run past it, e.g. a printed pattern on
+a larger board) or ``none`` (no outline known; ``outline`` may be omitted). Only ``exact`` outlines are evidence
+for the endpoint and outline terms and tests."""
+
 MAX_BOARDS = 100
 """Most boards one problem may hold (the exhaustive methods grow as N^4); more are refused when loaded."""
 MAX_SCAN_POINTS = 20_000
@@ -125,6 +131,14 @@ def check_simple_polygon(outline: np.ndarray) -> str | None:
     return None
 
 
+def check_outline_kind(kind) -> str:
+    """``kind`` when it is one of ``OUTLINE_KINDS``; ObservationError naming the field otherwise."""
+    if not isinstance(kind, str) or kind not in OUTLINE_KINDS:
+        raise ObservationError(f"must be one of {', '.join(map(repr, OUTLINE_KINDS))}, got {str(kind)[:40]!r}",
+                               field="outline_kind")
+    return kind
+
+
 @dataclass(frozen=True, eq=False)
 class BoardObservation:
     """One view of a planar calibration board by both sensors.
@@ -133,19 +147,23 @@ class BoardObservation:
         T_cam_board: 4x4 pose of the board in the camera, maps board-frame points (board plane z = 0)
             into the camera frame; metres.
         outline: (V,2) ordered vertices of the board's physical outline in its own frame (z = 0), metres.
-            The paper's square of side c is ``[[0,0],[c,0],[c,c],[0,c]]``.
+            The paper's square of side c is ``[[0,0],[c,0],[c,c],[0,c]]``. None only when ``outline_kind`` is
+            ``none``.
         scan: (K,2) lidar points on this board, in the lidar frame (scan plane z = 0), ordered by bearing;
             metres.
         corners_px: optional (J,2) detected image corners, distorted pixels as the detector returns them.
         corners_board: optional (J,3) the same corners in the board frame (metres; given as (J,2) on z = 0).
             Both or neither; they need the file's ``Observations.camera``.
+        outline_kind: ``exact`` (default), ``lower_bound`` or ``none`` (``OUTLINE_KINDS``): how far ``outline``
+            is the edge the lidar meets.
     """
 
     T_cam_board: np.ndarray
-    outline: np.ndarray
+    outline: np.ndarray | None
     scan: np.ndarray
     corners_px: np.ndarray | None = None
     corners_board: np.ndarray | None = None
+    outline_kind: str = "exact"
 
     def __post_init__(self) -> None:
         T = _frozen_array(self.T_cam_board, "T_cam_board", (4, 4))
@@ -156,15 +174,8 @@ class BoardObservation:
             what = "is a reflection or singular" if not np.isfinite(defect) else \
                 f"is not orthonormal (|R^T R - I| = {defect:.2g} > {ROTATION_TOL:g})"
             raise ObservationError(f"rotation {what}", field="T_cam_board")
-        outline = numeric_array(self.outline, "outline", (None, 2), MAX_OUTLINE_VERTICES + 1)
-        if len(outline) >= 4 and np.array_equal(outline[0], outline[-1]):
-            outline = outline[:-1]  # a closed ring: the first vertex repeated at the end
-        if len(outline) > MAX_OUTLINE_VERTICES:
-            raise ObservationError(f"{len(outline)} vertices, more than the limit of {MAX_OUTLINE_VERTICES}",
-                                   field="outline")
-        why = check_simple_polygon(outline)
-        if why:
-            raise ObservationError(f"outline {why}", field="outline")
+        check_outline_kind(self.outline_kind)
+        outline = None if self.outline is None and self.outline_kind == "none" else self._checked_outline()
         scan = numeric_array(self.scan, "scan", (None, 2), MAX_SCAN_POINTS)
         at_origin = np.flatnonzero(np.hypot(scan[:, 0], scan[:, 1]) < MIN_RANGE_M)
         if len(at_origin):
@@ -176,6 +187,26 @@ class BoardObservation:
         object.__setattr__(self, "outline", outline)
         object.__setattr__(self, "scan", scan)
         self._check_corners()
+
+    def _checked_outline(self) -> np.ndarray:
+        if self.outline is None:
+            raise ObservationError("missing (only a board with outline_kind 'none' may omit it)", field="outline")
+        outline = numeric_array(self.outline, "outline", (None, 2), MAX_OUTLINE_VERTICES + 1)
+        if len(outline) >= 4 and np.array_equal(outline[0], outline[-1]):
+            outline = outline[:-1]  # a closed ring: the first vertex repeated at the end
+        if len(outline) > MAX_OUTLINE_VERTICES:
+            raise ObservationError(f"{len(outline)} vertices, more than the limit of {MAX_OUTLINE_VERTICES}",
+                                   field="outline")
+        why = check_simple_polygon(outline)
+        if why:
+            raise ObservationError(f"outline {why}", field="outline")
+        return outline
+
+    @property
+    def outline_exact(self) -> bool:
+        """True when the outline is the edge the lidar meets (``outline_kind`` ``exact``): only then are the scan
+        ends and points evidence against it."""
+        return self.outline_kind == "exact"
 
     def _check_corners(self) -> None:
         if self.corners_px is None and self.corners_board is None:
@@ -200,6 +231,14 @@ class BoardObservation:
     @property
     def has_corners(self) -> bool:
         return self.corners_px is not None
+
+    @property
+    def centre(self) -> np.ndarray:
+        """(2,) a point of the board in its own frame (metres): the outline's vertex mean, else the corners',
+        else the board origin."""
+        if self.outline is not None:
+            return self.outline.mean(axis=0)
+        return self.corners_board[:, :2].mean(axis=0) if self.has_corners else np.zeros(2)
 
     @property
     def normal_cam(self) -> np.ndarray:
@@ -293,6 +332,11 @@ class Observations:
     def has_corners(self) -> bool:
         """True when every board carries image corners (and the camera is known): the joint model applies."""
         return bool(self.boards) and self.camera is not None and all(b.has_corners for b in self.boards)
+
+    @property
+    def exact_outlines(self) -> np.ndarray:
+        """(N,) bool: boards whose outline is exact (``BoardObservation.outline_exact``)."""
+        return np.array([b.outline_exact for b in self.boards], dtype=bool)
 
     def planes_cam(self) -> tuple[np.ndarray, np.ndarray]:
         """Board planes in the camera frame: normals (N,3) and offsets (N,), plane ``n . p_C = d``."""

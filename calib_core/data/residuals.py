@@ -32,7 +32,7 @@ def candidate_chunk(obs: Observations) -> int:
     """How many candidates one batch holds within ``CHUNK_ELEMENTS`` (the largest temporaries are (M,K,3) over
     the scan points and (M,N,2,V,V) over endpoint-edge pairs)."""
     K = sum(len(b.scan) for b in obs.boards)
-    V = max((len(b.outline) for b in obs.boards), default=0)
+    V = max((len(b.outline) for b in obs.boards if b.outline is not None), default=0)
     return max(1, CHUNK_ELEMENTS // max(1, 3 * K + 2 * obs.n_boards * V * V))
 
 
@@ -124,13 +124,14 @@ def point_line_errors(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     with different edges (the pair of distinct edges with the least summed distance). The error of an
     endpoint ``p`` against edge ``q_k q_{k+1}`` is ``|p - q_k| + |p - q_{k+1}| - |q_{k+1} - q_k|``, zero
     exactly when ``p`` lies on the edge segment. Boards of different outlines are handled one outline
-    shape at a time (vectorised over candidates and boards that share a vertex count).
+    shape at a time (vectorised over candidates and boards that share a vertex count). Every outline is read
+    as given, whatever its ``outline_kind``; a board without one (kind ``none``) gets 0.
     """
     P = endpoints_in_board(obs, candidates)                                 # (M,N,2,3)
     M, N = P.shape[:2]
-    out = np.empty((M, N, 2))
-    counts = np.array([len(b.outline) for b in obs.boards])
-    for V in np.unique(counts):
+    out = np.zeros((M, N, 2))
+    counts = np.array([0 if b.outline is None else len(b.outline) for b in obs.boards])
+    for V in np.unique(counts[counts > 0]):
         idx = np.flatnonzero(counts == V)
         a = np.array([obs.boards[i].outline for i in idx])                  # (n,V,2) vertices q_k, z = 0
         edge = np.roll(a, -1, axis=1) - a                                    # q_{k+1} - q_k

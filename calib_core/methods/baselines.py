@@ -9,7 +9,7 @@ from ..data.observations import Observations
 from ..data.result import SolveFailure
 from ..refine.refine import refine
 from ..registry import Method
-from ..robust.scorers import PENG2022_OPTIONS, SCORERS
+from ..robust.scorers import PENG2022_OPTIONS, SCORERS, peng2022_outline_warnings
 from ..solvers.candidates import minimal_candidates
 from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
 from ..solvers.zhang_pless import zhang_pless_linear as _zp_linear
@@ -54,9 +54,10 @@ def peng2022(obs: Observations, **options):
     """Options: the ``selection.peng2022`` readings (``PENG2022_OPTIONS``, defaults there); the rest go to the
     minimal solver."""
     sel = {k: options.pop(k) for k in PENG2022_OPTIONS if k in options}
+    warnings = peng2022_outline_warnings(obs) if sel.get("error", "point_line") == "point_line" else []
     cands = minimal_candidates(obs, **options)
     T, info = select_candidate(obs, cands, "peng2022", **sel)
-    return T, cands.T_lidar_cam, info
+    return T, cands.T_lidar_cam, {**info, "warnings": warnings} if warnings else info
 
 
 BASELINES = (

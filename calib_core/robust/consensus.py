@@ -11,7 +11,8 @@ each scan, so scoring M hypotheses on N boards costs O(M N) (not O(M x points)):
   ``sigma_p^2 / K`` and ``sigma_p^2 / sum s_k^2`` (``s_k`` the points' positions along the line), so
   ``q_line = d_off^2 / var_off + sin^2(angle) / var_ang`` is chi-square with 2 degrees of freedom at the truth.
 * outline: the two scan ends, mapped into the board frame, lie inside the board outline; their distances outside
-  it over ``outline_sigma`` squared.
+  it over ``outline_sigma`` squared (boards with an exact outline only: a ``lower_bound`` or no outline is no
+  evidence against the scan ends).
 * a board whose scan centroid falls behind the camera gets ``inf``.
 
 Lidar frame ``{L}``, camera ``{C}``, board ``{W}_i`` as in ``calib_core.data.observations``; metres, radians.
@@ -112,10 +113,11 @@ def _statistics(obs: Observations, L: BoardLines, T: np.ndarray, outline_sigma_m
 
 
 def _outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(board indices, outline) of each distinct outline among the boards."""
+    """(board indices, outline) of each distinct exact outline among the boards."""
     groups: dict[bytes, list[int]] = {}
     for i, b in enumerate(obs.boards):
-        groups.setdefault(np.ascontiguousarray(b.outline).tobytes() + bytes([len(b.outline)]), []).append(i)
+        if b.outline_exact:
+            groups.setdefault(np.ascontiguousarray(b.outline).tobytes() + bytes([len(b.outline)]), []).append(i)
     return [(np.array(idx), obs.boards[idx[0]].outline) for idx in groups.values()]
 
 

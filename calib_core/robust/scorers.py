@@ -22,6 +22,7 @@ from ..data.residuals import (
     points_in_boards,
     range_residuals,
 )
+from ..data.result import SolveFailure
 from ..errors import CalibrationError
 
 EDGE_SIGMA_M = 0.03
@@ -30,6 +31,28 @@ spacing at the board edges (0.25 deg at 5 m is 22 mm)."""
 
 OUTLINE_SIGMA_M = 0.03
 """Scale (metres) of the points-inside-the-outline term of the ``lidarcam`` score."""
+
+
+def exact_outline_boards(obs: Observations) -> np.ndarray:
+    """Indices of the boards whose outline is exact: the only ones the endpoint and outline terms read (a
+    ``lower_bound`` outline lets the scan run past it, ``none`` says nothing)."""
+    return np.flatnonzero(obs.exact_outlines)
+
+
+def peng2022_outline_warnings(obs: Observations) -> list[str]:
+    """The paper's point-line term needs every board's edges: ``SolveFailure`` naming the field when a board has
+    none (``outline_kind`` ``none``); a warning when some outlines are only lower bounds (the paper's model is
+    kept, and assumes they are the edges)."""
+    kinds = [b.outline_kind for b in obs.boards]
+    none = [i for i, k in enumerate(kinds) if k == "none"]
+    if none:
+        raise SolveFailure(f"peng2022: the point-line error needs the board edges, but boards {none} have "
+                           "outline_kind 'none' (no outline)")
+    low = [i for i, k in enumerate(kinds) if k == "lower_bound"]
+    if not low:
+        return []
+    return [f"peng2022: boards {low} have outline_kind 'lower_bound' (the physical board may be larger); the "
+            "paper's point-line error assumes the outline is the edge the lidar meets"]
 
 
 def point_to_plane(obs: Observations, candidates: np.ndarray) -> np.ndarray:
@@ -56,6 +79,7 @@ def peng2022(obs: Observations, candidates: np.ndarray, *, delta_m: float = 0.03
     """
     M = len(candidates)
     if error == "point_line":
+        peng2022_outline_warnings(obs)
         sq = in_chunks(lambda C: np.sum(point_line_errors(obs, C) ** 2, axis=-1), obs, candidates)  # (M,N)
     elif error == "point_plane":
         data = obs.scan_data
@@ -103,7 +127,8 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
     ``cost = 0.5 sum_k (e_k / sigma)^2 + 0.5 sum_{i,end} (d_{i,end} / edge_sigma)^2 + 0.5 sum_k (o_k / outline_sigma)^2
     + behind_penalty * (boards behind the camera)`` with ``e_k`` the range residual of every scan point against
     its board plane, ``d`` the point-line errors of the two endpoints of every board (docs/METHOD.md eq. 8-12), ``o_k``
-    the distance of every scan point, mapped into its board's frame, outside the board outline, and a board
+    the distance of every scan point, mapped into its board's frame, outside the board outline (``d`` and ``o`` on
+    boards with an exact outline only, ``exact_outline_boards``), and a board
     "behind the camera" when the centroid of its scan points mapped into the camera frame has depth <= 0.
 
     Args:
@@ -121,12 +146,14 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
         out = in_chunks(lambda C: lidarcam(obs, C, **opts, return_details=True), obs, candidates)
         return out if return_details else out[0]
     rng_term = 0.5 * np.sum((range_residuals(candidates, obs.scan_data) / range_sigma_m) ** 2, axis=1)
-    edge_term = 0.5 * np.sum((point_line_errors(obs, candidates) / edge_sigma_m) ** 2, axis=(1, 2))
+    exact = exact_outline_boards(obs)
+    edge_term = 0.5 * np.sum((point_line_errors(obs, candidates)[:, exact] / edge_sigma_m) ** 2, axis=(1, 2))
     out_term = np.zeros(len(candidates))
     behind = np.zeros(len(candidates))
     R, t = candidates[:, :3, :3], candidates[:, :3, 3]
     for b, P in zip(obs.boards, points_in_boards(obs, candidates), strict=True):
-        out_term += 0.5 * np.sum((outside_outline(P[..., :2], b.outline) / outline_sigma_m) ** 2, axis=1)
+        if b.outline_exact:
+            out_term += 0.5 * np.sum((outside_outline(P[..., :2], b.outline) / outline_sigma_m) ** 2, axis=1)
         depth = np.einsum("ma,ma->m", R[:, :, 2], b.scan_3d.mean(axis=0) - t)   # z of R^T (c - t)
         behind += depth <= 0
     with np.errstate(invalid="ignore"):
@@ -146,9 +173,9 @@ def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigm
     T = np.asarray(T_lidar_cam, float)
     C = T.reshape(-1, 4, 4)
     parts = [range_residuals(C, obs.scan_data) / range_sigma_m,
-             point_line_errors(obs, C).reshape(len(C), -1) / edge_sigma_m]
+             point_line_errors(obs, C)[:, exact_outline_boards(obs)].reshape(len(C), -1) / edge_sigma_m]
     parts += [outside_outline(P[..., :2], b.outline) / outline_sigma_m
-              for b, P in zip(obs.boards, points_in_boards(obs, C), strict=True)]
+              for b, P in zip(obs.boards, points_in_boards(obs, C), strict=True) if b.outline_exact]
     out = np.concatenate(parts, axis=1)
     return out[0] if T.ndim == 2 else out
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import CameraModel, DatasetError, _matrix, camera_from_dict, read_yaml
+from ..dataset import CameraModel, DatasetError, camera_from_dict, matrix_field, read_yaml
 
 RADTAN_MODELS = {"plumb_bob", "rational_polynomial", "radtan", "radial_tangential", "none", ""}
 
@@ -39,7 +39,7 @@ def _kalibr(cam: dict, path: Path, name: str) -> CameraModel:
     except (TypeError, ValueError):
         raise DatasetError(f"field {name}.intrinsics / resolution: expected [fu, fv, pu, pv] and [w, h]",
                            file=path) from None
-    dist = _matrix(cam.get("distortion_coeffs", []), f"{name}.distortion_coeffs", path, (None,))
+    dist = matrix_field(cam.get("distortion_coeffs", []), f"{name}.distortion_coeffs", path, (None,))
     K = np.array([[fu, 0.0, pu], [0.0, fv, pv], [0.0, 0.0, 1.0]])
     return CameraModel(w, h, K, dist)
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import DatasetError, _rows
+from ..dataset import DatasetError, csv_rows
 
 COLUMNS = ("pose", "x_m", "y_m")
 
@@ -18,7 +18,7 @@ COLUMNS = ("pose", "x_m", "y_m")
 def read_segmented_points(path) -> dict[str, np.ndarray]:
     """Pose name -> (K,2) board points (metres); DatasetError naming the file, line and field when a row is bad."""
     path = Path(path)
-    rows = _rows(path)
+    rows = csv_rows(path)
     if not rows:
         raise DatasetError("empty file (needs a header pose,x_m,y_m)", file=path)
     (_, header), body = rows[0], rows[1:]

@@ -1,0 +1,194 @@
+"""The results store: per cell, ``settings.json`` and ``chunk-<first>-<last>-<methods hash>.csv`` files under
+``<results_dir>/<sweep>/trials/<setting-key>/``, each written whole (temporary file, then rename); reading,
+checking (a damaged chunk is never read in part), and the (trial, method) pairs still to compute.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import socket
+import sys
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+
+import pandas as pd
+
+from .cell import RESULT_COLUMNS, Cell, RunnerError
+
+
+def read_table(path: Path, text_columns: Sequence[str] = ("reason",)) -> pd.DataFrame:
+    """A CSV table whose ``text_columns`` read back as strings ("" where empty, even when all are empty)."""
+    df = pd.read_csv(path)
+    for col in text_columns:
+        if col in df:
+            df[col] = df[col].astype(object).where(df[col].notna(), "").astype(str)
+    return df
+
+
+class DamagedChunk(RunnerError):
+    """A chunk file that does not parse in full (empty, cut mid-row, junk): never read in part."""
+
+
+def methods_tag(methods: Sequence[str]) -> str:
+    """The 6-hex hash of a method list (in order) that a chunk file's name carries."""
+    return hashlib.sha1(",".join(methods).encode()).hexdigest()[:6]
+
+
+_CHUNK_NAME = re.compile(r"^chunk-(\d{5,})-(\d{5,})-([0-9a-f]{6})\.csv$")
+
+
+def _read_chunk(path: Path) -> pd.DataFrame:
+    """The rows of one chunk file, checked in full: the header has the result columns; every (trial, method) of
+    the name's trial range and of the methods whose hash the name carries appears exactly once; trial, method,
+    ok and valid are well-formed in every row. DamagedChunk otherwise."""
+    def damaged(why: str) -> DamagedChunk:
+        return DamagedChunk(f"{path}: damaged chunk file ({why})")
+
+    m = _CHUNK_NAME.match(path.name)
+    if not m:
+        raise damaged("name is not chunk-<first>-<last>-<methods hash>.csv")
+    try:
+        df = read_table(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        raise damaged(f"does not parse: {str(exc).splitlines()[0][:120]}") from None
+    missing = [c for c in RESULT_COLUMNS if c not in df.columns]
+    if missing:
+        raise damaged(f"missing columns {missing[:4]}")
+    first, last = int(m.group(1)), int(m.group(2))
+    trial = pd.to_numeric(df["trial"], errors="coerce")
+    if trial.isna().any() or not (trial == trial.round()).all():
+        raise damaged("a trial number that is not an integer")
+    if df["method"].isna().any() or not df["method"].map(lambda v: isinstance(v, str) and v != "").all():
+        raise damaged("a row without a method")
+    methods = list(dict.fromkeys(df["method"]))
+    tag = methods_tag(methods)
+    for col in ("ok", "valid"):
+        if not df[col].map(lambda v: str(v) in ("True", "False")).all():
+            raise damaged(f"a row whose {col!r} is not True/False")
+    want = {(t, mm) for t in range(first, last + 1) for mm in methods}
+    got = list(zip(trial.astype(int), df["method"], strict=True))
+    if tag != m.group(3) or len(got) != len(set(got)) or set(got) != want:
+        raise damaged(f"{len(got)} rows, expected {(last - first + 1)} trials x the methods of hash {m.group(3)}")
+    df["trial"] = trial.astype(int)
+    for col in ("ok", "valid"):
+        df[col] = df[col].map(lambda v: str(v) == "True").astype(bool)
+    return df
+
+
+def verify_cell_dir(path: Path) -> list[str]:
+    """Problems of the store of one cell (empty when sound): damaged chunk files, stray temporary files."""
+    out = []
+    for f in sorted(Path(path).glob("chunk-*.csv")):
+        try:
+            _read_chunk(f)
+        except DamagedChunk as err:
+            out.append(str(err))
+    out += [f"{f}: temporary file left by an interrupted write" for f in sorted(Path(path).glob(".chunk-*.tmp"))]
+    return out
+
+
+def verify_store(results_dir: str | Path, sweep: str | None = None) -> list[str]:
+    """Problems of every cell under ``results_dir`` (one sweep, or all): see ``verify_cell_dir``."""
+    root = Path(results_dir)
+    sweeps = [root / sweep] if sweep else sorted(p for p in root.iterdir() if (p / "trials").is_dir())
+    return [msg for sw in sweeps for cell in sorted((sw / "trials").glob("*/")) for msg in verify_cell_dir(cell)]
+
+
+def load_cell_dir(path: Path, heal: bool = False) -> pd.DataFrame:
+    """Every row stored under one cell folder (duplicates of a (trial, method) pair dropped).
+
+    A damaged chunk file raises DamagedChunk; with ``heal`` it is renamed ``<name>.damaged`` (so its trials are
+    recomputed), reported on stderr, and left out whole.
+    """
+    frames = []
+    for f in sorted(Path(path).glob("chunk-*.csv")):
+        try:
+            frames.append(_read_chunk(f))
+        except DamagedChunk as err:
+            if not heal:
+                raise DamagedChunk(f"{err}; rerun the sweep to recompute it") from None
+            os.replace(f, f.with_name(f.name + ".damaged"))
+            sys.stderr.write(f"{err}: moved aside to {f.name}.damaged; its trials are recomputed\n")
+    if not frames:
+        return pd.DataFrame()
+    df = pd.concat(frames, ignore_index=True)
+    return df.drop_duplicates(["trial", "method"], keep="first")
+
+
+def load_cell(cell: Cell) -> pd.DataFrame:
+    """The rows of ``cell``: its trials ``0..n_trials-1`` and its methods, sorted by trial then method order."""
+    df = load_cell_dir(cell.dir)
+    if df.empty:
+        return df
+    df = df[(df["trial"] < cell.n_trials) & df["method"].isin(cell.methods)].copy()
+    order = {m: i for i, m in enumerate(cell.methods)}
+    df["_m"] = df["method"].map(order)
+    return df.sort_values(["trial", "_m"]).drop(columns="_m").reset_index(drop=True)
+
+
+def load_sweep(results_dir: str | Path, sweep: str) -> pd.DataFrame:
+    """Every row stored for ``sweep`` under ``results_dir`` (all its cells)."""
+    cells = sorted((Path(results_dir) / sweep / "trials").glob("*/"))
+    frames = [load_cell_dir(c) for c in cells]
+    frames = [f for f in frames if not f.empty]
+    if not frames:
+        raise RunnerError(f"no trials stored under {Path(results_dir) / sweep / 'trials'}")
+    return pd.concat(frames, ignore_index=True)
+
+
+def _tmp_name(path: Path) -> Path:
+    """A hidden temporary name next to ``path``, unique per host and process (workers of a cluster share the store
+    on one file system, where two hosts may run the same pid)."""
+    return path.with_name(f".{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
+
+
+def _write_atomic(df: pd.DataFrame, path: Path) -> None:
+    """Write whole or not at all: a temporary file in the same folder, flushed to disk, then renamed."""
+    tmp = _tmp_name(path)
+    with open(tmp, "w", newline="") as fh:
+        df.to_csv(fh, index=False, float_format="%.10g")
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def write_chunk(cell: Cell, trials: Sequence[int], methods: Sequence[str], rows: list[dict]) -> None:
+    """One chunk file of ``cell``: the rows of ``trials`` x ``methods``, named by its trial range and methods."""
+    cols = list(cell.columns()) + list(RESULT_COLUMNS)
+    df = pd.DataFrame(rows)
+    df = df.reindex(columns=cols + [c for c in df.columns if c not in cols])  # a trial_fn may omit metric columns
+    tag = methods_tag(methods)
+    _write_atomic(df, cell.dir / f"chunk-{min(trials):05d}-{max(trials):05d}-{tag}.csv")
+
+
+def prepare_cell(cell: Cell) -> None:
+    """The cell's folder and its ``settings.json`` (written once, whole or absent)."""
+    cell.dir.mkdir(parents=True, exist_ok=True)
+    settings = cell.dir / "settings.json"
+    if not settings.exists():
+        d = asdict(cell)
+        d.pop("n_trials"), d.pop("methods"), d.pop("results_dir"), d.pop("plugins")
+        tmp = _tmp_name(settings)  # whole or absent: a worker killed mid-write must not leave half a file
+        tmp.write_text(json.dumps({"key": cell.key, **d}, indent=1, sort_keys=True, default=str) + "\n")
+        os.replace(tmp, settings)
+
+
+def pending(cell: Cell, chunk_size: int) -> list[tuple[int, ...] | tuple]:
+    """(trials, methods) tasks still to run for ``cell``: consecutive trials missing the same methods."""
+    df = load_cell_dir(cell.dir, heal=True)
+    done = set(zip(df["trial"], df["method"], strict=True)) if not df.empty else set()
+    tasks: list[tuple[list[int], tuple[str, ...]]] = []
+    for t in range(cell.n_trials):
+        missing = tuple(m for m in cell.methods if (t, m) not in done)
+        if not missing:
+            continue
+        if tasks and tasks[-1][1] == missing and len(tasks[-1][0]) < chunk_size and tasks[-1][0][-1] == t - 1:
+            tasks[-1][0].append(t)
+        else:
+            tasks.append(([t], missing))
+    return [(tuple(ts), ms) for ts, ms in tasks]
+

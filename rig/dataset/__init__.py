@@ -1,0 +1,36 @@
+"""Real-rig dataset folders: camera.yaml, board.yaml, per-pose images and scans (see docs/dataset.md).
+
+Layout of a dataset folder::
+
+    camera.yaml        intrinsics, OpenCV/ROS style (image_width, image_height, camera_matrix, distortion_coefficients)
+    board.yaml         checkerboard: inner-corner grid, square size, physical outline (metres)
+    NNN.png | NNN.jpg  one image per pose
+    NNN.csv            one scan per pose: header ``bearing_rad,range_m`` or ``x,y`` (lidar frame, metres)
+    scans.csv          alternative to the per-pose CSVs: one file keyed by a ``pose`` column
+    background.csv     optional: a scan without the board (same columns)
+    windows.yaml       optional: per-pose manual bearing window, overrides the automatic segment search
+    ground_truth.yaml  optional: written by ``simulate.dataset``; never read by extraction
+
+``load_dataset`` fails as a whole (``DatasetError``) only when the shared files are bad (folder, camera.yaml,
+board.yaml, background.csv, windows.yaml); a bad image or scan makes that pose's ``error`` a ``DatasetError``
+naming the file and line, and the other poses go on.
+"""
+
+from .load import IMAGE_SUFFIXES, RESERVED_STEMS, load_dataset
+from .model import BoardSpec, CameraModel, Dataset, DatasetError, Pose, Scan
+from .scans import csv_rows, make_scan, read_keyed_scans, read_scan_csv, same_pose
+from .yaml_files import (
+    camera_from_dict,
+    load_board,
+    load_camera,
+    load_ground_truth,
+    load_windows,
+    matrix_field,
+    read_yaml,
+)
+
+__all__ = [
+    "IMAGE_SUFFIXES", "RESERVED_STEMS", "BoardSpec", "CameraModel", "Dataset", "DatasetError", "Pose", "Scan",
+    "camera_from_dict", "csv_rows", "load_board", "load_camera", "load_dataset", "load_ground_truth",
+    "load_windows", "make_scan", "matrix_field", "read_keyed_scans", "read_scan_csv", "read_yaml", "same_pose",
+]
