@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
 .DEFAULT_GOAL := help
-.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard verify-results search-paper robustness clean
+.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard verify-results search-paper robustness plan-check clean
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
@@ -64,6 +64,9 @@ verify-results: $(STAMP) ## Check that every stored trial chunk under results/ p
 
 robustness: $(STAMP) ## Wrong boards, outlier points, mixed pixels (experiment=outliers), write results/outliers/
 	$(PY) -m experiments.outliers
+
+plan-check: $(STAMP) ## The capture planner against the simulator (conf/plan/check.yaml), write results/plan/
+	$(PY) -m experiments.plan_check
 
 clean: ## Remove the virtual environment and caches
 	rm -rf $(VENV) .pytest_cache .ruff_cache outputs multirun

@@ -7,7 +7,7 @@ import sys
 
 from calib_core.errors import LidarcamError
 
-from . import bag, rig, simulate
+from . import bag, plan, rig, simulate
 
 
 def _cmd_methods(args) -> int:
@@ -170,6 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_parsers(sub)
     rig.add_parsers(sub)
     bag.add_parsers(sub)
+    plan.add_parsers(sub)
     return p
 
 

@@ -108,6 +108,31 @@ def report_warnings(observations: Observations, rms_mm: list[float], T_lidar_cam
     return out
 
 
+DEFAULT_CORNER_SIGMA_PX = 0.5
+"""Corner noise the capture verdict assumes when the extraction recorded no reprojection RMS."""
+
+
+def plan_verdict_md(observations: Observations, T_lidar_cam: np.ndarray) -> list[str]:
+    """The capture planner's verdict on the boards captured (``calib_core.refine.plan.verdict``) at the calibrated
+    extrinsic: range noise from the scan lines, corner noise from the extraction's median reprojection RMS."""
+    from calib_core.refine.plan import plan_capture, set_informations, verdict
+    from calib_core.refine.plan_views import rig_from_observations
+    from calib_core.refine.uncertainty import scan_noise_estimate
+
+    head = ["## Capture plan", ""]
+    try:
+        sr = scan_noise_estimate(observations)
+        rp = [v for v in (observations.meta or {}).get("reproj_rms_px") or [] if v is not None]
+        sc = (float(np.median(rp)) if rp else DEFAULT_CORNER_SIGMA_PX) if observations.has_corners else 0.0
+        rig = rig_from_observations(observations, T_lidar_cam, sr, sc)
+        plan = plan_capture(rig, 2, current=observations, current_info=set_informations(observations, T_lidar_cam,
+                                                                                           sr, sc))
+    except (LidarcamError, ValueError) as err:
+        return head + [f"No plan: {err}", ""]
+    return head + [f"{verdict(plan)}. (Assumed noise: range {1000 * sr:.1f} mm, corners {sc:g} px; `lidarcam plan "
+                   "--from OBS.json` gives the whole plan.)", ""]
+
+
 def _mounting_md(res: dict) -> list[str]:
     """The mounting parameters of a calibration with fixed parameters (``calib_core.refine.partial``), as a table."""
     if not res.get("mounting"):
@@ -317,6 +342,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
         md += ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""]
     summary.warnings = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
+    md += plan_verdict_md(observations, T)
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
     summary.markdown.write_text("\n".join(md) + "\n")
     return summary

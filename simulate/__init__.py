@@ -105,7 +105,36 @@ def generate(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | N
     return Observations(boards, scene.T_lidar_cam, meta, camera)
 
 
+def observe_poses(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board: np.ndarray, seed: int = 0,
+                  trial: int = 0) -> Observations:
+    """Fresh measurements of given board poses ``T_lidar_board`` (N,4,4) under ``T_lidar_cam``: each board's own
+    scan with range noise and its camera pose (and corners) under ``options.pose_mode`` (the camera and lidar
+    streams of ``trial_rngs(options, seed, trial)``), as ``generate`` would give them for that scene.
+
+    Raises CameraError when a board's pose cannot be estimated (e.g. no detection in ``image`` mode)."""
+    o = options
+    _, rng_lidar, rng_cam = trial_rngs(o, seed, trial)
+    K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
+    spec = BoardSpec.of(o)
+    outline = spec.outline()
+    bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
+    T_cam = invert_T(np.asarray(T_lidar_cam, float))
+    P = checkerboard_corners(o)
+    boards = []
+    for T in np.asarray(T_lidar_board, float).reshape(-1, 4, 4):
+        scan = cast_scan(bearings, T[None], outline, o.lidar_max_range_m, o.noise_mm / 1000.0, rng_lidar)[0]
+        T_cb, uv = observe_board(K, T_cam @ T, spec, o.pose_mode, o.cam_width, o.cam_height, rng_cam,
+                                 o.pixel_noise_px, o.image_noise_std, o.render_supersample)
+        boards.append(BoardObservation(T_cb, outline, scan, uv, None if uv is None else P))
+    camera = None if o.pose_mode == "exact" else Camera(K, [], o.cam_width, o.cam_height)
+    meta = {"generator": GENERATOR, "options": o.to_dict(), "seed": int(seed), "trial": int(trial)}
+    if o.pose_mode != "exact":
+        meta["T_cam_board_true"] = (T_cam[None] @ np.asarray(T_lidar_board, float)).tolist()
+    return Observations(tuple(boards), np.asarray(T_lidar_cam, float), meta, camera)
+
+
 __all__ = [
     "BoardSpec", "CameraError", "GENERATOR", "Scene", "SceneError", "SimOptions", "camera_matrix",
-    "checkerboard_corners", "generate", "render_board_image", "settings_hash", "simulate_trial", "trial_rngs",
+    "checkerboard_corners", "generate", "observe_poses", "render_board_image", "settings_hash", "simulate_trial",
+    "trial_rngs",
 ]

@@ -3,17 +3,19 @@
 Every case is a ``Case``: a file's bytes (``data``), made from simulated observations, and what must happen:
 
 - ``refused``: ``load_observations`` raises ObservationError, one line naming the file (and ``field`` when given);
-- ``correct``: the file loads and the default method's answer is ok and valid against the truth;
+- ``correct``: the file loads and the default method's answer is ok and valid against the truth (and, where
+  ``cause`` is given, a warning names that cause);
 - ``flagged``: the file loads; the data are physically wrong, so the default method's answer must be ``ok=False``
   (its reason names a board and a test) and, where ``cause`` is given, a warning names that cause;
-- ``warned``: the answer carries a warning naming ``cause`` (mirrored scans fit an upside-down lidar exactly);
+- ``warned``: the answer carries a warning naming ``cause`` (mirrored scans fit an upside-down lidar exactly; a
+  board set listed twice);
 - ``undetectable``: board poses scaled by 15% (focal length or square size off) can leave the scans consistent
   with a wrong answer; without corner observations the verdict cannot always see it. Counted, not asserted:
   when the answer is contradicted, the cause must be named.
 
 Classes: bytes (encodings, binary, truncation, nesting), types (JSON types, booleans and strings for numbers,
 meta), tolerance (rounded rotations, closed outlines, BOM), limits (boards, points, vertices), physics (units,
-mispaired, mirrored, behind the camera, scaled poses, stray points).
+mispaired, mirrored, behind the camera, scaled poses, stray points; copies: repeated points, boards listed twice).
 """
 
 from __future__ import annotations
@@ -189,6 +191,22 @@ def limit_cases(d: dict) -> list[Case]:
     ]
 
 
+def copy_cases(d: dict, d3: dict, d94: dict) -> list[Case]:
+    """Copies: a board whose 40 scan points are one point repeated (no line: that board is left out or refused by
+    name), 94 boards with 6 of them listed twice (100 boards: the exhaustive methods must bound their memory), 3
+    boards each listed twice (the verdict names the duplicates)."""
+    def repeated(x):
+        x["boards"][2]["scan"] = [x["boards"][2]["scan"][5]] * 40
+
+    return [
+        Case("scan_one_point_repeated", "limits", _edit(d, repeated), "correct"),
+        Case("boards_100_six_listed_twice", "limits", _edit(d94, lambda x: x["boards"].extend(x["boards"][:6])),
+             "correct", cause="duplicated"),
+        Case("boards_3_each_listed_twice", "limits", _edit(d3, lambda x: x["boards"].extend(x["boards"][:])),
+             "warned", cause="duplicated"),
+    ]
+
+
 def _scale_scan(x, i, s):
     x["boards"][i]["scan"] = [[s * p[0], s * p[1]] for p in x["boards"][i]["scan"]]
 
@@ -270,9 +288,10 @@ def physics_cases(d: dict, tag: str, rng) -> list[Case]:
 
 
 def corpus(physics_seeds: int = 2, n_boards: int = 5, lidar_res_deg: float = 0.5) -> list[Case]:
-    """The whole corpus: 77 file cases and 12 physics cases per seed (small problems, to keep the tests fast)."""
+    """The whole corpus: 80 file cases and 12 physics cases per seed (small problems, to keep the tests fast)."""
     d = base(6, seed=0)
     out = byte_cases(d) + type_cases(d) + tolerance_cases(d) + limit_cases(d)
+    out += copy_cases(d, base(3, seed=3), base(94, seed=5, lidar_res_deg=0.5))
     rng = np.random.default_rng(11)
     for s in range(physics_seeds):
         out += physics_cases(base(n_boards, seed=1 + s, lidar_res_deg=lidar_res_deg), f"s{s}", rng)

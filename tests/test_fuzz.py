@@ -41,6 +41,10 @@ def test_file_case(case, tmp_path):
         return
     _, obs = _load(case, tmp_path)
     res = calibrate(obs, "lidarcam")
+    if case.cause:
+        assert case.cause in res.info["verdict"]["causes"], res.info["warnings"]
+    if case.expect == "warned":
+        return
     assert res.ok and is_valid(*pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)), res.reason
     assert res.info["verdict"]["consistent"]
 

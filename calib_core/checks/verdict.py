@@ -11,7 +11,8 @@ Every answer of ``calibrate`` is tested against its observations, whatever the m
   the board (at most a quarter of a
   board's inlier points outside it by more than the tolerance);
 - boards in front of both sensors: every board's centre in front of the camera (its pose alone), and under the
-  answer every board's scan in front of the camera; scan points away from the lidar origin.
+  answer every board's scan in front of the camera; scan points away from the lidar origin;
+- copies (warnings, not contradictions): a board listed twice, a scan that is one point repeated.
 
 A board that fails any test contradicts the answer. ``calib_core.checks.diagnose.judge`` then looks for a likely cause
 (units, mispaired or mirrored scans, scaled board poses). Frames and units as in ``calib_core.data.observations``.
@@ -24,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from ..data.lines import tls_line
+from ..data.lines import MIN_SPREAD_M, tls_line
 from ..data.observations import Observations, ScanData
 from ..data.residuals import outside_outline, points_in_boards, range_residuals
 
@@ -90,7 +91,8 @@ class Verdict:
         consistent: no board contradicts the answer.
         reason: which boards and tests contradict it, by how much (None when consistent).
         warnings: plain-language warnings (data oddities, likely causes of a contradiction).
-        causes: short names of the likely causes found (``units``, ``mispaired``, ``mirrored``, ``scale``).
+        causes: short names of the likely causes found (``units``, ``mispaired``, ``mirrored``, ``scale``,
+            ``duplicated``, ``repeated``).
         sigma_m: the noise std used (metres; line estimate and pose floor in quadrature).
         boards: per board, the test statistics (dicts of plain numbers).
     """
@@ -209,9 +211,27 @@ def _unit_causes(obs: Observations) -> list[tuple[str, str]]:
     return out
 
 
+def copy_causes(obs: Observations, board_ids=None) -> list[tuple[str, str]]:
+    """Copies in the data alone: boards listed more than once (identical pose and scan: each copy counts as a
+    new view, so every method weighs that board twice and its covariance is too small) and scans that are one
+    point repeated (RMS spread under ``MIN_SPREAD_M``). ``board_ids``: the boards' numbers in the messages."""
+    ids = list(range(obs.n_boards)) if board_ids is None else [int(i) for i in board_ids]
+    groups: dict[bytes, list[int]] = {}
+    for i, b in zip(ids, obs.boards, strict=True):
+        groups.setdefault(b.T_cam_board.tobytes() + b"|" + b.scan.tobytes(), []).append(i)
+    dup = ["boards " + " = ".join(map(str, g)) for g in groups.values() if len(g) > 1]
+    out = [("duplicated", f"duplicated boards: {', '.join(dup)} (identical pose and scan, one board listed more than "
+                          "once): each copy counts as another view; remove the copies")] if dup else []
+    for i, b in zip(ids, obs.boards, strict=True):
+        if len(b.scan) > 1 and np.sqrt(np.mean(np.sum((b.scan - b.scan.mean(axis=0)) ** 2, axis=1))) < MIN_SPREAD_M:
+            out.append(("repeated", f"board {i}: its {len(b.scan)} scan points are one point repeated: no line, "
+                                    "its plane is not constrained"))
+    return out
+
+
 def data_warnings(obs: Observations) -> list[str]:
-    """Warnings about the data alone: units (``unit_causes``)."""
-    return [msg for _, msg in unit_causes(obs)]
+    """Warnings about the data alone: units (``unit_causes``), copies (``copy_causes``)."""
+    return [msg for _, msg in unit_causes(obs) + copy_causes(obs)]
 
 
 def orientation_warnings(T: np.ndarray) -> list[tuple[str, str]]:
@@ -236,7 +256,7 @@ def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | 
     if board_ids is not None:
         for st in stats:
             st["board"] = int(board_ids[st["board"]])
-    found = unit_causes(obs) + orientation_warnings(T_lidar_cam)
+    found = unit_causes(obs) + copy_causes(obs, board_ids) + orientation_warnings(T_lidar_cam)
     warnings = [msg for _, msg in found]
     names = tuple(dict.fromkeys(n for n, _ in found))
     bad = [s for s in stats if s["bad"]]

@@ -10,6 +10,8 @@ from .observations import Observations
 from .result import SolveFailure
 
 MIN_LINE_POINTS = 3
+MIN_SPREAD_M = 1e-6
+"""Scan points whose RMS spread about their centroid is below this (metres) are one point repeated: no line."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,8 +44,9 @@ def tls_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
 
 
 def fit_line(points: np.ndarray, *, min_points: int = MIN_LINE_POINTS, min_aspect: float = 3.0) -> ScanLine:
-    """Fit a line to (K,2) ordered points by SVD; refuses fewer than ``min_points`` points or a point cloud
-    that is not line-like (spread along the line less than ``min_aspect`` times the spread across it).
+    """Fit a line to (K,2) ordered points by SVD; refuses fewer than ``min_points`` points, points that are one
+    point repeated (RMS spread under ``MIN_SPREAD_M``) or a point cloud that is not line-like (spread along the
+    line less than ``min_aspect`` times the spread across it).
 
     Raises:
         SolveFailure: with the reason, for too few or degenerate points.
@@ -52,6 +55,9 @@ def fit_line(points: np.ndarray, *, min_points: int = MIN_LINE_POINTS, min_aspec
     if len(P) < min_points:
         raise SolveFailure(f"{len(P)} scan points, at least {min_points} are needed to fit a line")
     c, u, _, s = tls_line(P)
+    if s[0] < MIN_SPREAD_M * np.sqrt(len(P)):
+        raise SolveFailure(f"its {len(P)} scan points are one point repeated (spread {s[0] / np.sqrt(len(P)):.1e} m):"
+                           " no line")
     if s[0] <= 0 or (s[1] > 0 and s[0] < min_aspect * s[1]):
         raise SolveFailure("scan points are not line-like (collinear-degenerate or scattered)")
     if (P[-1] - P[0]) @ u < 0:

@@ -266,10 +266,30 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
                        float(np.sqrt(np.mean(er**2))), cost, nit, converged)
 
 
-def _blocks(obs, T_e, T_b, sc, sr):
-    """Information blocks H_ee (6,6), H_eb (N,6,6), H_bb (N,6,6) of the normalised residuals."""
-    e, Jc, Je, Jb = _weighted(obs, T_e, T_b, sc, sr, True)
-    return _normal_equations(obs, _row_offsets(obs), e, Jc, Je, Jb)[2:]
+def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
+                       range_sigma_m: float) -> np.ndarray:
+    """Each board's Fisher information (N,6,6) about the extrinsic (rotation rad then translation m) with its own
+    pose marginalised: ``H_ee,i - H_ei H_ii^-1 H_ie``. Boards are independent, so the information of a set is the
+    sum over its boards (what a capture planner adds up). ``corner_sigma_px <= 0``: exact board poses, the range
+    model's ``J_i^T J_i / range_sigma_m^2``.
+
+    UncertaintyError when a board's pose is not determined by its corners.
+    """
+    T_e, T_b = np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float)
+    if corner_sigma_px <= 0:
+        _, J = range_residuals(T_e, scan_data_at(obs, T_b), jacobian=True)
+        starts = np.r_[0, np.cumsum([len(b.scan) for b in obs.boards])[:-1]]
+        return np.add.reduceat(np.einsum("ka,kb->kab", J, J), starts) / float(range_sigma_m) ** 2
+    _, Jc, Je, Jb = _weighted(obs, T_e, T_b, float(corner_sigma_px), float(range_sigma_m), True)
+    oc, os = _row_offsets(obs)
+    H_bb = np.add.reduceat(np.einsum("ra,rb->rab", Jc, Jc), oc) + np.add.reduceat(np.einsum("ra,rb->rab", Jb, Jb), os)
+    H_eb = np.add.reduceat(np.einsum("ra,rb->rab", Je, Jb), os)
+    H_ee = np.add.reduceat(np.einsum("ra,rb->rab", Je, Je), os)
+    try:
+        X = np.linalg.solve(H_bb, np.swapaxes(H_eb, 1, 2))          # H_ii^-1 H_ie, (N,6,6)
+    except np.linalg.LinAlgError:
+        raise UncertaintyError("a board's pose is not determined by its corners") from None
+    return H_ee - H_eb @ X
 
 
 def marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
@@ -278,13 +298,7 @@ def marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board:
 
     UncertaintyError when a board's pose or the extrinsic is not determined.
     """
-    H_ee, H_eb, H_bb = _blocks(obs, np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float),
-                               float(corner_sigma_px), float(range_sigma_m))
-    try:
-        X = np.linalg.solve(H_bb, np.swapaxes(H_eb, 1, 2))          # H_ii^-1 H_ie, (N,6,6)
-    except np.linalg.LinAlgError:
-        raise UncertaintyError("a board's pose is not determined by its corners") from None
-    S = H_ee - np.einsum("nab,nbc->ac", H_eb, X)
+    S = board_informations(obs, T_lidar_cam, T_cam_board, corner_sigma_px, range_sigma_m).sum(axis=0)
     return _inverse_information(S, rcond)
 
 
@@ -301,12 +315,7 @@ def joint_crlb(obs: Observations, range_sigma_m: float, corner_sigma_px: float, 
             raise UncertaintyError("no extrinsic given and the observations carry no ground truth")
         T_lidar_cam = obs.T_lidar_cam_true
     T_b = board_poses(obs) if T_cam_board is None else np.asarray(T_cam_board, float)
-    if corner_sigma_px <= 0:
-        data = scan_data_at(obs, T_b)
-        _, J = range_residuals(np.asarray(T_lidar_cam, float), data, jacobian=True)
-        cov = _inverse_information(J.T @ J / range_sigma_m**2, 1e-12)
-    else:
-        cov = marginal_covariance(obs, T_lidar_cam, T_b, corner_sigma_px, range_sigma_m)
+    cov = marginal_covariance(obs, T_lidar_cam, T_b, corner_sigma_px, range_sigma_m)
     return Crlb(sigma_rot_deg(cov), sigma_trans_m(cov), cov)
 
 

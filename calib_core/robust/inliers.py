@@ -83,15 +83,18 @@ def _pairs(K: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(ii), np.concatenate(jj)
 
 
-def robust_line_residuals(points: np.ndarray) -> np.ndarray:
+def robust_line_residuals(points: np.ndarray) -> np.ndarray | None:
     """Range residuals (K,) of a board's points against its robust line: the least-median-of-|residual| line
-    through point pairs, refitted by total least squares on the points within 3 robust stds of it."""
+    through point pairs, refitted by total least squares on the points within 3 robust stds of it; None when
+    no pair of points spans a line (one point repeated: the line fit refuses the board)."""
     P = np.asarray(points, float)
     i, j = _pairs(len(P))
     d = P[j] - P[i]
     n = np.column_stack([-d[:, 1], d[:, 0]])
     ln = np.linalg.norm(n, axis=1)
     ok = ln > 0
+    if not ok.any():
+        return None
     n = n[ok] / ln[ok, None]
     e = line_range_residuals(P, n, np.einsum("lc,lc->l", n, P[i[ok]]))
     med = np.median(np.abs(e), axis=1)

@@ -20,6 +20,7 @@ from .load import IMAGE_SUFFIXES, RESERVED_STEMS, load_dataset
 from .model import BoardSpec, CameraModel, Dataset, DatasetError, Pose, Scan
 from .scans import csv_rows, make_scan, read_keyed_scans, read_scan_csv, same_pose
 from .yaml_files import (
+    board_from_dict,
     camera_from_dict,
     load_board,
     load_camera,
@@ -31,6 +32,6 @@ from .yaml_files import (
 
 __all__ = [
     "IMAGE_SUFFIXES", "RESERVED_STEMS", "BoardSpec", "CameraModel", "Dataset", "DatasetError", "Pose", "Scan",
-    "camera_from_dict", "csv_rows", "load_board", "load_camera", "load_dataset", "load_ground_truth",
+    "board_from_dict", "camera_from_dict", "csv_rows", "load_board", "load_camera", "load_dataset", "load_ground_truth",
     "load_windows", "make_scan", "matrix_field", "read_keyed_scans", "read_scan_csv", "read_yaml", "same_pose",
 ]

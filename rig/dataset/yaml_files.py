@@ -127,7 +127,11 @@ def load_board(path) -> BoardSpec:
     optional ``origin_square`` (``dark`` | ``light``; absent: keep the detector's order). Without ``outline_m``
     the outline is the squares' extent: one square beyond the outer inner corners on every side."""
     path = Path(path)
-    data = read_yaml(path)
+    return board_from_dict(read_yaml(path), path)
+
+
+def board_from_dict(data: dict, path: Path) -> BoardSpec:
+    """A BoardSpec from board.yaml's keys (already parsed); errors name ``path``."""
     try:
         cols, rows = int(_require(data, "cols", path)), int(_require(data, "rows", path))
         square = float(_require(data, "square_m", path))

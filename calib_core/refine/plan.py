@@ -1,0 +1,303 @@
+"""Capture planning: what a board set will give before (or while) it is captured, and which board poses to take
+next, from the Fisher information of the joint model over corners and ranges (``joint.board_informations``).
+
+Parameters and units of a prediction: the extrinsic's ``(w, dt)`` of ``calib_core.data.residuals``: ``w`` a small
+rotation applied on the lidar side, ``R_lidar_cam <- exp([w]x) R_lidar_cam`` (so roll, pitch, yaw are rotations
+about the lidar's x, y, z axes), ``dt`` the change of ``t_lidar_cam`` (x, y, z along the lidar's axes). The
+1-sigma of each is shown in degrees and millimetres. The information of a set of boards is the sum of its boards'
+(each board's own pose marginalised), so a plan is a sum of 6x6 matrices: the greedy search adds, one board at a
+time, the feasible pose that most improves the criterion (D-optimal: the largest log-determinant; or the smallest
+variance of one axis, or of the rotation or translation as a whole).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..checks.degeneracy import AXES, NULL_CONDITIONING, undetermined_directions
+from ..data.observations import MAX_BOARDS, Observations
+from ..errors import LidarcamError
+from .joint import board_informations
+from .plan_views import POSE_FIELDS, REJECTIONS, PlanRig, board_poses_lidar, feasibility, noise_free_views
+from .uncertainty import UncertaintyError, _inverse_information
+
+SIGMA_NAMES = ("roll_deg", "pitch_deg", "yaw_deg", "x_mm", "y_mm", "z_mm")
+"""The per-axis 1-sigma as reported (module docstring)."""
+
+CRITERIA = ("D", "rot", "trans") + AXES
+"""``D``: D-optimal; ``rot`` / ``trans``: the trace of the rotation / translation covariance; an axis name: its
+variance."""
+
+PRIOR_SIGMA = (np.radians(30.0), 3.0)
+"""A weak prior (1-sigma: rotation rad, translation m) that keeps the greedy criterion finite while the set does
+not yet determine every direction; it never enters a reported prediction."""
+
+SCALE_M = 4.0
+"""The lever arm (metres) that turns translations into rotation-like units when the rank of an information is
+judged (the typical range of a board; the degeneracy analysis uses the set's own)."""
+
+MAX_PLAN_BOARDS = 200
+"""The most boards a plan (current + proposed) is extended to while it looks for the target."""
+
+
+class PlanError(LidarcamError):
+    """The planner cannot answer: no feasible board pose in the workspace, or an unknown criterion."""
+
+
+@dataclass(frozen=True, eq=False)
+class Prediction:
+    """The predicted 1-sigma of a board set (module docstring for the parameters).
+
+    Attributes:
+        sigma: (6,) per axis, radians then metres, inf where the set does not determine it.
+        rot_sigma_deg, trans_sigma_mm: roots of the traces of the rotation and translation blocks (inf when any
+            of their axes is inf). covariance: the 6x6 inverse information, None when singular.
+    """
+
+    sigma: np.ndarray
+    rot_sigma_deg: float
+    trans_sigma_mm: float
+    covariance: np.ndarray | None
+
+    def sigma_dict(self) -> dict:
+        """``{"roll_deg": ..., ..., "z_mm": ...}``, None where undetermined."""
+        scale = np.r_[np.full(3, np.degrees(1.0)), np.full(3, 1000.0)]
+        return {k: (float(v) if np.isfinite(v) else None) for k, v in zip(SIGMA_NAMES, self.sigma * scale,
+                                                                          strict=True)}
+
+    def meets(self, target: tuple[float, float]) -> bool:
+        """Both ``rot_sigma_deg <= target[0]`` and ``trans_sigma_mm <= target[1]``."""
+        return self.rot_sigma_deg <= target[0] and self.trans_sigma_mm <= target[1]
+
+
+def predict(information: np.ndarray, scale_m: float = SCALE_M) -> Prediction:
+    """The 1-sigma of the extrinsic under the 6x6 Fisher ``information`` (rotation rad then translation m).
+
+    Where it is singular (an eigenvalue below ``NULL_CONDITIONING**2`` of the largest, translations in units of
+    ``scale_m`` as in the degeneracy analysis), an axis is undetermined when the null space reaches it; the others
+    get the variance of an estimable quantity, ``e^T F^+ e``."""
+    F = 0.5 * (np.asarray(information, float) + np.asarray(information, float).T)
+    D = np.r_[np.ones(3), np.full(3, float(scale_m))]
+    lam, V = np.linalg.eigh(F * np.outer(D, D))
+    null = lam <= NULL_CONDITIONING**2 * lam[-1] if lam[-1] > 0 else np.ones(6, bool)
+    cov = None
+    if not null.any():
+        try:
+            cov = _inverse_information(F, 1e-12)
+        except UncertaintyError:
+            null = lam <= lam[0]
+    if cov is not None:
+        sigma = np.sqrt(np.diag(cov))
+    else:
+        reach = np.sum(V[:, null] ** 2, axis=1) > 1e-9
+        pinv = (V[:, ~null] / lam[~null]) @ V[:, ~null].T * np.outer(D, D)
+        sigma = np.where(reach, np.inf, np.sqrt(np.clip(np.diag(pinv), 0.0, None)))
+    rot = float(np.degrees(np.sqrt(np.sum(sigma[:3] ** 2))))
+    return Prediction(sigma, rot, float(1000.0 * np.sqrt(np.sum(sigma[3:] ** 2))), cov)
+
+
+def set_informations(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float, corner_sigma_px: float,
+                     T_cam_board: np.ndarray | None = None) -> np.ndarray:
+    """(N,6,6) per-board information of a board set at ``T_lidar_cam`` (``joint.board_informations``), in chunks
+    of at most ``MAX_BOARDS``; range-only for boards without corners or with ``corner_sigma_px <= 0``."""
+    T_b = np.array([b.T_cam_board for b in obs.boards]) if T_cam_board is None else np.asarray(T_cam_board, float)
+    sc = corner_sigma_px if obs.has_corners else 0.0
+    return board_informations(obs, T_lidar_cam, T_b, sc, range_sigma_m)
+
+
+def pool(rig: PlanRig) -> tuple[np.ndarray, np.ndarray]:
+    """The feasible workspace grid: poses (M,6) in ``POSE_FIELDS`` units and their information (M,6,6) under
+    the rig's noise. PlanError when no pose is feasible."""
+    grid = rig.workspace.grid()
+    reason, ranges, bearings = feasibility(rig, board_poses_lidar(rig, grid))
+    ok = reason < 0
+    if not ok.any():
+        counts = np.bincount(reason[reason >= 0], minlength=len(REJECTIONS))
+        detail = "; ".join(f"{c} {w}" for c, w in zip(counts, REJECTIONS, strict=True) if c)
+        raise PlanError(f"no board pose of the workspace grid ({len(grid)} poses) is feasible: {detail}")
+    poses, ranges = grid[ok], ranges[ok]
+    T = board_poses_lidar(rig, poses)
+    infos = []
+    for s in range(0, len(poses), MAX_BOARDS):
+        views = noise_free_views(rig, T[s:s + MAX_BOARDS], ranges[s:s + MAX_BOARDS], bearings)
+        infos.append(set_informations(views, rig.T_lidar_cam, rig.range_sigma_m, rig.corner_sigma_px))
+    return poses, np.concatenate(infos)
+
+
+def _scores(S: np.ndarray, C: np.ndarray, criterion: str) -> np.ndarray:
+    """Criterion per candidate for the information ``S + C_m`` (higher is better), a weak prior added."""
+    prior = np.diag(np.r_[np.full(3, PRIOR_SIGMA[0] ** -2), np.full(3, PRIOR_SIGMA[1] ** -2)])
+    A = S[None] + C + prior[None]
+    if criterion == "D":
+        return np.linalg.slogdet(A)[1]
+    cov = np.linalg.inv(A)
+    if criterion == "rot":
+        return -np.trace(cov[:, :3, :3], axis1=1, axis2=2)
+    if criterion == "trans":
+        return -np.trace(cov[:, 3:, 3:], axis1=1, axis2=2)
+    j = AXES.index(criterion)
+    return -cov[:, j, j]
+
+
+def greedy(S0: np.ndarray, candidates: np.ndarray, n: int, criterion: str = "D") -> list[int]:
+    """Indices of ``n`` candidates (each at most once) chosen one at a time to maximise ``criterion`` of
+    ``S0 + sum of the chosen candidates' information`` (``candidates`` (M,6,6))."""
+    if criterion not in CRITERIA:
+        raise PlanError(f"unknown criterion {criterion!r}; one of {', '.join(CRITERIA)}")
+    S, free, out = np.array(S0, float), np.ones(len(candidates), bool), []
+    for _ in range(min(n, len(candidates))):
+        sc = np.where(free, _scores(S, candidates, criterion), -np.inf)
+        k = int(np.argmax(sc))
+        out.append(k)
+        free[k] = False
+        S = S + candidates[k]
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """A capture plan.
+
+    Attributes:
+        current: the prediction of the boards captured so far; current_n: how many.
+        undetermined: the axes (``AXES``) the current set leaves undetermined or weak, and the degeneracy
+            analysis's sentence (``message``); plan_undetermined, plan_message: the same after the proposed boards.
+        poses: (K,6) the proposed poses (``POSE_FIELDS`` units); after: the prediction after each.
+        extension: predictions after each further greedy board beyond K (for the sigma-vs-boards curve);
+        to_target: boards in all (current + proposed) that reach ``target``, None if not within
+            ``MAX_PLAN_BOARDS``. T_lidar_board: (K,4,4) the proposed poses in the lidar frame.
+    """
+
+    current: Prediction
+    current_n: int
+    undetermined: tuple[str, ...]
+    message: str
+    poses: np.ndarray
+    after: tuple[Prediction, ...]
+    extension: tuple[Prediction, ...]
+    to_target: int | None
+    target: tuple[float, float]
+    criterion: str
+    plan_undetermined: tuple[str, ...]
+    plan_message: str
+    T_lidar_board: np.ndarray
+
+
+def name_undetermined(obs: Observations | None, T_lidar_cam: np.ndarray, range_sigma_m: float
+                      ) -> tuple[tuple[str, ...], str]:
+    """The axes a board set leaves undetermined or weak and the degeneracy analysis's sentence
+    (``checks.degeneracy.undetermined_directions`` at the given range noise); all six with no boards."""
+    if obs is None or obs.n_boards == 0:
+        return AXES, "no boards yet: nothing is determined"
+    deg = undetermined_directions(obs, T_lidar_cam, range_sigma_m)
+    return (deg.axes if len(deg.directions) else ()), deg.message()
+
+
+def plan_capture(rig: PlanRig, k: int, *, current: Observations | None = None, current_info: np.ndarray | None = None,
+                 target: tuple[float, float] = (0.1, 5.0), criterion: str = "D") -> Plan:
+    """The next ``k`` board poses for ``rig`` after the boards ``current`` (their per-board information
+    ``current_info`` (N,6,6) at the rig's mounting and noise, e.g. from ``set_informations``), and how many boards
+    reach ``target`` = (rotation deg, translation mm) of ``rot_sigma_deg`` and ``trans_sigma_mm``."""
+    poses, C = pool(rig)
+    S0 = np.zeros((6, 6)) if current_info is None or not len(current_info) else np.sum(current_info, axis=0)
+    n0 = 0 if current is None else current.n_boards
+    more = max(k, MAX_PLAN_BOARDS - n0)
+    order = greedy(S0, C, more, criterion)
+    cum = S0[None] + np.cumsum(C[order], axis=0)
+    preds = [predict(F) for F in cum]
+    now = predict(S0)
+    reached = [i for i, p in enumerate([now] + preds) if p.meets(target)]
+    chosen = order[:k]
+    T_new = board_poses_lidar(rig, poses[chosen])
+    names, msg = name_undetermined(current, rig.T_lidar_cam, rig.range_sigma_m)
+    planned = _with(current, rig, T_new)
+    p_names, p_msg = name_undetermined(planned, rig.T_lidar_cam, rig.range_sigma_m)
+    return Plan(now, n0, names, msg, poses[chosen], tuple(preds[:k]), tuple(preds[k:]),
+                n0 + reached[0] if reached else None, tuple(target), criterion, p_names, p_msg, T_new)
+
+
+def _with(current: Observations | None, rig: PlanRig, T_lidar_board: np.ndarray) -> Observations | None:
+    """The current boards (if any) and noise-free views of ``T_lidar_board``, at most ``MAX_BOARDS``."""
+    if not len(T_lidar_board):
+        return current
+    _, ranges, bearings = feasibility(rig, T_lidar_board)
+    new = noise_free_views(rig, T_lidar_board, ranges, bearings)
+    if current is None:
+        return new
+    boards = (current.boards + new.boards)[:MAX_BOARDS]
+    return Observations(boards, rig.T_lidar_cam, {}, current.camera or rig.camera)
+
+
+def pose_dict(pose: np.ndarray) -> dict:
+    """``{"distance_m": ..., ..., "roll_deg": ...}`` of one planner pose (6,)."""
+    return {k: round(float(v), 4) for k, v in zip(POSE_FIELDS, pose, strict=True)}
+
+
+def _pred_dict(p: Prediction) -> dict:
+    finite = {k: (float(v) if np.isfinite(v) else None) for k, v in (("rot_sigma_deg", p.rot_sigma_deg),
+                                                                      ("trans_sigma_mm", p.trans_sigma_mm))}
+    return {**finite, "sigma": p.sigma_dict()}
+
+
+def plan_to_dict(plan: Plan) -> dict:
+    """JSON-able plan: ``current`` (``rot_sigma_deg``, ``trans_sigma_mm``, ``sigma`` per axis, ``undetermined``)
+    and ``next`` (each proposed pose with the predicted sigmas after it); None where a sigma is undetermined."""
+    nxt = [{"pose": pose_dict(q), "T_lidar_board": np.round(T, 6).tolist(), "boards": plan.current_n + i + 1,
+            **_pred_dict(p)} for i, (q, T, p) in enumerate(zip(plan.poses, plan.T_lidar_board, plan.after,
+                                                                 strict=True))]
+    return {"schema": "lidarcam.plan/1", "criterion": plan.criterion,
+            "target": {"rot_sigma_deg": plan.target[0], "trans_sigma_mm": plan.target[1]},
+            "boards_to_target": plan.to_target, "verdict": verdict(plan),
+            "current": {**_pred_dict(plan.current), "undetermined": list(plan.undetermined)},
+            "current_boards": plan.current_n, "current_message": plan.message,
+            "next": nxt, "after_next": {"undetermined": list(plan.plan_undetermined), "message": plan.plan_message}}
+
+
+AXIS_WORDS = {"roll": "roll", "pitch": "pitch", "yaw": "yaw", "x": "x", "y": "y", "z": "height (z)"}
+
+
+def describe_pose(pose: np.ndarray) -> str:
+    """An operator's words for a planner pose: ``3.0 m at bearing +10 deg, lean +40 deg, turn -40 deg``."""
+    d = pose_dict(pose)
+    words = [f"{d['distance_m']:.1f} m away at bearing {d['bearing_deg']:+.0f} deg"]
+    if d["height_m"]:
+        words.append(f"centre {d['height_m']:+.2f} m above the scan plane")
+    words.append(f"top leaned {'back' if d['lean_deg'] >= 0 else 'forward'} {abs(d['lean_deg']):.0f} deg")
+    words.append(f"turned {abs(d['turn_deg']):.0f} deg {'left' if d['turn_deg'] >= 0 else 'right'}")
+    if d["roll_deg"]:
+        words.append(f"rolled {d['roll_deg']:+.0f} deg in its plane")
+    return ", ".join(words)
+
+
+def weakest_axis(p: Prediction, target: tuple[float, float]) -> tuple[str, str]:
+    """The axis farthest above its share of ``target`` (each axis ``target / sqrt(3)``) and its 1-sigma in words."""
+    share = np.r_[np.full(3, np.radians(target[0])), np.full(3, target[1] / 1000.0)] / np.sqrt(3.0)
+    j = int(np.argmax(np.where(np.isfinite(p.sigma), p.sigma / share, np.inf)))
+    s = p.sigma[j]
+    value = "undetermined" if not np.isfinite(s) else f"{np.degrees(s):.2f} deg" if j < 3 else f"{1000 * s:.0f} mm"
+    return AXES[j], value
+
+
+def verdict(plan: Plan) -> str:
+    """One sentence on what the current boards give and what to add (the next poses of the plan)."""
+    add = "; ".join(describe_pose(q) for q in plan.poses[:2])
+    n_add = min(2, len(plan.poses))
+    if plan.undetermined:
+        what = ", ".join(AXIS_WORDS[a] for a in plan.undetermined)
+        head = f"{what} {'is' if len(plan.undetermined) == 1 else 'are'} not determined or weak"
+    else:
+        axis, value = weakest_axis(plan.current, plan.target)
+        head = (f"{plan.current_n} boards give 1-sigma {plan.current.rot_sigma_deg:.2f} deg, "
+                f"{plan.current.trans_sigma_mm:.0f} mm; the weakest is {AXIS_WORDS[axis]} ({value})")
+        if plan.current.meets(plan.target):
+            return head + f": the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm) is met"
+    tail = "" if plan.to_target is None else f" ({plan.to_target} boards in all reach {plan.target[0]:g} deg, " \
+        f"{plan.target[1]:g} mm)"
+    return f"{head}: add {n_add} board{'s' if n_add > 1 else ''}: {add}{tail}"
+
+
+__all__ = ["CRITERIA", "POSE_FIELDS", "Plan", "PlanError", "PlanRig", "Prediction", "SIGMA_NAMES", "describe_pose",
+           "greedy", "name_undetermined", "plan_capture", "plan_to_dict", "pool", "predict", "set_informations",
+           "verdict"]
