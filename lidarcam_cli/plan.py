@@ -75,7 +75,7 @@ def print_plan(rig, plan) -> None:
 
     cur = plan.current
     print(f"current: {plan.current_n} boards; range noise {1000 * rig.range_sigma_m:.1f} mm, corner noise "
-          f"{rig.corner_sigma_px:g} px")
+          f"{rig.corner_sigma_px:.2g} px")
     print("  1-sigma: rotation " + ("undetermined" if not np.isfinite(cur.rot_sigma_deg) else
                                    f"{cur.rot_sigma_deg:.3f} deg") + ", translation "
           + ("undetermined" if not np.isfinite(cur.trans_sigma_mm) else f"{cur.trans_sigma_mm:.1f} mm"))

@@ -33,6 +33,7 @@ def cmd_extract(args) -> int:
     from calib_core.data.io import save_observations
     from rig.dataset import DatasetError, load_dataset
     from rig.extract import extract, format_diagnostics
+    from rig.report import capture_verdict
 
     ds = load_dataset(args.dataset)
     obs, diags = extract(ds, _options(args))
@@ -44,6 +45,7 @@ def cmd_extract(args) -> int:
         raise DatasetError("no usable pose (see the skip reasons above)", file=args.dataset)
     save_observations(obs, args.out)
     print(f"wrote {args.out} ({obs.n_boards} boards)")
+    print(f"capture plan: {capture_verdict(obs)}")
     return 0
 
 

@@ -112,25 +112,31 @@ DEFAULT_CORNER_SIGMA_PX = 0.5
 """Corner noise the capture verdict assumes when the extraction recorded no reprojection RMS."""
 
 
-def plan_verdict_md(observations: Observations, T_lidar_cam: np.ndarray) -> list[str]:
-    """The capture planner's verdict on the boards captured (``calib_core.refine.plan.verdict``) at the calibrated
-    extrinsic: range noise from the scan lines, corner noise from the extraction's median reprojection RMS."""
+def capture_verdict(observations: Observations, T_lidar_cam: np.ndarray | None = None) -> str:
+    """The capture planner's verdict on the boards captured (``calib_core.refine.plan.verdict``) at ``T_lidar_cam``
+    (None: the ``lidarcam`` calibration of the boards), with the noise it assumed: range noise from the scan
+    lines, corner noise the extraction's median reprojection RMS (else ``DEFAULT_CORNER_SIGMA_PX``)."""
+    from calib_core import calibrate
     from calib_core.refine.plan import plan_capture, set_informations, verdict
     from calib_core.refine.plan_views import rig_from_observations
     from calib_core.refine.uncertainty import scan_noise_estimate
 
-    head = ["## Capture plan", ""]
     try:
+        if T_lidar_cam is None:
+            res = calibrate(observations)
+            if not res.ok:
+                return f"no plan: the calibration failed ({res.reason})"
+            T_lidar_cam = res.T_lidar_cam
         sr = scan_noise_estimate(observations)
         rp = [v for v in (observations.meta or {}).get("reproj_rms_px") or [] if v is not None]
         sc = (float(np.median(rp)) if rp else DEFAULT_CORNER_SIGMA_PX) if observations.has_corners else 0.0
         rig = rig_from_observations(observations, T_lidar_cam, sr, sc)
-        plan = plan_capture(rig, 2, current=observations, current_info=set_informations(observations, T_lidar_cam,
-                                                                                           sr, sc))
+        plan = plan_capture(rig, 2, current=observations,
+                            current_info=set_informations(observations, T_lidar_cam, sr, sc))
     except (LidarcamError, ValueError) as err:
-        return head + [f"No plan: {err}", ""]
-    return head + [f"{verdict(plan)}. (Assumed noise: range {1000 * sr:.1f} mm, corners {sc:g} px; `lidarcam plan "
-                   "--from OBS.json` gives the whole plan.)", ""]
+        return f"no plan: {err}"
+    return (f"{verdict(plan)}. (Assumed noise: range {1000 * sr:.1f} mm, corners {sc:.2g} px; `lidarcam plan "
+            "--from OBS.json` gives the whole plan.)")
 
 
 def _mounting_md(res: dict) -> list[str]:
@@ -342,7 +348,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
         md += ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""]
     summary.warnings = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
-    md += plan_verdict_md(observations, T)
+    md += ["## Capture plan", "", capture_verdict(observations, T), ""]
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
     summary.markdown.write_text("\n".join(md) + "\n")
     return summary

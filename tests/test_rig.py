@@ -320,6 +320,7 @@ def test_cli_extract_and_report(rig, tmp_path, capsys):
     assert main(["extract", str(ds.root), "--out", str(out), "--range-sigma", "0.01"]) == 0
     text = capsys.readouterr().out
     assert "6 of 6 poses used" in text and out.exists()
+    assert "capture plan: 6 boards give 1-sigma" in text and "add 2 boards" in text
     from calib_core.data.io import load_observations
 
     obs2 = load_observations(out)
