@@ -81,8 +81,10 @@ def msac_select(obs: Observations, cands, threshold: float = MSAC_THRESHOLD_PER_
     return j, np.flatnonzero(inl[j]), float(cost[j])
 
 
-MSAC_SOLVER = {"real_parts": True}
-"""The authors' P3P keeps the real part of every complex root (``unique(real(roots(...)))``)."""
+MSAC_SOLVER = {"solver": "vasconcelos_dual", "real_parts": True}
+"""The authors' P3P keeps the real part of every complex root (``unique(real(roots(...)))``); the candidates such a
+root yields depend on the formulation, so they are built in the authors' dual-space one
+(``solvers/vasconcelos_dual.py``; its exact solutions are ``solvers/vasconcelos.py``'s)."""
 
 
 def _msac(obs: Observations, threshold: float, solver_options: dict):

@@ -34,7 +34,7 @@ class CandidateSet:
         return f"{len(self.triples)} triples, no real solution" + (f" ({'; '.join(parts)})" if parts else "")
 
 
-MINIMAL_SOLVERS = ("vasconcelos", "zhou2014")
+MINIMAL_SOLVERS = ("vasconcelos", "zhou2014", "vasconcelos_dual")
 """The minimal solvers (modules of this package, each with ``solve_triples(n, d, p, u, **options)``)."""
 
 
@@ -50,6 +50,8 @@ def minimal_candidates(obs: Observations, solver: str = "vasconcelos", **solver_
     # the solver modules are the heavy part: load on use
     if solver == "zhou2014":
         from .zhou2014 import solve_triples
+    elif solver == "vasconcelos_dual":
+        from .vasconcelos_dual import solve_triples
     else:
         from .vasconcelos import solve_triples
 
