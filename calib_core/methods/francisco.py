@@ -107,9 +107,9 @@ def vasconcelos_msac(obs: Observations, *, threshold: float = MSAC_THRESHOLD_PER
 
     Reproduced from their MATLAB: units (mm) and the z = 10 mm frame of the error (``msac_errors``), the
     threshold 1e-5 per mm, the triple's own boards always inliers, the MSAC cost and its ties
-    (``msac_select``), and real parts of complex P3P roots as candidates (``MSAC_SOLVER``).  The code's board
-    count (``length(Tp)`` of a 4x4xN array, wrong for N = 3) is taken as N.  Its answer is expressed in our frame
-    (scan plane z = 0, metres).
+    (``msac_select``), and real parts of complex P3P roots as candidates, built in the authors' dual formulation
+    (``MSAC_SOLVER``).  The code's board count (``length(Tp)`` of a 4x4xN array, wrong for N = 3) is taken as N.
+    Its answer is expressed in our frame (scan plane z = 0, metres).
     """
     return _msac(obs, threshold, solver_options)
 
@@ -145,8 +145,8 @@ def zhou2014(obs: Observations, **solver_options):
 
 FRANCISCO_METHODS = (
     Method("vasconcelos_msac", vasconcelos_msac, 3, VASC_CITE + " (the authors' MATLAB)",
-           "the authors' code: minimal solutions of all triples (real parts of complex roots kept), MSAC on the "
-           "dual-space plane-line error (threshold 1e-5 per mm)", cost=EXHAUSTIVE),
+           "the authors' code: minimal solutions of all triples in its dual formulation (real parts of complex roots "
+           "kept), MSAC on the dual-space plane-line error (threshold 1e-5 per mm)", cost=EXHAUSTIVE),
     Method("vasconcelos_msac_refined", vasconcelos_msac_refined, 3, VASC_CITE + " (the authors' MATLAB)",
            "the authors' code's default output: vasconcelos_msac refined on range residuals of its inlier boards",
            cost=EXHAUSTIVE),
