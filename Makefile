@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
 .DEFAULT_GOAL := help
-.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard verify-results search-paper robustness plan-check clean
+.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard verify-results search-paper robustness plan-check clean clean-results
 
 help: ## List the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
@@ -59,8 +59,11 @@ real-data: $(STAMP) ## The three public rigs end to end, write results/real/ (RE
 leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v1.yaml -> results/leaderboard/ (FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
 	$(PY) -m experiments.leaderboard $(if $(FULL),--full) $(ARGS)
 
-verify-results: $(STAMP) ## Check that every stored trial chunk under results/ parses in full
+verify-results: $(STAMP) ## Check that every stored trial chunk under results/ parses in full; list reports stale against the code
 	$(PY) -m experiments.verify results
+
+clean-results: ## Empty the trial stores under results/ (results/*/trials: every row is recomputed on the next run)
+	rm -rf results/*/trials
 
 robustness: $(STAMP) ## Wrong boards, outlier points, mixed pixels (experiment=outliers), write results/outliers/
 	$(PY) -m experiments.outliers

@@ -23,10 +23,13 @@ RESULT_COLUMNS = (
     "trial", "method", "ok", "reason", "e_R_deg", "e_t_m", "valid", "n_candidates", "true_among_candidates",
     "some_candidate_valid", "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds",
     "crlb_rot_deg", "crlb_trans_mm", "conditioning", "nees", "sigma_rot_deg", "sigma_trans_mm",
-    "n_wrong", "n_rejected", "wrong_caught", "good_lost",
+    "n_wrong", "n_rejected", "wrong_caught", "good_lost", "code",
 )
 # Columns that legitimately differ between two runs of the same settings (wall time).
 TIMING_COLUMNS = ("seconds",)
+CODE_COLUMN = RESULT_COLUMNS[-1]
+"""The column holding the fingerprint of the code that computed a row (``experiments.fingerprint``), written by
+the runner, last in every row; rows stored without it are stale (recomputed), not damaged."""
 
 
 class RunnerError(RuntimeError):

@@ -28,6 +28,7 @@ import pandas as pd  # noqa: E402
 
 from .aggregate import summarise, write_tables  # noqa: E402
 from .catalog import PAPER_METHODS, method_colour, method_label, method_order  # noqa: E402
+from .fingerprint import write_stamped
 from .reproduce import experiment_cells  # noqa: E402
 from .runner import run_cells  # noqa: E402
 from .store import load_cell  # noqa: E402
@@ -159,7 +160,7 @@ def corner_noise(trials: int = 100, boards_trials: int = 100, results_dir: str =
     lines += noise_section(s_noise, share, draw_corner_noise(s_noise, out / "figures"))
     lines += boards_section(s_boards, draw_corner_boards(s_boards, out / "figures"))
     report = out / "REPORT.md"
-    report.write_text("\n".join(lines))
+    write_stamped(report, "\n".join(lines))
     return {"report": report, "total_s": time.perf_counter() - t0}
 
 

@@ -29,6 +29,7 @@ from calib_core.methods.ablations import ABLATIONS, INVARIANT, SCALE_ONLY  # noq
 
 from .aggregate import summarise, write_tables  # noqa: E402
 from .catalog import method_colour, method_label, method_order  # noqa: E402
+from .fingerprint import write_stamped
 from .reproduce import experiment_cells  # noqa: E402
 from .runner import run_cells  # noqa: E402
 from .store import load_cell  # noqa: E402
@@ -251,7 +252,7 @@ def explain(ablation_trials: int = 1000, sens_trials: int = 40, results_dir: str
         fit.to_csv(out / "fit_to_paper.csv", index=False, float_format="%.6g")
         lines += fit_section(fit)
     report = out / "REPORT.md"
-    report.write_text("\n".join(lines))
+    write_stamped(report, "\n".join(lines))
     paper = Path(results_dir) / "paper" / "REPORT.md"
     if paper.exists() and "explain/REPORT.md" not in paper.read_text():
         with paper.open("a") as f:

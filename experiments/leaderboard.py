@@ -38,6 +38,7 @@ from calib_core.registry import METHODS, get_method
 from .aggregate import summarise
 from .cell import Cell, resolve_methods
 from .config import register_configs
+from .fingerprint import write_stamped
 from .leaderboard_table import figure, leaderboard_table, markdown_table, real_table
 from .reproduce import CONF_DIR, experiment_cells
 from .runner import run_cells
@@ -199,7 +200,7 @@ def run_leaderboard(suite_file: str | Path = DEFAULT_SUITE, *, full: bool = Fals
             "full": full, "overrides": list(overrides), "real": sorted(real_rows),
             "suite_overrides": {s.name: list(s.overrides) for s in suites}}
     report = out / "REPORT.md"
-    report.write_text(build_report(table, real_table(real_rows), info, crlb))
+    write_stamped(report, build_report(table, real_table(real_rows), info, crlb))
     return {"out": out, "report": report, **info, "total_s": time.perf_counter() - t0}
 
 

@@ -32,6 +32,7 @@ from .claims import (
     reading_fit,
 )
 from .figures import PAPER_SWEEPS
+from .fingerprint import write_stamped
 from .objective import load_search_conf, objective_lines, score
 from .report_tables import method_table, valid_cell
 from .search import SPACE_KEYS, sensitivity_ranges
@@ -299,7 +300,7 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
 
 def write_matched_report(tables: str | Path, preset: str, search_dir: str | Path) -> Path:
     path = Path(tables) / "REPORT.md"
-    path.write_text(build(Path(tables), preset, Path(search_dir)))
+    write_stamped(path, build(Path(tables), preset, Path(search_dir)))
     return path
 
 

@@ -22,6 +22,7 @@ import pandas as pd
 
 from .aggregate import write_tables
 from .catalog import method_colour, method_label, method_order
+from .fingerprint import write_stamped
 from .reproduce import experiment_cells
 from .runner import run_cells
 from .store import load_cell
@@ -131,7 +132,7 @@ def run(trials: int, results_dir: str, n_jobs: int, chunk_size: int = 0, compute
     summary.to_csv(out / "robustness_outliers.csv", index=False, float_format="%.6g")
     draw(summary, out)
     n = int(summary["n_trials"].min()) if len(summary) else 0
-    (out / "REPORT.md").write_text(report(summary, n, f"python -m experiments.outliers --trials {trials}"))
+    write_stamped(out / "REPORT.md", report(summary, n, f"python -m experiments.outliers --trials {trials}"))
     return out
 
 

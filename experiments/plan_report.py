@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .fingerprint import write_stamped
+
 TOLERANCE = 0.2
 """The prediction holds when the empirical RMS is within this fraction of the predicted sigma."""
 
@@ -103,5 +105,5 @@ def write_report(out: Path, summary: dict) -> Path:
     md += ["", "## Vertical boards, before any data", "",
            f"The same rig with a workspace of vertical boards (lean 0, turn +-40 deg), {v['boards']} planned "
            f"boards: the planner names **{', '.join(v['undetermined']) or 'nothing'}**:", "", f"> {v['message']}", ""]
-    (out / "REPORT.md").write_text("\n".join(md) + "\n")
+    write_stamped(out / "REPORT.md", "\n".join(md) + "\n")
     return out / "REPORT.md"

@@ -36,6 +36,7 @@ from .claims import (
     reading_fit,
 )
 from .figures import PAPER_SWEEPS
+from .fingerprint import write_stamped
 from .report_tables import error_cell, method_table, valid_cell
 
 
@@ -264,7 +265,7 @@ def build_report(tables: str | Path) -> str:
 
 def write_report(tables: str | Path) -> Path:
     path = Path(tables) / "REPORT.md"
-    path.write_text(build_report(tables))
+    write_stamped(path, build_report(tables))
     return path
 
 

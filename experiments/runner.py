@@ -21,25 +21,34 @@ import pandas as pd
 
 from calib_core.plugins import load_plugins
 
-from .cell import Cell
-from .store import load_cell, pending, prepare_cell, write_chunk
+from .cell import CODE_COLUMN, Cell, RunnerError
+from .fingerprint import method_codes, refresh_plugins, rerun_message
+from .store import load_cell, pending, prepare_cell, prune_stale, write_chunk
 from .trial import TrialFn, simulate_trial
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def _run_chunk(trial_fn: TrialFn, cell: Cell, trials: Sequence[int], methods: Sequence[str],
-               search_path: Sequence[str] = ()):
-    """One chunk of trials. ``search_path`` is the parent's ``sys.path``: a reused worker may have started
-    before a plugin's folder joined it, so the worker takes the parent's path before loading the plugins."""
+               codes: dict[str, str] | None = None, search_path: Sequence[str] = ()):
+    """One chunk of trials, every row stamped with the fingerprint of the code that computed it. ``codes``: the
+    parent's fingerprints; a worker running other code (started before an edit) refuses rather than mislabel
+    rows. ``search_path`` is the parent's ``sys.path``: a reused worker may have started before a plugin's
+    folder joined it, so the worker takes the parent's path before loading the plugins."""
     missing = [p for p in search_path if p not in sys.path]
     if missing:
         sys.path[:0] = missing
         importlib.invalidate_caches()
     load_plugins(cell.plugins)  # a worker process starts with the package's methods only (idempotent)
+    refresh_plugins(cell.plugins)
+    mine = method_codes(methods)
+    if codes is not None and any(mine[m] != codes[m] for m in methods):
+        diff = [f"{m}: {mine[m]} here, {codes[m]} in the parent" for m in methods if mine[m] != codes[m]]
+        raise RunnerError(f"a worker process runs other code than the sweep ({'; '.join(diff)}): the code changed "
+                          "while this process was running; start a new process")
     rows = []
     for t in trials:
-        rows.extend(trial_fn(cell, t, methods))
+        rows.extend({**r, CODE_COLUMN: mine[r["method"]]} for r in trial_fn(cell, t, methods))
     return cell, tuple(trials), tuple(methods), rows
 
 
@@ -82,13 +91,16 @@ def run_cells(cells: Sequence[Cell], *, n_jobs: int = -1, chunk_size: int = 0, p
     (0: automatic) are the unit of work and of writing. ``n_jobs=1`` runs in this process.
     """
     workers = n_workers(n_jobs)
-    for cell in cells:
-        prepare_cell(cell)
+    label = label or ", ".join(sorted({c.sweep for c in cells}))
+    codes, stale, why = _prune(cells)
     total_trials = sum(c.n_trials for c in cells)
     size = chunk_size if chunk_size > 0 else auto_chunk_size(total_trials, workers)
-    tasks = [(cell, ts, ms) for cell in cells for ts, ms in pending(cell, size)]
-    bar = _Progress(sum(len(ts) for _, ts, _ in tasks), label or ", ".join(sorted({c.sweep for c in cells})),
-                    progress)
+    tasks = [(cell, ts, ms, code) for cell, code in zip(cells, codes, strict=True) for ts, ms in pending(cell, size)]
+    todo = sum(len(ts) * len(ms) for _, ts, ms, _ in tasks)
+    reused = sum(c.n_trials * len(c.methods) for c in cells) - todo
+    if progress or reused or stale:
+        print(f"{label}: {rerun_message(reused, stale, why, todo - sum(stale.values()))}", file=sys.stderr)
+    bar = _Progress(sum(len(ts) for _, ts, _, _ in tasks), label, progress)
     try:
         if workers == 1 or len(tasks) <= 1:
             results: Iterable = (_run_chunk(trial_fn, *task) for task in tasks)
@@ -107,6 +119,25 @@ def run_cells(cells: Sequence[Cell], *, n_jobs: int = -1, chunk_size: int = 0, p
     frames = [load_cell(c) for c in cells]
     frames = [f for f in frames if not f.empty]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def _prune(cells: Sequence[Cell]):
+    """Prepare every cell, take the current code fingerprints of its methods (plugins whose file changed are
+    reloaded first) and remove the rows another code computed. Returns the fingerprints of each cell and the
+    removed rows and their reasons per method."""
+    stale: dict[str, int] = {}
+    why: dict[str, set] = {}
+    codes = []
+    for cell in cells:
+        prepare_cell(cell)
+        load_plugins(cell.plugins)
+        refresh_plugins(cell.plugins)
+        codes.append(method_codes(cell.methods))
+        removed, reasons = prune_stale(cell, codes[-1])
+        for m, n in removed.items():
+            stale[m] = stale.get(m, 0) + n
+            why.setdefault(m, set()).update(reasons[m])
+    return codes, {m: n for m, n in stale.items() if n}, why
 
 
 def _consume(results: Iterable, bar: _Progress) -> None:

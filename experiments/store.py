@@ -17,7 +17,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from .cell import RESULT_COLUMNS, Cell, RunnerError
+from .cell import CODE_COLUMN, RESULT_COLUMNS, Cell, RunnerError
+from .fingerprint import changed_parts
 
 
 def read_table(path: Path, text_columns: Sequence[str] = ("reason",)) -> pd.DataFrame:
@@ -55,9 +56,11 @@ def _read_chunk(path: Path) -> pd.DataFrame:
         df = read_table(path)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
         raise damaged(f"does not parse: {str(exc).splitlines()[0][:120]}") from None
-    missing = [c for c in RESULT_COLUMNS if c not in df.columns]
+    missing = [c for c in RESULT_COLUMNS if c not in df.columns and c != CODE_COLUMN]
     if missing:
         raise damaged(f"missing columns {missing[:4]}")
+    if CODE_COLUMN in df and not df[CODE_COLUMN].map(lambda v: isinstance(v, str) and ":" in v).all():
+        raise damaged(f"a row without its {CODE_COLUMN!r} (cut short?)")
     first, last = int(m.group(1)), int(m.group(2))
     trial = pd.to_numeric(df["trial"], errors="coerce")
     if trial.isna().any() or not (trial == trial.round()).all():
@@ -177,6 +180,36 @@ def prepare_cell(cell: Cell) -> None:
         os.replace(tmp, settings)
 
 
+def prune_stale(cell: Cell, codes: dict[str, str]) -> tuple[dict[str, int], dict[str, set]]:
+    """Remove from the chunk files of ``cell`` the rows of the methods in ``codes`` that another code computed
+    (``code`` column absent or different), so that they are recomputed and never mixed with fresh rows; a chunk
+    keeps its other methods' rows under its new methods hash. Returns, per method, the rows removed among the
+    cell's trials and why (the fingerprint parts that changed)."""
+    removed: dict[str, int] = {}
+    why: dict[str, set] = {}
+    for f in sorted(cell.dir.glob("chunk-*.csv")):
+        try:
+            df = _read_chunk(f)
+        except DamagedChunk:
+            continue  # pending() moves damaged chunks aside first
+        code = df[CODE_COLUMN] if CODE_COLUMN in df else pd.Series([None] * len(df), index=df.index)
+        stale_rows = df["method"].isin(list(codes)) & (code != df["method"].map(codes))
+        if not stale_rows.any():
+            continue
+        stale = set(df.loc[stale_rows, "method"])
+        for m in stale:
+            rows = df["method"] == m
+            removed[m] = removed.get(m, 0) + int((rows & (df["trial"] < cell.n_trials)).sum())
+            why.setdefault(m, set()).update(*(changed_parts(c, codes[m]) for c in code[rows].unique()))
+        keep = df[~df["method"].isin(stale)]
+        m = _CHUNK_NAME.match(f.name)
+        if not keep.empty:
+            _write_atomic(keep, f.with_name(f"chunk-{m.group(1)}-{m.group(2)}-"
+                                            f"{methods_tag(list(dict.fromkeys(keep['method'])))}.csv"))
+        f.unlink()
+    return removed, why
+
+
 def pending(cell: Cell, chunk_size: int) -> list[tuple[int, ...] | tuple]:
     """(trials, methods) tasks still to run for ``cell``: consecutive trials missing the same methods."""
     df = load_cell_dir(cell.dir, heal=True)
@@ -191,4 +224,3 @@ def pending(cell: Cell, chunk_size: int) -> list[tuple[int, ...] | tuple]:
         else:
             tasks.append(([t], missing))
     return [(tuple(ts), ms) for ts, ms in tasks]
-

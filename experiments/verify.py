@@ -1,9 +1,11 @@
-"""Check a results store: every chunk file parses in full (see ``experiments.store.verify_store``).
+"""Check a results folder: every chunk file of its stores parses in full (``experiments.store.verify_store``), and
+every generated ``REPORT.md`` under it states a code fingerprint equal to the current code's
+(``experiments.fingerprint.report_staleness``).
 
     python -m experiments.verify [results_dir] [--sweep NAME]
 
-Prints one line per problem and exits 1 when there is any (0 when the store is sound). A rerun of the sweep
-recomputes the trials of a damaged chunk.
+Prints one line per problem (damaged chunk, stale report) and exits 1 when there is any (0 when all is sound). A
+rerun of the sweep recomputes the trials of a damaged chunk; rerunning the report's command regenerates it.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from .fingerprint import report_staleness
 from .store import verify_store
 
 
@@ -25,6 +28,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {args.results_dir}: not a folder", file=sys.stderr)
         return 2
     problems = verify_store(args.results_dir, args.sweep)
+    root = Path(args.results_dir) / (args.sweep or "")
+    reports = sorted(p for p in root.rglob("REPORT.md") if "trials" not in p.parts)
+    problems += [f"{p}: stale report: {why}" for p in reports if (why := report_staleness(p))]
     for p in problems:
         print(p)
     print(f"{len(problems)} problem(s) in {args.results_dir}" + (f" ({args.sweep})" if args.sweep else ""),

@@ -7,7 +7,7 @@ import sys
 
 from calib_core.errors import LidarcamError
 
-from . import bag, plan, rig, simulate
+from . import bag, importer, plan, rig, simulate
 
 
 def _cmd_methods(args) -> int:
@@ -169,6 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=_cmd_calibrate)
     simulate.add_parsers(sub)
     rig.add_parsers(sub)
+    importer.add_parsers(sub)
     bag.add_parsers(sub)
     plan.add_parsers(sub)
     return p

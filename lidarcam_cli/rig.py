@@ -1,19 +1,37 @@
-"""CLI verbs for real rigs: ``lidarcam extract DATASET --out obs.json`` and ``lidarcam report DATASET RESULT``.
+"""CLI verbs for real rigs: ``lidarcam import FORMAT SRC ... --out DATASET_OR_OBS``, ``lidarcam extract DATASET --out
+obs.json`` and ``lidarcam report DATASET_OR_OBS RESULT``.
 
-``add_parsers(subparsers)`` registers both verbs; each handler returns the exit code. Bad input raises a
-LidarcamError, which ``lidarcam_cli.main`` prints as one line and exits 2.
+``add_parsers(subparsers)`` registers the verbs; each handler returns the exit code. Bad input raises a
+LidarcamError, which ``lidarcam_cli.main`` prints as one line and exits 2. The assembling is ``rig.importing``'s
+(``make real-data`` uses the same functions).
 """
 
 from __future__ import annotations
 
 import argparse
 
+from calib_core.data.observations import OUTLINE_KINDS
+from rig.extract_options import CURVATURE_CHI2
+
 
 def _options(args):
     from rig.extract import ExtractOptions
 
     return ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma,
-                          max_reproj_px=args.max_reproj)
+                          max_reproj_px=args.max_reproj, outline_kind=args.outline_kind,
+                          max_curvature_chi2=args.max_curvature_chi2, max_board_m=args.max_board)
+
+
+def _dataset(args):
+    """The dataset folder, its camera refitted from its images with ``--refit-intrinsics`` (the fit printed)."""
+    from rig.dataset import load_dataset
+    from rig.intrinsics import format_intrinsics, refit_camera
+
+    ds = load_dataset(args.dataset)
+    if args.refit_intrinsics:
+        ds, fit = refit_camera(ds)
+        print("intrinsics refitted from the images: " + format_intrinsics(fit)[0])
+    return ds
 
 
 def _add_extract_options(p: argparse.ArgumentParser) -> None:
@@ -23,6 +41,16 @@ def _add_extract_options(p: argparse.ArgumentParser) -> None:
                    help="lidar range noise, 1 sigma, metres (default: %(default)s)")
     p.add_argument("--max-reproj", type=float, default=2.0, metavar="PX",
                    help="reject a board whose corner reprojection RMS exceeds this (default: %(default)s px)")
+    p.add_argument("--outline-kind", choices=OUTLINE_KINDS, default="exact",
+                   help="what board.yaml's outline is: the board's edge (exact, default), a lower bound (the "
+                   "printed pattern on a larger board: the scan may run past it) or none (not known)")
+    p.add_argument("--refit-intrinsics", action="store_true",
+                   help="fit the camera from the dataset's own images instead of camera.yaml (rough intrinsics)")
+    p.add_argument("--max-curvature-chi2", type=float, default=CURVATURE_CHI2, metavar="X",
+                   help="refuse a segment as an arc above this curvature statistic (chi-square(1) units of the "
+                   "range noise; raise it for a lidar whose range depends on the surface colour; default %(default)s)")
+    p.add_argument("--max-board", type=float, default=2.0, metavar="M",
+                   help="longest accepted board segment when the outline is not exact (default: %(default)s m)")
 
 
 def cmd_extract(args) -> int:
@@ -31,11 +59,11 @@ def cmd_extract(args) -> int:
     from pathlib import Path
 
     from calib_core.data.io import save_observations
-    from rig.dataset import DatasetError, load_dataset
+    from rig.dataset import DatasetError
     from rig.extract import extract, format_diagnostics
     from rig.report import capture_verdict
 
-    ds = load_dataset(args.dataset)
+    ds = _dataset(args)
     obs, diags = extract(ds, _options(args))
     print(format_diagnostics(diags))
     if args.diagnostics:
@@ -51,15 +79,26 @@ def cmd_extract(args) -> int:
 
 def cmd_report(args) -> int:
     """``lidarcam report``: overlays, residual plots and report.md for a result on a dataset."""
+    from pathlib import Path
+
     from calib_core.data.io import load_observations
     from calib_core.data.result import load_result
-    from rig.dataset import load_dataset
     from rig.extract import extract
     from rig.report import write_report
 
-    ds = load_dataset(args.dataset)
     res = load_result(args.result)
-    obs = load_observations(args.obs) if args.obs else extract(ds, _options(args))[0]
+    if Path(args.dataset).is_file():  # observations without images (imported board poses and points)
+        ds, obs = None, load_observations(args.dataset)
+    else:
+        ds = _dataset(args)
+        obs = load_observations(args.obs) if args.obs else extract(ds, _options(args))[0]
+        if obs.camera is not None:  # the camera the observations were extracted with (e.g. refitted)
+            from dataclasses import replace
+
+            from rig.dataset import CameraModel
+
+            c = obs.camera
+            ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist))
     summary = write_report(ds, obs, res, args.out)
     for w in summary.warnings:
         print(f"warning: {w}")
@@ -81,7 +120,7 @@ def add_parsers(subparsers) -> None:
     p = subparsers.add_parser("report", help="overlays, residual plots and report.md of a calibration result",
                               description="Project the scans into the images through the result's extrinsic, "
                                           "plot residuals per board and write report.md.")
-    p.add_argument("dataset", help="dataset folder")
+    p.add_argument("dataset", help="dataset folder, or an observation JSON (no overlays then)")
     p.add_argument("result", help="lidarcam.result/1 JSON (from lidarcam calibrate --out)")
     p.add_argument("--out", required=True, help="folder to write the report into")
     p.add_argument("--obs", help="observation JSON from lidarcam extract (default: extract again)")

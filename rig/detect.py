@@ -56,6 +56,29 @@ def _solve_pose(obj: np.ndarray, corners: np.ndarray, camera: CameraModel):
     return make_T(R, tvec.ravel()), rms
 
 
+def find_chessboard(gray: np.ndarray, board: BoardSpec, flags: int | None = None) -> np.ndarray | None:
+    """(cols*rows, 2) pixel corners of the board in ``gray``, or None: ``cv2.findChessboardCornersSB`` (``flags``;
+    default normalise + exhaustive + accuracy), else the classic ``cv2.findChessboardCorners`` refined by
+    ``cv2.cornerSubPix`` (it finds some strongly lit or tilted boards the sector detector misses)."""
+    import cv2
+
+    if flags is None:
+        flags = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+    size = (board.cols, board.rows)
+    found, corners = cv2.findChessboardCornersSB(gray, size, flags=flags)
+    if not found or corners is None:
+        found, corners = cv2.findChessboardCorners(gray, size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH
+                                                   | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        if not found or corners is None:
+            return None
+        corners = cv2.cornerSubPix(gray, corners.astype(np.float32), (5, 5), (-1, -1), SUBPIX_CRITERIA)
+    return corners.reshape(-1, 2).astype(np.float32)
+
+
+SUBPIX_CRITERIA = (3, 50, 1e-3)
+"""cv2.cornerSubPix stop rule (TERM_CRITERIA_COUNT | EPS, 50 iterations, 1e-3 px)."""
+
+
 def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags: int | None = None,
                  corners: np.ndarray | None = None) -> BoardDetection:
     """Find the checkerboard in ``gray`` and its pose ``T_cam_board``; raises ExtractionError when not found.
@@ -64,16 +87,12 @@ def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags:
 
     The detector's corner order is made canonical: the board frame is right-handed with z pointing away from the
     camera (a mirrored order is reversed along rows) and, when ``cols + rows`` is odd and board.yaml states the
-    origin square's colour, a 180-degree reversal is undone.
+    origin square's colour (light when board.yaml does not say: the order ``findChessboardCornersSB`` gives; the
+    classic detector's fallback may start at the other end), a 180-degree reversal is undone.
     """
-    import cv2
-
-    if flags is None:
-        flags = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
-    found = corners is not None and len(corners) > 0
     if corners is None:
-        found, corners = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags=flags)
-    if not found or corners is None:
+        corners = find_chessboard(gray, board, flags)
+    if corners is None or len(corners) == 0:
         raise ExtractionError(f"checkerboard with {board.cols}x{board.rows} inner corners not found in the image")
     corners = corners.reshape(-1, 2).astype(float)
     obj = board.corners
@@ -81,11 +100,12 @@ def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags:
     if T[:3, 2] @ T[:3, 3] < 0:  # mirrored order: the board's z axis points at the camera
         corners = corners.reshape(board.rows, board.cols, 2)[:, ::-1].reshape(-1, 2).copy()
         T, rms = _solve_pose(obj, corners, camera)
-    if not board.reversible and board.origin_square_dark is not None:
+    if not board.reversible:  # no origin colour given: light, the order findChessboardCornersSB gives
+        dark = bool(board.origin_square_dark)
         c = board.cols
         origin = _square_mean(gray, corners[[0, 1, c + 1, c]])
         neighbour = _square_mean(gray, corners[[1, 2, c + 2, c + 1]])
-        if math.isfinite(origin) and math.isfinite(neighbour) and (origin < neighbour) != board.origin_square_dark:
+        if math.isfinite(origin) and math.isfinite(neighbour) and (origin < neighbour) != dark:
             corners = corners[::-1].copy()
             T, rms = _solve_pose(obj, corners, camera)
     return BoardDetection(T, corners, rms)

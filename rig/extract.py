@@ -66,14 +66,22 @@ def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = Non
         _board_finish(scan, idx, diag)
         if diag.source == "window" and diag.line_rms_mm > 1000 * opts.split_tol:
             diag.notes.append(f"window points fit a line only to {diag.line_rms_mm:.0f} mm RMS")
-        obs = BoardObservation(det.T_cam_board, dataset.board.outline, scan.points[idx], det.corners,
-                               dataset.board.corners)
+        obs = board_observation(det.T_cam_board, dataset, scan.points[idx], det.corners, opts)
         diag.used = True
         return obs, diag, det
     except (ExtractionError, DatasetError) as err:
         diag.reason = str(err)
         diag.ambiguous = list(getattr(err, "segments", []))
         return None, diag, det
+
+
+def board_observation(T_cam_board: np.ndarray, dataset: Dataset, points: np.ndarray, corners: np.ndarray | None,
+                      opts: ExtractOptions) -> BoardObservation:
+    """One extracted board: its camera pose, scan points and corners, the outline as ``opts.outline_kind`` reads it
+    (left out for ``none``)."""
+    outline = None if opts.outline_kind == "none" else dataset.board.outline
+    return BoardObservation(T_cam_board, outline, points, corners, None if corners is None else dataset.board.corners,
+                            outline_kind=opts.outline_kind)
 
 
 def _detect_all(dataset: Dataset, opts: ExtractOptions) -> dict[str, BoardDetection | Exception]:
@@ -133,8 +141,7 @@ def _resolve_ambiguous(dataset: Dataset, boards: list, diags: list[PoseDiagnosti
         if best < opts.split_tol and best < opts.resolve_ratio * second:
             i0, i1 = d.ambiguous[order[0]]
             idx = np.arange(i0, i1)
-            boards[k] = BoardObservation(T_cb, dataset.board.outline, pose.scan.points[idx], dets[d.name].corners,
-                                         dataset.board.corners)
+            boards[k] = board_observation(T_cb, dataset, pose.scan.points[idx], dets[d.name].corners, opts)
             d.used, d.reason = True, None
             _board_finish(pose.scan, idx, d)
             d.notes.append(f"ambiguous segments resolved by the extrinsic of {len(good)} other boards "

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 
+from calib_core.data.observations import OUTLINE_KINDS
 from calib_core.errors import LidarcamError
 
 
@@ -54,8 +55,11 @@ class ExtractOptions:
         max_curvature_chi2: a segment whose parabola fit beats the line by more than this (chi-square(1) units of
             the range noise) is refused as an arc (``CURVATURE_CHI2``; raise it for a lidar whose range depends on
             the surface's colour).
-        outline_known: False when the physical board may be larger than ``board.outline`` (e.g. a printed sheet on
-            a larger board): segments longer than the outline's chord are not penalised, up to ``max_board_m``.
+        outline_kind: what ``board.outline`` says of the physical board, written into the observations
+            (``calib_core.data.observations.OUTLINE_KINDS``): ``exact`` (default), ``lower_bound`` (the board may be
+            larger, e.g. a printed sheet on a larger board: segments longer than the outline's chord are not
+            penalised, up to ``max_board_m``) or ``none`` (as ``lower_bound`` for the segment search; the
+            observations carry no outline).
         max_board_m: longest accepted segment when the outline is not known.
         skip_ambiguous: skip a pose whose two best segments score within ``ambiguity_margin`` (else keep the best
             with a note).
@@ -79,7 +83,7 @@ class ExtractOptions:
     detector_flags: int | None = None
     auto_background: bool = True
     static_tol_m: float = 0.03
-    outline_known: bool = True
+    outline_kind: str = "exact"
     max_curvature_chi2: float = CURVATURE_CHI2
     max_board_m: float = 2.0
     skip_ambiguous: bool = True
@@ -88,6 +92,15 @@ class ExtractOptions:
     duplicate_deg: float = 1.5
     duplicate_m: float = 0.015
     resolve_ratio: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.outline_kind not in OUTLINE_KINDS:
+            raise ExtractionError(f"outline_kind must be one of {', '.join(OUTLINE_KINDS)}, got {self.outline_kind!r}")
+
+    @property
+    def outline_known(self) -> bool:
+        """True when the outline is the board's edge (``outline_kind`` ``exact``): the segment may not exceed it."""
+        return self.outline_kind == "exact"
 
     @property
     def split_tol(self) -> float:

@@ -9,11 +9,12 @@ how well each is determined.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .dataset import BoardSpec, CameraModel, DatasetError
+from .dataset import BoardSpec, CameraModel, Dataset, DatasetError
+from .detect import find_chessboard
 
 PARAM_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 MIN_VIEWS = 3
@@ -34,12 +35,8 @@ class IntrinsicsFit:
 
 
 def find_corners(gray: np.ndarray, board: BoardSpec) -> np.ndarray | None:
-    """(cols*rows, 2) pixel corners of the board in ``gray`` (``findChessboardCornersSB``), or None."""
-    import cv2
-
-    flags = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
-    found, corners = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags=flags)
-    return corners.reshape(-1, 2).astype(np.float32) if found and corners is not None else None
+    """(cols*rows, 2) pixel corners of the board in ``gray`` (``rig.detect.find_chessboard``), or None."""
+    return find_chessboard(gray, board)
 
 
 def calibrate_intrinsics(images: dict[str, np.ndarray], board: BoardSpec, fix_k3: bool = True,
@@ -88,3 +85,24 @@ def format_intrinsics(fit: IntrinsicsFit) -> list[str]:
     return [f"`cv2.calibrateCameraExtended` on {len(fit.views)} detected boards: reprojection RMS "
             f"{fit.rms_px:.3f} px (per view {min(fit.per_view_px.values()):.3f}-{max(fit.per_view_px.values()):.3f}"
             " px).", "", "| parameter | value | 1-sigma |", "|---|---:|---:|"] + rows
+
+
+def with_corners(dataset: Dataset) -> tuple[Dataset, dict[str, np.ndarray | None]]:
+    """The dataset with every pose's detector corners found once (``Pose.corners``; an empty array where the board
+    was not found, so extraction does not search again), and pose name -> corners (None: not found)."""
+    poses, corners = [], {}
+    for p in dataset.poses:
+        c = None if p.error else find_corners(p.read_image(), dataset.board)
+        corners[p.name] = c
+        poses.append(replace(p, corners=np.zeros((0, 2)) if c is None else c))
+    return replace(dataset, poses=tuple(poses)), corners
+
+
+def refit_camera(dataset: Dataset) -> tuple[Dataset, IntrinsicsFit]:
+    """The dataset with its camera refitted from its own images (``calibrate_intrinsics`` on every detected board;
+    the corners found are kept on the poses) and the fit."""
+    ds, corners = with_corners(dataset)
+    found = {k: v for k, v in corners.items() if v is not None}
+    fit = calibrate_intrinsics({p.name: p.read_image() for p in ds.poses if p.name in found}, ds.board,
+                               corners=found)
+    return replace(ds, camera=fit.camera), fit

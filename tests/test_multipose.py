@@ -4,6 +4,7 @@ intrinsics from the images; the vendored ACFR rig (MIT) end to end; the public r
 from __future__ import annotations
 
 import dataclasses
+import os
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ from rig.extract import ExtractOptions, extract
 from rig.multipose import duplicate_groups, static_masks
 
 ROOT = Path(__file__).resolve().parents[1]
-REAL = ROOT.parent / "shared" / "real-data"
+REAL = Path(os.environ.get("REAL_DATA", ROOT.parent / "shared" / "real-data"))
 ACFR_FIXTURE = Path(__file__).parent / "fixtures" / "acfr"
 
 
@@ -91,7 +92,7 @@ def test_near_duplicate_poses_are_merged_into_one_board(sim_rig):
 
 def test_unknown_outline_accepts_a_board_larger_than_its_pattern(sim_rig):
     """Shrink board.yaml's outline to the pattern: with outline_known the true (longer) segment is refused or
-    penalised; with outline_known=False the same segments as with the true outline are found."""
+    penalised; with outline_kind="lower_bound" the same segments as with the true outline are found."""
     from rig.dataset import BoardSpec
     from rig.importers.bouguet import grid_outline
 
@@ -101,7 +102,7 @@ def test_unknown_outline_accepts_a_board_larger_than_its_pattern(sim_rig):
     small = dataclasses.replace(ds, board=BoardSpec(b.cols, b.rows, b.square, pattern, b.origin_square_dark))
     truth, dt = extract(ds)
     _, dk = extract(small)
-    obs, du = extract(small, ExtractOptions(outline_known=False))
+    obs, du = extract(small, ExtractOptions(outline_kind="lower_bound"))
     seg = {d.name: d.segment for d in dt if d.used}
     assert sum(d.used and d.segment == seg.get(d.name) for d in du) == len(seg)
     assert sum(d.used and d.segment == seg.get(d.name) for d in dk) < len(seg)
@@ -130,7 +131,7 @@ def test_acfr_fixture_every_segment_is_the_board():
     from rig.public_sets import load_acfr
 
     rs = load_acfr(ACFR_FIXTURE)
-    obs, diags = extract(rs.dataset, ExtractOptions(outline_known=False))
+    obs, diags = extract(rs.dataset, ExtractOptions(outline_kind="lower_bound"))
     assert obs.n_boards == 5, [d.reason for d in diags]
     for d in diags:
         lo, hi = d.bearing_deg
@@ -143,7 +144,7 @@ def test_acfr_without_the_learnt_background_is_worse():
     from rig.public_sets import load_acfr
 
     rs = load_acfr(ACFR_FIXTURE)
-    _, diags = extract(rs.dataset, ExtractOptions(outline_known=False, auto_background=False,
+    _, diags = extract(rs.dataset, ExtractOptions(outline_kind="lower_bound", auto_background=False,
                                                   skip_ambiguous=False))
     on_board = [d.used and -30 < d.bearing_deg[0] < d.bearing_deg[1] < 30 for d in diags]
     assert not all(on_board)

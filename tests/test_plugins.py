@@ -32,21 +32,6 @@ register(Method("{name}", {fn}, 3, "a test lab", "peng2022 under another name", 
 '''
 
 
-@pytest.fixture
-def plugin_dir(tmp_path, monkeypatch):
-    """A folder on sys.path for plugin modules; the registry, loaded plugins and modules restored afterwards."""
-    methods, loaded, modules = dict(METHODS), dict(plugins._LOADED), set(sys.modules)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    importlib.invalidate_caches()
-    yield tmp_path
-    METHODS.clear()
-    METHODS.update(methods)
-    plugins._LOADED.clear()
-    plugins._LOADED.update(loaded)
-    for name in set(sys.modules) - modules:
-        del sys.modules[name]
-
-
 def _write(folder, module, text):
     path = folder.joinpath(*module.split(".")).with_suffix(".py")
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -6,6 +6,8 @@
   ``distortion_coefficients`` (OpenCV sample spelling ``Camera_Matrix`` / ``Distortion_Coefficients`` too) and the
   image size as ``image_width`` / ``image_height`` (also OpenCV's sample
   spelling ``image_Width`` / ``image_Height``).
+- MATLAB text (``.m`` / ``.txt``, e.g. a Bouguet toolbox export): ``K = [fx 0 cx; 0 fy cy; 0 0 1];`` and
+  ``kc = [k1; k2; p1; p2; k3]'`` (OpenCV's order); the image size is not in the file and is given.
 - Kalibr camchain YAML: ``cam0: {camera_model: pinhole, intrinsics: [fu, fv, pu, pv], distortion_model: radtan,
   distortion_coeffs: [k1, k2, r1, r2], resolution: [w, h]}`` (``cam`` selects another camera).
 
@@ -70,11 +72,40 @@ def _opencv_xml(path: Path) -> CameraModel:
     return CameraModel(w, h, np.asarray(K, float), dist)
 
 
-def read_camera_file(path, cam: str = "cam0") -> CameraModel:
-    """Intrinsics from a ROS / OpenCV (YAML or XML) / Kalibr file; DatasetError naming the file and field."""
+def _matlab_text(path: Path, size: tuple[int, int] | None) -> CameraModel:
+    import re
+
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"cannot read as text ({exc})", file=path) from None
+    if size is None:
+        raise DatasetError("MATLAB text holds no image size: give it (the images' size)", file=path)
+    found = {}
+    for name, count in (("K", 9), ("kc", None)):
+        m = re.search(rf"(?m)^\s*{name}\s*=\s*\[([^\]]*)\]", text)
+        if m is None:
+            if name == "kc":
+                continue
+            raise DatasetError(f"field {name}: missing ('{name} = [...]')", file=path)
+        try:
+            v = np.array([float(t) for t in re.split(r"[\s,;]+", m.group(1).strip()) if t])
+        except ValueError:
+            raise DatasetError(f"field {name}: not a list of numbers", file=path) from None
+        if count is not None and v.size != count:
+            raise DatasetError(f"field {name}: expected {count} numbers, got {v.size}", file=path)
+        found[name] = v
+    return CameraModel(int(size[0]), int(size[1]), found["K"].reshape(3, 3), found.get("kc", np.zeros(0)))
+
+
+def read_camera_file(path, cam: str = "cam0", size: tuple[int, int] | None = None) -> CameraModel:
+    """Intrinsics from a ROS / OpenCV (YAML or XML) / Kalibr / MATLAB text file (``size`` (width, height): the
+    image size where the file has none); DatasetError naming the file and field."""
     path = Path(path)
     if path.suffix.lower() == ".xml":
         return _opencv_xml(path)
+    if path.suffix.lower() in (".m", ".txt"):
+        return _matlab_text(path, size)
     data = read_yaml(path)
     if cam in data and isinstance(data[cam], dict):
         return _kalibr(data[cam], path, cam)

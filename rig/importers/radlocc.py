@@ -83,17 +83,23 @@ def _is_number(t: str) -> bool:
     return True
 
 
-def read_radlocc_laser(path, lines: range | None = None) -> list[RadloccScan]:
-    """The scans of a RADLOCC laser log, one per non-empty line (``lines``: 1-based line numbers to read, e.g.
-    ``range(1, 62)`` to ignore trailing lines of another format)."""
-    path = Path(path)
+def data_lines(path: Path) -> list[tuple[int, str]]:
+    """(1-based line number, text) of the non-empty lines of a text file that are not ``#`` comments; DatasetError
+    naming the file when it cannot be read as text."""
     try:
         text = path.read_text().splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise DatasetError(f"cannot read as text ({exc})", file=path) from None
+    return [(k, s) for k, s in enumerate(text, start=1) if s.strip() and not s.lstrip().startswith("#")]
+
+
+def read_radlocc_laser(path, lines: range | None = None) -> list[RadloccScan]:
+    """The scans of a RADLOCC laser log, one per non-empty line (``lines``: 1-based line numbers to read, e.g.
+    ``range(1, 62)`` to ignore trailing lines of another format)."""
+    path = Path(path)
     out = []
-    for k, s in enumerate(text, start=1):
-        if (lines is not None and k not in lines) or not s.strip() or s.lstrip().startswith("#"):
+    for k, s in data_lines(path):
+        if lines is not None and k not in lines:
             continue
         out.append(parse_radlocc_line(s, path, k))
     if not out:
