@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .data.lines import scan_noise_estimate
 from .data.observations import Observations
 from .data.residuals import plane_residuals
 from .entry import calibrate
-from .refine.uncertainty import scan_noise_estimate
 
 
 @dataclass(frozen=True, eq=False)

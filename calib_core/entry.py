@@ -10,22 +10,15 @@ import numpy as np
 from .checks.diagnose import data_causes, judge
 from .checks.verdict import check, data_warnings
 from .data.observations import Observations
-from .data.result import CalibrationResult, SolveFailure
-from .errors import CalibrationError
-from .refine.uncertainty import UncertaintyError
+from .data.result import CalibrationResult
+from .errors import CalibrationError, SolveFailure, UncertaintyError
 from .registry import get_method
-
-SEED_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022", "vasconcelos_msac",
-                "vasconcelos_msac_refined", "zhou2014")
-"""The paper's methods (and the published methods reproduced beside them: Francisco's as its authors' code
-runs it, Zhou 2014): their answers stand as their papers compute them; the verdict is reported beside them
-(``info["verdict"]`` and warnings) and never turns them into ``ok=False``. Their ablations (``peng2022/...``)
-count as the same method; a derived variant (``X+ml``) is ours and is held to the verdict."""
 
 
 def is_seed_method(name: str) -> bool:
-    """True for the paper's methods and their ablations (``peng2022/equal``), not for ``X+suffix`` variants."""
-    return "+" not in name and name.split("/")[0] in SEED_METHODS
+    """True for the paper's methods and their ablations (``peng2022/equal``), not for ``X+suffix`` variants: the
+    registry's ``Method.paper``."""
+    return get_method(name).paper
 
 
 def _failure(obs: Observations, method: str, reason: str, candidates, t0: float, verdict: bool,
@@ -53,7 +46,7 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
     Returns a ``CalibrationResult``; a method that cannot solve (too few boards, degenerate data) gives
     ``ok=False`` and a reason, never a guess. Every answer is then tested against the data
     (``calib_core.checks.verdict``, in ``info["verdict"]``, its warnings in ``info["warnings"]``): an answer the data
-    contradict is ``ok=False`` with the reason, except for the paper's methods (``SEED_METHODS``), whose answer
+    contradict is ``ok=False`` with the reason, except for the paper's methods (``Method.paper``), whose answer
     stands with the contradiction as a warning. ``verdict=False`` skips the test. Unknown methods or options
     raise ``CalibrationError``.
     """
@@ -84,8 +77,8 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
         obs_v, ids = (observations, None) if used is None else (observations.subset(used), list(used))
         # the likely cause of a contradiction is searched for where it decides the answer (our methods); the
         # paper's methods carry the contradiction itself, which costs no search
-        v = check(obs_v, T, board_ids=ids) if is_seed_method(method) else judge(obs_v, T, board_ids=ids)
-        if not v.consistent and ids is not None and not is_seed_method(method):
+        v = check(obs_v, T, board_ids=ids) if m.paper else judge(obs_v, T, board_ids=ids)
+        if not v.consistent and ids is not None and not m.paper:
             full = judge(observations, T)  # the likely cause may lie in the boards left out (a mispaired scan)
             v = replace(v, warnings=tuple(dict.fromkeys([*v.warnings, *full.warnings])),
                         causes=tuple(dict.fromkeys([*v.causes, *full.causes])))
@@ -94,7 +87,7 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
         if not v.consistent:
             warnings.append(f"the data contradict this answer: {v.reason}")
         info["warnings"] = warnings + [w for w in v.warnings if w not in warnings]
-        if not v.consistent and not is_seed_method(method):
+        if not v.consistent and not m.paper:
             causes = [w for w in v.warnings if w.startswith("likely cause")]
             return CalibrationResult(method, False, None, f"{method}: the data contradict the answer: {v.reason}"
                                      + "".join(f"; {c}" for c in causes), cands, time.perf_counter() - t0,

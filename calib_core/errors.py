@@ -1,6 +1,9 @@
-"""Exception types of calib_core: every bad-input error names its file, board and field."""
+"""Exception types of calib_core, all in one home: every bad-input error names its file, board and field; a method
+that cannot solve raises ``SolveFailure`` with its reason, which ``calibrate`` turns into ``ok=False``."""
 
 from __future__ import annotations
+
+import numpy as np
 
 
 class LidarcamError(Exception):
@@ -41,3 +44,25 @@ class ObservationError(LidarcamError, ValueError):
 
 class CalibrationError(LidarcamError):
     """A method was asked for something it cannot do (unknown method name, bad option)."""
+
+
+class SolveFailure(LidarcamError):
+    """Raised inside a method when it cannot solve; ``calibrate`` turns it into ``ok=False`` with the reason.
+
+    ``candidates`` (M,4,4) are the candidates considered before failing, kept for the benchmark; ``info``
+    diagnostics for the result (e.g. the directions a degenerate board set does not determine).
+    """
+
+    def __init__(self, reason: str, candidates: np.ndarray | None = None, info: dict | None = None) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.candidates = np.zeros((0, 4, 4)) if candidates is None else np.asarray(candidates, float)
+        self.info = dict(info or {})
+
+
+class UncertaintyError(LidarcamError):
+    """The uncertainty cannot be computed: too few residuals, a singular information matrix, no extrinsic."""
+
+
+class JointError(LidarcamError):
+    """The joint model does not apply: no corners or no camera, or a board behind the camera."""

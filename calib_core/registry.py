@@ -21,6 +21,9 @@ class Method:
     ``SolveFailure`` with a reason when it cannot solve. An ``info["covariance"]`` (6x6) becomes the result's
     covariance. ``origin`` says where the method comes from (``"lidarcam"`` for the project's own, else the
     plugin's module or entry point); ``cost`` says how its run time grows with the number of boards N.
+    ``paper``: one of the paper's methods (or an ablation of one): its answer stands as its paper computes it, the
+    verdict is reported beside it and never turns it into ``ok=False``; every other method (ours, a derived
+    ``X+ml``, a plugin) is held to the verdict.
     """
 
     name: str
@@ -30,6 +33,7 @@ class Method:
     summary: str
     origin: str = "lidarcam"
     cost: str = ""
+    paper: bool = False
 
 
 METHODS: dict[str, Method] = {}
@@ -69,5 +73,6 @@ def get_method(name: str) -> Method:
 
 
 def derived(base: Method, suffix: str, func: Callable, summary: str) -> Method:
-    """A method derived from ``base`` under ``base.name + "+" + suffix`` (same minimum boards and citation)."""
-    return replace(base, name=f"{base.name}+{suffix}", func=func, summary=summary)
+    """A method derived from ``base`` under ``base.name + "+" + suffix`` (same minimum boards and citation; ours,
+    so not ``paper``)."""
+    return replace(base, name=f"{base.name}+{suffix}", func=func, summary=summary, paper=False)

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from calib_core import METHODS, calibrate
-from calib_core.data.lines import fit_lines
+from calib_core.data.lines import triple_inputs
 from calib_core.geometry.metrics import is_valid, pose_errors
 from simulate import SimOptions, generate
 
@@ -83,12 +83,9 @@ def triple_arrays(obs_list: list, n_triples: int):
     ns, ds, ps, us, Ts = [], [], [], [], []
     while sum(len(x) for x in ns) < n_triples:
         for obs in obs_list:
-            lines = fit_lines(obs)
-            n, d = obs.planes_cam()
-            p = np.array([ln.point for ln in lines])
-            u = np.array([ln.direction for ln in lines])
             tri = board_triples(obs.n_boards)
-            ns.append(n[tri]), ds.append(d[tri]), ps.append(p[tri]), us.append(u[tri])
+            n, d, p, u = triple_inputs(obs, tri)
+            ns.append(n), ds.append(d), ps.append(p), us.append(u)
             Ts.append(np.repeat(obs.T_lidar_cam_true[None], len(tri), axis=0))
     return tuple(np.concatenate(a)[:n_triples] for a in (ns, ds, ps, us, Ts))
 

@@ -18,8 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from calib_core.data.lines import triple_inputs
 from calib_core.geometry.metrics import rotation_error_deg, translation_error_m
-from calib_core.solvers.candidates import MINIMAL_SOLVERS, triple_inputs
+from calib_core.solvers.candidates import MINIMAL_SOLVERS
+from calib_core.solvers.vasconcelos import board_triples
 from simulate import SimOptions, generate
 
 NOISE_LEVELS_MM = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
@@ -34,10 +36,10 @@ def solver_rows(n_problems: int, noise_mm: float, n_boards: int = 6, seed: int =
 
     obs_list = [generate(SimOptions(n_boards=n_boards, noise_mm=noise_mm), seed=seed, trial=i)
                 for i in range(n_problems)]
-    parts = [triple_inputs(o) for o in obs_list]
-    n, d, p, u = (np.concatenate([x[k] for x in parts]) for k in range(1, 5))
-    T = np.concatenate([np.repeat(o.T_lidar_cam_true[None], len(x[0]), axis=0) for o, x in zip(obs_list, parts,
-                                                                                                strict=True)])
+    tri = board_triples(n_boards)
+    parts = [triple_inputs(o, tri) for o in obs_list]
+    n, d, p, u = (np.concatenate([x[k] for x in parts]) for k in range(4))
+    T = np.repeat(np.stack([o.T_lidar_cam_true for o in obs_list]), len(tri), axis=0)
     rows = []
     for name in MINIMAL_SOLVERS:
         solve = import_module(f"calib_core.solvers.{name}").solve_triples

@@ -31,10 +31,10 @@ def _current(args):
 
     from calib_core import calibrate
     from calib_core.data.io import load_observations
+    from calib_core.data.lines import scan_noise_estimate
     from calib_core.errors import CalibrationError
     from calib_core.refine.plan import set_informations
     from calib_core.refine.plan_views import rig_from_observations
-    from calib_core.refine.uncertainty import scan_noise_estimate
     from rig.plan_rig import load_plan_rig
 
     base = load_plan_rig(args.rig) if args.rig else None

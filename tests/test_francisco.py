@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 
 from calib_core import calibrate
+from calib_core.data.lines import scan_lines, triple_inputs
 from calib_core.data.observations import BoardObservation, Observations
 from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.transforms import make_T, rotvec_to_matrix
 from calib_core.methods.francisco import MSAC_THRESHOLD_PER_MM, msac_errors, msac_select
 from calib_core.solvers import vasconcelos_dual
-from calib_core.solvers.candidates import CandidateSet, minimal_candidates, triple_inputs
-from calib_core.solvers.vasconcelos import solve_triples
+from calib_core.solvers.candidates import CandidateSet, minimal_candidates
+from calib_core.solvers.vasconcelos import board_triples, solve_triples
 from simulate import SimOptions, generate
 
 FIXTURE = Path(__file__).parent / "fixtures" / "francisco_reference.npz"
@@ -52,12 +53,10 @@ def test_dual_error_matches_independent_computation_and_vanishes_at_truth():
         assert E.shape == (2, 5)
         assert np.all(E[0] < 1e-12)                   # every board's plane contains its scan line
         assert np.all(E[1] > 1e-7)
-        _, n, d, p, u = triple_inputs(obs)
-        from calib_core.data.lines import fit_lines
-        lines = fit_lines(obs)
+        lines = scan_lines(obs)
         n_all, d_all = obs.planes_cam()
         for i in range(5):
-            bf = dual_error_bruteforce(T_off, n_all[i], d_all[i], lines[i].point, lines[i].direction)
+            bf = dual_error_bruteforce(T_off, n_all[i], d_all[i], lines.centroid[i], lines.direction[i])
             assert E[1, i] == pytest.approx(bf, rel=1e-8)
 
 
@@ -106,7 +105,7 @@ def test_outlier_board_left_out_of_the_refinement_and_named():
 def test_real_parts_option_keeps_every_complex_pair_once():
     rng = np.random.default_rng(0)
     obs_list = [generate(SimOptions(n_boards=6, noise_mm=30.0), seed=1, trial=i) for i in range(10)]
-    parts = [triple_inputs(o)[1:] for o in obs_list]
+    parts = [triple_inputs(o, board_triples(6)) for o in obs_list]
     n, d, p, u = (np.concatenate([x[k] for x in parts]) for k in range(4))
     strict = solve_triples(n, d, p, u)
     loose = solve_triples(n, d, p, u, real_parts=True)

@@ -86,3 +86,41 @@ def test_library_loads_no_io_or_plotting_stack():
             f"print(' '.join(k for k in {HEAVY!r} if k in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "", f"importing calib_core loads: {out.stdout.strip()}"
+
+
+CORE_FLOORS = (("errors",), ("geometry",), ("data",), ("solvers",), ("refine",), ("robust",), ("checks",),
+               ("registry",), ("methods",), ("entry", "plugins"), ("crossval",), ("__init__",))
+"""The stages of ``calib_core`` in import order, lowest first: a module imports only from its own stage or from a
+lower floor (the flow: data -> scan lines -> candidates -> refinement and robust choice -> checks -> methods ->
+the one entry). ``registry`` sits below the methods that register themselves in it."""
+
+
+PLACED_ABOVE_ITS_FOLDER = {"calib_core.refine.plan": "checks"}
+"""Modules that sit on a higher floor than their folder: the capture planner reads the degeneracy analysis (it
+belongs with the checks; it lives beside the information it sums)."""
+
+
+def _stage(name: str) -> str:
+    parts = name.split(".")
+    return "__init__" if len(parts) == 1 else PLACED_ABOVE_ITS_FOLDER.get(name, parts[1])
+
+
+def test_calib_core_stage_order():
+    floor = {s: k for k, stages in enumerate(CORE_FLOORS) for s in stages}
+    mods = _modules("calib_core")
+    assert {_stage(n) for n in mods} <= set(floor), f"stages without a floor: {set(map(_stage, mods)) - set(floor)}"
+    bad = [(n, m) for n, p in mods.items() for m in _imports(n, p) if m in mods and _stage(m) != _stage(n)
+           and floor[_stage(m)] >= floor[_stage(n)]]
+    assert not bad, f"calib_core imports across or up its stages: {bad}"
+
+
+def test_calib_core_module_and_function_sizes():
+    long = []
+    for n, p in _modules("calib_core").items():
+        text = p.read_text()
+        if text.count("\n") > 400:
+            long.append(f"{n}: {text.count(chr(10))} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno - node.lineno + 1 > 80:
+                long.append(f"{n}.{node.name}: {node.end_lineno - node.lineno + 1} lines")
+    assert not long, f"over 400 lines a module or 80 a function: {long}"

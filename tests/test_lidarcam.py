@@ -156,8 +156,8 @@ def test_polish_batched_jacobian_equals_scipy_forward_differences(seed):
     from scipy.optimize import least_squares
 
     from calib_core.data.residuals import perturb
-    from calib_core.methods.lidarcam import POLISH_DIFF_STEP, polish
-    from calib_core.robust.scorers import lidarcam_residuals
+    from calib_core.robust.choose import POLISH_DIFF_STEP, polish
+    from calib_core.robust.scorers import ScoreOptions, lidarcam_residuals
 
     rng = np.random.default_rng(seed)
     obs = make_observations(rng, 3 + seed % 3, 0.02)
@@ -169,6 +169,6 @@ def test_polish_batched_jacobian_equals_scipy_forward_differences(seed):
     sol = least_squares(lambda x: lidarcam_residuals(obs, perturb(T0, x), range_sigma_m=0.02), np.zeros(6),
                         method="trf", diff_step=POLISH_DIFF_STEP, max_nfev=30)
     T_ref = perturb(T0, sol.x)
-    T_new = polish(obs, T0, 30, range_sigma_m=0.02)
+    T_new = polish(obs, T0, 30, ScoreOptions(), 0.02)
     e_R, e_t = pose_errors(T_new, T_ref)
     assert e_R < 1e-6 and e_t < 1e-8

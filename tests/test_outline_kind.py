@@ -13,7 +13,7 @@ from calib_core.data.io import load_observations, observations_to_dict, save_obs
 from calib_core.data.observations import BoardObservation, Observations
 from calib_core.errors import ObservationError
 from calib_core.geometry.metrics import pose_errors
-from calib_core.robust.consensus import board_lines, board_statistics
+from calib_core.robust.consensus import board_statistics
 from calib_core.robust.scorers import lidarcam as lidarcam_score
 from simulate import SimOptions, generate
 
@@ -75,9 +75,8 @@ def test_lower_bound_outline_lets_the_scan_run_past_it():
     obs = generate(SimOptions(n_boards=6), seed=3, trial=1)
     small = shrunk(obs.boards[0].outline, 0.4)
     exact, low = with_kind(obs, "exact", small), with_kind(obs, "lower_bound", small)
-    lines = board_lines(exact, 0.02)
-    q_exact = board_statistics(exact, lines, obs.T_lidar_cam_true[None], 0.03)[0]
-    q_low = board_statistics(low, lines, obs.T_lidar_cam_true[None], 0.03)[0]
+    q_exact = board_statistics(exact, obs.T_lidar_cam_true[None], 0.02, 0.03)[0]
+    q_low = board_statistics(low, obs.T_lidar_cam_true[None], 0.02, 0.03)[0]
     assert q_exact.min() > 100 and q_low.max() < 30
     res = calibrate(low)
     assert res.ok, res.reason

@@ -69,9 +69,9 @@ def test_refinement_never_increases_the_cost_and_converges_from_a_perturbed_star
     for _ in range(5):
         T_true, data = random_problem(rng, noise=0.01)
         T0 = perturb(T_true, np.r_[rng.normal(scale=0.03, size=3), rng.normal(scale=0.05, size=3)])
-        r = refine(data, T0, residual=kind, loss=loss, f_scale=0.03)
+        r = refine(data, T0, residual=kind, loss=loss, f_scale_m=0.03)
         assert r.cost <= r.initial_cost + 1e-15
         assert robust_cost(RESIDUALS[kind](T0, data), loss, 0.03) == pytest.approx(r.initial_cost)
         # converges to the optimum reached from the truth (the estimator's own error is not the point here)
-        r_true = refine(data, T_true, residual=kind, loss=loss, f_scale=0.03)
+        r_true = refine(data, T_true, residual=kind, loss=loss, f_scale_m=0.03)
         np.testing.assert_allclose(r.T_lidar_cam, r_true.T_lidar_cam, atol=1e-5)

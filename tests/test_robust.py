@@ -11,7 +11,8 @@ import pytest
 from calib_core import calibrate
 from calib_core.data.result import load_result
 from calib_core.geometry.metrics import pose_errors
-from calib_core.robust.consensus import board_lines, board_statistics, needed_samples
+from calib_core.robust.consensus import board_statistics
+from calib_core.robust.hypotheses import needed_samples
 from calib_core.robust.inliers import trim_points
 from simulate import SimOptions, generate
 
@@ -83,10 +84,10 @@ def test_too_few_consistent_boards_fails_with_reason():
 
 def test_statistic_is_zero_at_the_truth_without_noise_and_large_for_a_wrong_board():
     obs = generate(SimOptions(n_boards=6, noise_mm=0.0), seed=3, trial=0)
-    q = board_statistics(obs, board_lines(obs, 0.02), obs.T_lidar_cam_true[None], 0.03)[0]
+    q = board_statistics(obs, obs.T_lidar_cam_true[None], 0.02, 0.03)[0]
     assert np.all(q < 1e-6)
     bad = generate(SimOptions(n_boards=6, wrong_segments=1), seed=3, trial=0)
-    q = board_statistics(bad, board_lines(bad, 0.02), bad.T_lidar_cam_true[None], 0.03)[0]
+    q = board_statistics(bad, bad.T_lidar_cam_true[None], 0.02, 0.03)[0]
     w = bad.meta["wrong_boards"][0]
     assert q[w] > 100 and np.all(np.delete(q, w) < 30)
 

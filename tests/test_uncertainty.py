@@ -6,18 +6,18 @@ from scenes import OUTLINE, make_observations, random_extrinsic
 
 from calib_core.checks.degeneracy import degeneracy_warnings
 from calib_core.data.io import extrinsic_yaml
+from calib_core.data.lines import scan_noise_estimate
 from calib_core.data.residuals import outside_outline, perturb, range_residuals
+from calib_core.errors import UncertaintyError
 from calib_core.geometry.transforms import make_T, matrix_to_rotvec, rotvec_to_matrix
 from calib_core.refine.refine import refine
 from calib_core.refine.uncertainty import (
-    UncertaintyError,
     conditioning,
     covariance,
     crlb,
     fisher_information,
     normal_spread_deg,
     refinement_covariance,
-    scan_noise_estimate,
 )
 from calib_core.robust.scorers import lidarcam as lidarcam_score
 

@@ -27,9 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..data.lines import residual_sigma
 from ..data.observations import Observations
 from ..data.residuals import range_residuals
-from ..data.result import SolveFailure
+from ..errors import SolveFailure
 from ..geometry.transforms import skew
 from ..refine.partial import vertical_start
 from ..refine.uncertainty import conditioning, normal_spread_deg, typical_range
@@ -54,6 +55,17 @@ information whatever the noise: undetermined."""
 MAX_SCALED_SIGMA = 0.1
 """A direction whose 1-sigma exceeds this in scaled units (radians; translation in units of the typical range)
 is undetermined: the data do not fix it."""
+
+
+
+@dataclass(frozen=True)
+class DegeneracyOptions:
+    """Thresholds of ``undetermined_directions`` for a method's refusal: a direction with no information below
+    ``min_conditioning`` (``NULL_CONDITIONING``), or with a scaled 1-sigma above ``max_scaled_sigma``."""
+
+    min_conditioning: float = NULL_CONDITIONING
+    max_scaled_sigma: float = MAX_SCALED_SIGMA
+
 
 ALIGNED_SHARE = 0.9
 """Undetermined directions are named as lidar axes when each named axis lies this much (squared norm of its
@@ -220,7 +232,7 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     e, J = range_residuals(T, obs.scan_data, jacobian=True)
     L = typical_range(obs)
     Js = origin_jacobian(J, T) * np.r_[np.ones(3), np.full(3, L)]
-    sigma = float(np.sqrt(e @ e / max(len(e) - 6, 1))) if range_sigma_m is None else float(range_sigma_m)
+    sigma = residual_sigma(e, 6) if range_sigma_m is None else float(range_sigma_m)
     F = Js.T @ Js
     lam, V = np.linalg.eigh(F)
     null = lam <= (null_conditioning**2) * lam[-1]

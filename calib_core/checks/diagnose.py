@@ -18,9 +18,10 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import linear_sum_assignment, minimize_scalar
 
-from ..data.observations import BoardObservation, Observations
+from ..data.lines import scan_lines, triple_inputs
+from ..data.observations import MIN_RANGE_M, BoardObservation, Observations
 from ..data.residuals import range_residuals
-from ..data.result import SolveFailure
+from ..errors import SolveFailure
 from ..refine.refine import refine
 from .verdict import (
     CLIP_Z,
@@ -35,6 +36,23 @@ from .verdict import (
 
 MAX_DIAGNOSE_BOARDS = 12
 """Above this many boards the pairing hypotheses are not tried (their cost grows as N^4)."""
+PAIR_COST_SIGMAS = 5.0
+"""A scan's cost against a board plane: its median |range residual| in units of this many noise stds ..."""
+PAIR_COST_CAP = 10.0
+"""... capped here (a scan far off a plane costs the same however far)."""
+MAX_PAIRING_WORK = 5e7
+"""The pairing is not tried when candidates x boards x scan points exceed this (memory and time)."""
+DIAGNOSE_F_SCALE_SIGMAS = 3.0
+"""Scale (noise stds) of the robust loss of the diagnoses' refinements."""
+SCALE_RANGE = (0.7, 1.4)
+"""The board-pose scale factors searched (``scale_causes``) ..."""
+SCALE_XATOL = 0.005
+"""... to this tolerance in log-scale ..."""
+SCALE_MAXITER = 14
+"""... in at most this many steps, each a refinement of at most ``SCALE_MAX_NFEV`` evaluations ..."""
+SCALE_MAX_NFEV = 15
+MIN_SCALE_CHANGE = 0.02
+"""... and a scale within this of 1 is no cause."""
 
 
 def _rebuilt(obs: Observations, scans, trans_scale: float = 1.0) -> Observations:
@@ -47,20 +65,21 @@ def _rebuilt(obs: Observations, scans, trans_scale: float = 1.0) -> Observations
 
 
 def _pair_costs(obs: Observations, C: np.ndarray, sigma: float) -> np.ndarray:
-    """(M,S,P): median |range residual| / (5 sigma), capped at 10, of scan S against board plane P per candidate."""
+    """(M,S,P): median |range residual| / (``PAIR_COST_SIGMAS`` sigma), capped at ``PAIR_COST_CAP``, of scan S
+    against board plane P per candidate."""
     n, d = obs.planes_cam()
     m = np.einsum("mab,pb->mpa", C[:, :3, :3], n)                             # (M,P,3) normals, lidar frame
     c = d + np.einsum("mpa,ma->mp", m, C[:, :3, 3])                            # (M,P)
     out = np.empty((len(C), obs.n_boards, obs.n_boards))
     for s, b in enumerate(obs.boards):
         r = np.linalg.norm(b.scan, axis=1)
-        keep = r > 1e-3
+        keep = r > MIN_RANGE_M
         beams = b.scan[keep] / r[keep, None]
         mb = np.einsum("mpa,ka->mpk", m[..., :2], beams)
         with np.errstate(divide="ignore", invalid="ignore"):
             e = np.abs(r[keep] - c[..., None] / mb)
         out[:, s, :] = np.nan_to_num(np.median(e, axis=-1), nan=np.inf) if keep.any() else np.inf
-    return np.minimum(out / (5 * sigma), 10.0)
+    return np.minimum(out / (PAIR_COST_SIGMAS * sigma), PAIR_COST_CAP)
 
 
 EXHAUSTIVE_PAIRING_BOARDS = 6
@@ -73,13 +92,9 @@ def _candidates(obs: Observations, exhaustive: bool) -> np.ndarray:
     triple of scans when ``exhaustive``)."""
     from itertools import permutations
 
-    from ..data.lines import fit_lines
     from ..solvers.vasconcelos import board_triples, solve_triples
 
-    lines = fit_lines(obs)
-    n, d = obs.planes_cam()
-    p = np.array([ln.point for ln in lines])
-    u = np.array([ln.direction for ln in lines])
+    scan_lines(obs).require_line_like()
     tri = board_triples(obs.n_boards)
     if exhaustive:
         scans = np.array([q for t in tri for q in permutations(t)])
@@ -88,7 +103,7 @@ def _candidates(obs: Observations, exhaustive: bool) -> np.ndarray:
         P, Q = P[keep], Q[keep]
     else:
         P = Q = tri
-    return solve_triples(n[P], d[P], p[Q], u[Q]).T_lidar_cam
+    return solve_triples(*triple_inputs(obs, P, Q)).T_lidar_cam
 
 
 def best_pairing(obs: Observations, sigma: float, exhaustive: bool = False):
@@ -99,7 +114,7 @@ def best_pairing(obs: Observations, sigma: float, exhaustive: bool = False):
         C = _candidates(obs, exhaustive)
     except SolveFailure:
         return None
-    if not len(C) or len(C) * obs.n_boards * sum(len(b.scan) for b in obs.boards) > 5e7:
+    if not len(C) or len(C) * obs.n_boards * sum(len(b.scan) for b in obs.boards) > MAX_PAIRING_WORK:
         return None
     costs = _pair_costs(obs, C, sigma)
     best = None
@@ -111,7 +126,8 @@ def best_pairing(obs: Observations, sigma: float, exhaustive: bool = False):
     total, perm, T0 = best
     paired = _rebuilt(obs, [obs.boards[k].scan for k in perm])
     try:
-        T = refine(paired.scan_data, T0, residual="range", loss="soft_l1", f_scale=3 * sigma).T_lidar_cam
+        T = refine(paired.scan_data, T0, residual="range", loss="soft_l1",
+                   f_scale_m=DIAGNOSE_F_SCALE_SIGMAS * sigma).T_lidar_cam
     except Exception:  # noqa: BLE001 -- a diagnosis never fails the answer
         return None
     return total, perm, T, paired
@@ -148,19 +164,20 @@ def pairing_causes(obs: Observations, sigma: float) -> list[tuple[str, str]]:
 
 
 def scale_causes(obs: Observations, T: np.ndarray, sigma: float) -> list[tuple[str, str]]:
-    """Board poses that fit only once their translations are scaled by s in 0.7..1.4 (intrinsics or square size
+    """Board poses that fit only once their translations are scaled by s in ``SCALE_RANGE`` (intrinsics or square size
     off): a bounded 1D search (scipy) of the clipped chi-square of the range residuals, refined from ``T``."""
     def fit(log_s):
         o = _rebuilt(obs, [b.scan for b in obs.boards], float(np.exp(log_s)))
-        Ts = refine(o.scan_data, T, residual="range", loss="soft_l1", f_scale=3 * sigma, max_nfev=15).T_lidar_cam
+        Ts = refine(o.scan_data, T, residual="range", loss="soft_l1", f_scale_m=DIAGNOSE_F_SCALE_SIGMAS * sigma,
+                    max_nfev=SCALE_MAX_NFEV).T_lidar_cam
         z = range_residuals(Ts, measured_points(o)) / sigma
         return float(np.sum(np.minimum(z**2, CLIP_Z**2))), Ts, o
 
-    sol = minimize_scalar(lambda x: fit(x)[0], bounds=(np.log(0.7), np.log(1.4)), method="bounded",
-                          options={"xatol": 0.005, "maxiter": 14})
+    sol = minimize_scalar(lambda x: fit(x)[0], bounds=tuple(np.log(SCALE_RANGE)), method="bounded",
+                          options={"xatol": SCALE_XATOL, "maxiter": SCALE_MAXITER})
     s = float(np.exp(sol.x))
     _, Ts, o = fit(sol.x)
-    if abs(s - 1) < 0.02 or not is_consistent(o, Ts, sigma):
+    if abs(s - 1) < MIN_SCALE_CHANGE or not is_consistent(o, Ts, sigma):
         return []
     return [("scale", f"the board poses fit the scans only once their distances are scaled by {s:.3f}: the camera "
                       f"intrinsics (focal length) or the board's square size are off by about {100 * (s - 1):+.0f}%")]

@@ -6,7 +6,7 @@ Every answer of ``calibrate`` is tested against its observations, whatever the m
   std: a clipped chi-square per board (each point contributes ``min(z^2, c^2)``, so a few stray points cannot
   condemn a board) against its expectation under Gaussian noise, with room for a quarter of the points to be
   outliers; the noise std is estimated robustly from the scan lines alone (median absolute deviation, no
-  extrinsic), plus a floor ``POSE_FLOOR_M`` for the camera-side board poses;
+  extrinsic, ``calib_core.data.lines``), plus a floor ``POSE_FLOOR_M`` for the camera-side board poses;
 - the board outline (exact outlines only, ``outline_kind``): scan points mapped into their board's frame must lie on
   the board (at most a quarter of a
   board's inlier points outside it by more than the tolerance);
@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from ..data.lines import MIN_SPREAD_M, tls_line
-from ..data.observations import Observations, ScanData
+from ..data.lines import MIN_SPREAD_M, scan_lines
+from ..data.observations import MIN_RANGE_M, Observations, ScanData
 from ..data.residuals import outside_outline, points_in_boards, range_residuals
 
 CLIP_Z = 3.0
@@ -39,8 +39,6 @@ POSE_FLOOR_M = 0.01
 """Spread (metres) added in quadrature to the range noise for errors of the camera-side board planes."""
 OUTLINE_TOL_SIGMAS = 4.0
 """A point is off its board when outside the outline by more than this many noise stds plus ``POSE_FLOOR_M``."""
-MIN_RANGE_M = 1e-3
-"""Scan points closer than this to the lidar origin are not measurements (left out, and warned about)."""
 MIN_DEPTH_M = 0.05
 """A board whose centre is not this far in front of the camera is not in view."""
 
@@ -57,30 +55,9 @@ CHI2_MEAN, CHI2_VAR = _clipped_chi2_moments(CLIP_Z)
 
 
 def line_noise_estimate(obs: Observations) -> float:
-    """Range-noise std (metres) from the scan lines alone, robustly: each board's points (4 or more) are fitted
-    with a 2D line (refitted once without points beyond 3 MADs); the orthogonal residual ``d`` of a point on
-    beam ``b`` is its range error times ``|b . nu|``; the std is 1.4826 times the median of ``|d / (b . nu)|``
-    over all boards. NaN when no board has 4 points. Computed once per ``Observations``."""
-    return obs.derived("verdict.line_noise_estimate", _line_noise_estimate)
-
-
-def _line_noise_estimate(obs: Observations) -> float:
-    ratios = []
-    for b in obs.boards:
-        P = b.scan[np.linalg.norm(b.scan, axis=1) > MIN_RANGE_M]
-        if len(P) < 4:
-            continue
-        c, u, d, _ = tls_line(P)
-        mad = 1.4826 * np.median(np.abs(d))
-        keep = np.abs(d) <= 3 * mad
-        if keep.sum() >= 4 and mad > 0:
-            c, u, _, _ = tls_line(P[keep])
-        nu = np.array([-u[1], u[0]])
-        cos = np.abs((P / np.linalg.norm(P, axis=1, keepdims=True)) @ nu)
-        ratios.append(np.abs((P - c) @ nu) / np.maximum(cos, 0.2) * np.sqrt(len(P) / (len(P) - 2)))
-    if not ratios:
-        return float("nan")
-    return float(1.4826 * np.median(np.concatenate(ratios)))
+    """The robust range-noise std (metres) from the scan lines alone (``lines.ScanLines.robust_sigma_m``; NaN
+    when no board has enough points)."""
+    return scan_lines(obs).robust_sigma_m
 
 
 @dataclass(frozen=True)

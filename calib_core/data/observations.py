@@ -324,9 +324,16 @@ class Observations:
         return len(self.boards)
 
     def subset(self, indices) -> Observations:
-        """The same problem with only the boards at ``indices`` (in that order)."""
-        return Observations(tuple(self.boards[i] for i in indices), self.T_lidar_cam_true, dict(self.meta),
-                            self.camera)
+        """The same problem with only the boards at ``indices`` (in that order). Derived values that are per
+        board (those with a ``subset_boards`` method, e.g. the scan lines) are carried over, not recomputed."""
+        indices = [int(i) for i in indices]
+        out = Observations(tuple(self.boards[i] for i in indices), self.T_lidar_cam_true, dict(self.meta),
+                           self.camera)
+        per_board = {k: v.subset_boards(indices) for k, v in self.__dict__.get("_derived", {}).items()
+                     if hasattr(v, "subset_boards")}
+        if per_board:
+            out.__dict__["_derived"] = per_board
+        return out
 
     @property
     def has_corners(self) -> bool:

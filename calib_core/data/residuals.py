@@ -9,6 +9,8 @@ frame (``n . p_C = d``); in the lidar frame the plane of board i is ``m . p_L = 
 
 from __future__ import annotations
 
+from enum import StrEnum
+
 import numpy as np
 
 from ..geometry.transforms import rotvec_to_matrix
@@ -102,7 +104,14 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     return e, J
 
 
-RESIDUALS = {"plane": plane_residuals, "range": range_residuals}
+class Residual(StrEnum):
+    """Which residual a refinement minimises: along the beam (the range-noise likelihood) or to the plane."""
+
+    RANGE = "range"
+    PLANE = "plane"
+
+
+RESIDUALS = {Residual.PLANE: plane_residuals, Residual.RANGE: range_residuals}
 
 
 def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
@@ -163,6 +172,38 @@ def points_in_boards(obs: Observations, candidates: np.ndarray) -> list[np.ndarr
     for b in obs.boards:
         p_C = np.einsum("mba,mkb->mka", R, b.scan_3d[None] - t[:, None, :])
         out.append(np.einsum("ba,mkb->mka", b.T_cam_board[:3, :3], p_C - b.T_cam_board[:3, 3]))
+    return out
+
+
+def outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(board indices, outline) of each distinct exact outline among the boards (``outline_kind`` exact; boards
+    sharing one outline are handled at once)."""
+    groups: dict[bytes, list[int]] = {}
+    for i, b in enumerate(obs.boards):
+        if b.outline_exact:
+            groups.setdefault(np.ascontiguousarray(b.outline).tobytes() + bytes([len(b.outline)]), []).append(i)
+    return [(np.array(idx), obs.boards[idx[0]].outline) for idx in groups.values()]
+
+
+def scan_points_in_boards(obs: Observations, candidates: np.ndarray) -> np.ndarray:
+    """(M,K,3) every scan point (in ``obs.scan_data`` order) in its own board's frame under every candidate:
+    ``p_W = Phi_i^T (R^T (p_L - t) - Delta_i)`` (metres)."""
+    data = obs.scan_data
+    R, t = candidates[:, :3, :3], candidates[:, :3, 3]
+    T_cb = np.array([b.T_cam_board for b in obs.boards])[data.board]              # (K,4,4)
+    p_C = np.einsum("mba,mkb->mka", R, data.points[None] - t[:, None, :])
+    return np.einsum("kba,mkb->mka", T_cb[:, :3, :3], p_C - T_cb[None, :, :3, 3])
+
+
+def outside_outlines(obs: Observations, candidates: np.ndarray) -> np.ndarray:
+    """(M,K) distance (metres) of every scan point outside its board's exact outline under every candidate (0
+    inside, and on boards without an exact outline; ``outside_outline`` per group of boards sharing one)."""
+    data = obs.scan_data
+    P = scan_points_in_boards(obs, candidates)[..., :2]
+    out = np.zeros(P.shape[:2])
+    for idx, outline in outline_groups(obs):
+        sel = np.isin(data.board, idx)
+        out[:, sel] = outside_outline(P[:, sel], outline)
     return out
 
 

@@ -55,5 +55,5 @@ def ablations(base: Method) -> list[Method]:
         func = update_wrapper(partial(base.func, **fixed), base.func)
         opts = ", ".join(f"{k}={v!r}" for k, v in fixed.items())
         out.append(Method(name, func, base.min_boards, base.citation, f"ablation: {base.name} with {opts}",
-                          cost=base.cost))
+                          cost=base.cost, paper=base.paper))
     return out

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..data.observations import Observations
-from ..data.result import SolveFailure
+from ..errors import SolveFailure
 from ..refine.refine import refine
 from ..registry import Method
 from ..robust.scorers import PENG2022_OPTIONS, SCORERS, peng2022_outline_warnings
@@ -62,12 +62,15 @@ def peng2022(obs: Observations, **options):
 
 BASELINES = (
     Method("zhang_pless_linear", zhang_pless_linear, ZP_MIN_BOARDS, ZHANG_CITE,
-           "linear solution of N_i^T H q = |N_i|^2, Phi projected onto SO(3); no refinement", cost="O(N)"),
+           "linear solution of N_i^T H q = |N_i|^2, Phi projected onto SO(3); no refinement", cost="O(N)",
+           paper=True),
     Method("zhang_pless", zhang_pless, ZP_MIN_BOARDS, ZHANG_CITE,
            "the linear solution refined on point-to-plane distances (least squares, analytic Jacobian)",
-           cost="O(N)"),
+           cost="O(N)", paper=True),
     Method("vasconcelos", vasconcelos, 3, VASC_CITE,
-           "minimal P3P solver on all board triples; least point-to-plane error of all scan points", cost=EXHAUSTIVE),
+           "minimal P3P solver on all board triples; least point-to-plane error of all scan points", cost=EXHAUSTIVE,
+           paper=True),
     Method("peng2022", peng2022, 3, PENG_CITE,
-           "Vasconcelos candidates; uncertainty-weighted joint likelihood of the point-line error", cost=EXHAUSTIVE),
+           "Vasconcelos candidates; uncertainty-weighted joint likelihood of the point-line error", cost=EXHAUSTIVE,
+           paper=True),
 )

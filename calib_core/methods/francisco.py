@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..data.lines import fit_lines
+from ..data.lines import scan_lines
 from ..data.observations import Observations
 from ..data.result import SolveFailure
 from ..refine.refine import refine
@@ -44,9 +44,9 @@ def msac_errors(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     """
     n, d = obs.planes_cam()
     a_c = -n / (1e3 * d)[:, None]                                              # (N,3) 1/mm
-    lines = fit_lines(obs)
-    p0 = np.array([[*(1e3 * ln.point), MSAC_SCAN_PLANE_Z_MM] for ln in lines])  # (N,3) mm
-    u = np.array([[*ln.direction, 0.0] for ln in lines])                      # (N,3)
+    lines = scan_lines(obs)
+    p0 = np.column_stack([1e3 * lines.centroid, np.full(obs.n_boards, MSAC_SCAN_PLANE_Z_MM)])  # (N,3) mm
+    u = np.column_stack([lines.direction, np.zeros(obs.n_boards)])           # (N,3)
     C = np.asarray(candidates, float).reshape(-1, 4, 4)
     t = 1e3 * C[:, :3, 3] + np.array([0.0, 0.0, MSAC_SCAN_PLANE_Z_MM])       # (M,3) mm
     Ra = np.einsum("mij,nj->mni", C[:, :3, :3], a_c)                           # (M,N,3)
@@ -146,11 +146,11 @@ def zhou2014(obs: Observations, **solver_options):
 FRANCISCO_METHODS = (
     Method("vasconcelos_msac", vasconcelos_msac, 3, VASC_CITE + " (the authors' MATLAB)",
            "the authors' code: minimal solutions of all triples in its dual formulation (real parts of complex roots "
-           "kept), MSAC on the dual-space plane-line error (threshold 1e-5 per mm)", cost=EXHAUSTIVE),
+           "kept), MSAC on the dual-space plane-line error (threshold 1e-5 per mm)", cost=EXHAUSTIVE, paper=True),
     Method("vasconcelos_msac_refined", vasconcelos_msac_refined, 3, VASC_CITE + " (the authors' MATLAB)",
            "the authors' code's default output: vasconcelos_msac refined on range residuals of its inlier boards",
-           cost=EXHAUSTIVE),
+           cost=EXHAUSTIVE, paper=True),
     Method("zhou2014", zhou2014, 3, ZHOU_CITE,
            "Zhou's minimal solver (n_i^T [r1 r2] u_i = 0, orthonormality: up to 8 solutions) on all triples; "
-           "least point-to-plane error", cost=EXHAUSTIVE),
+           "least point-to-plane error", cost=EXHAUSTIVE, paper=True),
 )

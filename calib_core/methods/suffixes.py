@@ -6,74 +6,61 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..checks.degeneracy import board_set_warnings, explain_failure, undetermined_directions
+from ..checks.degeneracy import explain_failure
+from ..data.lines import scan_noise_estimate
 from ..data.observations import Observations
-from ..data.result import SolveFailure
-from ..geometry.mounting import parse_fixed
-from ..refine.joint import RANGE_ONLY_MODEL, JointError, joint_step
-from ..refine.partial import calibrate_fixed, fixed_starts
-from ..refine.refine import refine
-from ..refine.uncertainty import UncertaintyError, conditioning, refinement_covariance, scan_noise_estimate
+from ..errors import SolveFailure
+from ..refine.joint import RANGE_ONLY_MODEL, JointOptions
+from ..refine.refine import F_SCALE_SIGMAS, refine
+from ..refine.uncertainty import conditioning
 from ..registry import Method, derived
+from .finish import fixed_calibration, range_covariance, refuse_undetermined, try_joint
 
-REFINE_OPTIONS = ("loss", "f_scale", "range_sigma_m", "max_nfev", "fixed")
-"""Options of an ``X+ml`` / ``X+plane`` method that go to the refinement; all others go to ``X``."""
-
-F_SCALE_SIGMAS = 2.5
-"""Default robust-loss scale, in units of the range noise std."""
+REFINE_OPTIONS = ("loss", "f_scale_m", "f_scale", "range_sigma_m", "max_nfev", "fixed")
+"""Options of an ``X+ml`` / ``X+plane`` method that go to the refinement (``f_scale``: the former name of
+``f_scale_m``, metres); all others go to ``X``."""
 
 
 def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: str = "linear",
-                     f_scale: float | None = None, range_sigma_m: float | None = None, max_nfev: int = 100):
-    """Refine ``T0`` on ``residual`` and compute the covariance; returns (RefineResult, covariance, info).
+                     f_scale_m: float | None = None, range_sigma_m: float | None = None, max_nfev: int = 100):
+    """Refine ``T0`` on ``residual`` (robust scale ``f_scale_m`` metres, default ``F_SCALE_SIGMAS`` noise stds)
+    and compute the covariance; returns (RefineResult, covariance, info).
 
     Directions the board geometry leaves free (``calib_core.checks.degeneracy``) are not presented as estimated: a
     SolveFailure names them, with the analysis in its info."""
     data = obs.scan_data
-    if f_scale is None:
-        f_scale = F_SCALE_SIGMAS * (range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs))
-    r = refine(data, T0, residual=residual, loss=loss, f_scale=f_scale, max_nfev=max_nfev)
-    deg = undetermined_directions(obs, r.T_lidar_cam, range_sigma_m)
-    if not deg.determined:
-        raise SolveFailure(f"refinement: {deg.message()}", np.stack([r.T_lidar_cam, T0]),
-                           {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
-    try:
-        cov = refinement_covariance(data, r.T_lidar_cam, residual, range_sigma_m)
-    except UncertaintyError as err:
-        raise SolveFailure(f"refinement: {err}", T0[None]) from None
+    if f_scale_m is None:
+        f_scale_m = F_SCALE_SIGMAS * (range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs))
+    r = refine(data, T0, residual=residual, loss=loss, f_scale_m=f_scale_m, max_nfev=max_nfev)
+    deg = refuse_undetermined(obs, r.T_lidar_cam, np.stack([r.T_lidar_cam, T0]), "refinement", range_sigma_m)
+    cov = range_covariance(obs, r.T_lidar_cam, T0[None], "refinement", residual, range_sigma_m)
     info = {"refine_cost": r.cost, "refine_initial_cost": r.initial_cost, "refine_nfev": r.nfev,
-            "refine_residual": residual, "refine_loss": loss, "covariance": cov, "covariance_model": RANGE_ONLY_MODEL,
-            "conditioning": conditioning(obs, r.T_lidar_cam)}
+            "refine_residual": residual, "refine_loss": str(loss), "covariance": cov,
+            "covariance_model": RANGE_ONLY_MODEL, "conditioning": conditioning(obs, r.T_lidar_cam)}
     if len(deg.directions):
         info["warnings"] = [deg.message()]
     return r, cov, info
 
 
-def refine_fixed(base: Method, obs: Observations, residual: str, fixed: dict, options: dict, *, loss: str = "linear",
-                 f_scale: float | None = None, range_sigma_m: float | None = None, max_nfev: int = 100):
-    """``X+ml`` / ``X+plane`` with ``fixed`` mounting parameters (``calib_core.refine.partial``): the free ones refined
-    on ``residual`` from a closed-form start (roll, pitch and z given) or from ``X``'s answer."""
-    mask, values = parse_fixed(fixed)
-    if f_scale is None:
-        f_scale = F_SCALE_SIGMAS * (range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs))
-    starts = fixed_starts(obs, mask, values, lambda: base.func(obs, **options)[0])
-    T, info = calibrate_fixed(obs, mask, values, starts, residual=residual, loss=loss, f_scale=f_scale,
-                              range_sigma_m=range_sigma_m, max_nfev=max_nfev)
-    return T, np.asarray(starts), {**info, "refine_residual": residual, "refine_loss": loss,
-                                   "warnings": board_set_warnings(obs)}
+def _refine_options(options: dict) -> dict:
+    """The refinement's options popped from ``options`` (``f_scale`` read as ``f_scale_m``)."""
+    ropts = {k: options.pop(k) for k in REFINE_OPTIONS if k in options}
+    if "f_scale" in ropts:
+        ropts.setdefault("f_scale_m", ropts.pop("f_scale"))
+    return ropts
 
 
 def refined_method(base: Method, residual: str, suffix: str) -> Method:
     """The method ``base.name + "+" + suffix``: run ``base``, then refine its answer on ``residual``
     (``"range"``: maximum likelihood under range noise; ``"plane"``: point-to-plane distances), with the
-    covariance of the refined extrinsic. Options ``loss``, ``f_scale`` (default ``F_SCALE_SIGMAS`` x the noise
-    std), ``range_sigma_m`` (default: estimated), ``max_nfev`` and ``fixed`` (mounting parameters held at given
-    values, as for ``lidarcam``) go to the refinement, the rest to ``base``."""
+    covariance of the refined extrinsic. Options ``loss``, ``f_scale_m`` (metres, default ``F_SCALE_SIGMAS`` x the
+    noise std), ``range_sigma_m`` (default: estimated), ``max_nfev`` and ``fixed`` (mounting parameters held at
+    given values, as for ``lidarcam``) go to the refinement, the rest to ``base``."""
     def func(obs: Observations, **options):
-        ropts = {k: options.pop(k) for k in REFINE_OPTIONS if k in options}
+        ropts = _refine_options(options)
         fixed = ropts.pop("fixed", None)
         if fixed is not None:
-            return refine_fixed(base, obs, residual, fixed, options, **ropts)
+            return fixed_calibration(obs, fixed, lambda: base.func(obs, **options)[0], residual=residual, **ropts)
         try:
             T0, cands, info = base.func(obs, **options)
         except SolveFailure as fail:
@@ -88,8 +75,9 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
     return derived(base, suffix, func, f"{base.name}, then {what}, with covariance")
 
 
-JOINT_OPTIONS = ("loss", "f_scale", "range_sigma_m", "corner_sigma_px", "max_iter")
-"""Options of an ``X+joint`` method that go to the joint refinement; all others go to ``X``."""
+JOINT_OPTIONS = ("loss", "f_scale_sigmas", "f_scale", "range_sigma_m", "corner_sigma_px", "max_iter")
+"""Options of an ``X+joint`` method that go to the joint refinement (``f_scale``: the former name of
+``f_scale_sigmas``, in noise stds); all others go to ``X``."""
 
 
 def joint_method(base: Method) -> Method:
@@ -99,19 +87,17 @@ def joint_method(base: Method) -> Method:
     ``X+ml`` and says so in ``info["warnings"]`` (its covariance ignores the camera's noise)."""
     def func(obs: Observations, **options):
         jopts = {k: options.pop(k) for k in JOINT_OPTIONS if k in options}
+        if "f_scale" in jopts:
+            jopts.setdefault("f_scale_sigmas", jopts.pop("f_scale"))
         T0, cands, info = base.func(obs, **options)
         T0 = np.asarray(T0, float)
-        why = "no image corners" if not obs.has_corners else None
-        if why is None:
-            try:
-                T, cov, jinfo = joint_step(obs, T0, **jopts)
-            except (JointError, UncertaintyError) as err:
-                why = f"joint refinement failed ({err})"
-            else:
-                jinfo["conditioning"] = conditioning(obs, T)
-                return T, cands, {**info, **jinfo, "covariance": cov, "base_T_lidar_cam": T0}
-        ropts = {k: jopts[k] for k in ("loss", "range_sigma_m") if k in jopts}
-        r, _, rinfo = refine_and_cover(obs, T0, "range", **ropts)
+        loss, sigma = jopts.pop("loss", "linear"), jopts.pop("range_sigma_m", None)
+        joint, why = try_joint(obs, T0, range_sigma_m=sigma, loss=loss, options=JointOptions(**jopts))
+        if joint is not None:
+            T, cov, jinfo = joint
+            jinfo["conditioning"] = conditioning(obs, T)
+            return T, cands, {**info, **jinfo, "covariance": cov, "base_T_lidar_cam": T0}
+        r, _, rinfo = refine_and_cover(obs, T0, "range", loss=loss, range_sigma_m=sigma)
         warn = f"{why}: range-only maximum likelihood; its covariance ignores the camera's noise"
         return r.T_lidar_cam, cands, {**info, **rinfo, "base_T_lidar_cam": T0,
                                       "warnings": [*info.get("warnings", []), warn]}

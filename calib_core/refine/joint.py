@@ -20,13 +20,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data.camera import project
+from ..data.lines import residual_sigma, scan_noise_estimate
 from ..data.observations import Observations, ScanData
 from ..data.residuals import MIN_BEAM_INCIDENCE, perturb, range_residuals
-from ..errors import LidarcamError
+from ..errors import JointError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import rotvec_to_matrix, skew
-from .refine import robust_cost
-from .uncertainty import Crlb, UncertaintyError, _inverse_information, scan_noise_estimate
+from .refine import F_SCALE_SIGMAS, robust_cost
+from .uncertainty import Crlb, _inverse_information
 
 JOINT_MODEL = "joint"
 RANGE_ONLY_MODEL = "range-only, ignores camera noise"
@@ -39,10 +40,30 @@ RANGE_SIGMA_FLOOR_M = 1e-6
 START_CORNER_SIGMA_PX = 0.1
 START_RANGE_SIGMA_M = 0.002
 """Floors of the noise stds of the first solve (corner RMS at the observed poses, scan-line noise estimate)."""
+MAX_ITER = 50
+"""Levenberg-Marquardt iterations of one joint solve, at most."""
+INITIAL_LAMBDA = 1e-3
+"""Levenberg-Marquardt damping of the first step (relative to the diagonal) ..."""
+LAMBDA_FACTOR = 10.0
+"""... multiplied by this after a rejected step, divided by it after an accepted one ..."""
+MAX_LAMBDA = 1e10
+"""... and the solve stops (converged: no step lowers the cost) above this ..."""
+MIN_LAMBDA = 1e-9
+"""... and never below this."""
+COST_RTOL = 1e-12
+"""Converged when a step lowers the cost by less than this fraction, or moves no parameter by ``STEP_TOL``."""
+STEP_TOL = 1e-12
 
 
-class JointError(LidarcamError):
-    """The joint model does not apply: no corners or no camera, or a board behind the camera."""
+@dataclass(frozen=True)
+class JointOptions:
+    """A method's joint step: ``use_corners`` (when every board carries them), ``corner_sigma_px`` (default
+    estimated), the robust loss's scale ``f_scale_sigmas`` in noise stds, at most ``max_iter`` iterations."""
+
+    use_corners: bool = True
+    corner_sigma_px: float | None = None
+    f_scale_sigmas: float = F_SCALE_SIGMAS
+    max_iter: int = MAX_ITER
 
 
 def _corner_arrays(obs: Observations):
@@ -163,19 +184,19 @@ def _apply(T_e, T_b, de, db):
     return perturb(T_e, de), Tb
 
 
-def _solve(obs, T_e, T_b, sc, sr, loss, f_scale, max_iter, tol=1e-12):
+def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL):
     """Levenberg-Marquardt on the joint cost, each step by the Schur complement (linear in the boards); robust
     losses by iteratively reweighted least squares. Returns (T_e, T_b, cost, iterations, converged)."""
     drho = _DRHO[loss]
     offsets = _row_offsets(obs)
 
     def cost_of(Te, Tb):
-        return robust_cost(_weighted(obs, Te, Tb, sc, sr, False), loss, f_scale)
+        return robust_cost(_weighted(obs, Te, Tb, sc, sr, False), loss, f_scale_sigmas)
 
-    cost, lam, it = cost_of(T_e, T_b), 1e-3, 0
+    cost, lam, it = cost_of(T_e, T_b), INITIAL_LAMBDA, 0
     for it in range(1, max_iter + 1):
         e, Jc, Je, Jb = _weighted(obs, T_e, T_b, sc, sr, True)
-        w = np.sqrt(drho((e / f_scale) ** 2))
+        w = np.sqrt(drho((e / f_scale_sigmas) ** 2))
         nc = len(Jc)
         blocks = _normal_equations(obs, offsets, e * w, Jc * w[:nc, None], Je * w[nc:, None], Jb * w[nc:, None])
         while True:
@@ -187,12 +208,12 @@ def _solve(obs, T_e, T_b, sc, sr, loss, f_scale, max_iter, tol=1e-12):
                 new = np.inf
             if new <= cost:
                 break
-            lam *= 10.0
-            if lam > 1e10:
+            lam *= LAMBDA_FACTOR
+            if lam > MAX_LAMBDA:
                 return T_e, T_b, cost, it, True
         T_e, T_b, old, cost = Te, Tb, cost, new
-        lam = max(lam / 10.0, 1e-9)
-        if old - cost <= tol * max(cost, 1e-300) or max(np.abs(de).max(), np.abs(db).max()) < 1e-12:
+        lam = max(lam / LAMBDA_FACTOR, MIN_LAMBDA)
+        if old - cost <= tol * max(cost, 1e-300) or max(np.abs(de).max(), np.abs(db).max()) < STEP_TOL:
             return T_e, T_b, cost, it, True
     return T_e, T_b, cost, it, False
 
@@ -224,23 +245,21 @@ class JointResult:
 def _estimate_sigmas(obs, T_e, T_b, n_params_boards: int):
     ec = corner_residuals(obs, T_b)
     er = joint_range_residuals(obs, T_e, T_b)
-    dof_c = max(ec.size - n_params_boards, 1)
-    dof_r = max(er.size - 6, 1)
-    return (max(float(np.sqrt(np.sum(ec**2) / dof_c)), CORNER_SIGMA_FLOOR_PX),
-            max(float(np.sqrt(er @ er / dof_r)), RANGE_SIGMA_FLOOR_M))
+    return (max(residual_sigma(ec, n_params_boards), CORNER_SIGMA_FLOOR_PX),
+            max(residual_sigma(er, 6), RANGE_SIGMA_FLOOR_M))
 
 
 def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
-                 range_sigma_m: float | None = None, loss: str = "linear", f_scale: float = 2.5,
-                 max_iter: int = 50, sigma_iters: int = 3, sigma_rtol: float = 0.05) -> JointResult:
+                 range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
+                 max_iter: int = MAX_ITER, sigma_iters: int = 3, sigma_rtol: float = 0.05) -> JointResult:
     """Maximise the joint likelihood from the extrinsic ``T0`` and the observed board poses.
 
     Args:
         corner_sigma_px, range_sigma_m: noise stds; ``None`` estimates each from its own residuals (corners:
             ``2J - 6N`` degrees of freedom, ranges ``K - 6``), re-solving until they change by less than
             ``sigma_rtol`` (at most ``sigma_iters`` solves). Start values: the corner RMS at the observed poses,
-            the scan-line estimate of ``uncertainty.scan_noise_estimate`` (floored by ``START_*``).
-        loss, f_scale: scipy robust loss on the normalised residuals, its scale in noise stds.
+            the scan-line estimate of ``data.lines.scan_noise_estimate`` (floored by ``START_*``).
+        loss, f_scale_sigmas: robust loss (``refine.Loss``) on the normalised residuals, its scale in noise stds.
     Raises:
         JointError: no corners or camera; UncertaintyError: the joint information is singular.
     """
@@ -250,7 +269,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
     sc = corner_sigma_px if corner_sigma_px is not None else max(est_c, START_CORNER_SIGMA_PX)
     sr = range_sigma_m if range_sigma_m is not None else max(scan_noise_estimate(obs), START_RANGE_SIGMA_M)
     for _ in range(max(1, sigma_iters)):
-        T_e, T_b, _, nit, converged = _solve(obs, T_e, T_b, sc, sr, loss, f_scale, max_iter)
+        T_e, T_b, _, nit, converged = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter)
         new_c, new_r = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards)
         new_c = corner_sigma_px if corner_sigma_px is not None else new_c
         new_r = range_sigma_m if range_sigma_m is not None else new_r
@@ -261,7 +280,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
     cov = marginal_covariance(obs, T_e, T_b, sc, sr)
     ec = corner_residuals(obs, T_b)
     er = joint_range_residuals(obs, T_e, T_b)
-    cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale)
+    cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale_sigmas)
     return JointResult(T_e, T_b, cov, sc, sr, float(np.sqrt(np.mean(np.sum(ec**2, axis=1)))),
                        float(np.sqrt(np.mean(er**2))), cost, nit, converged)
 
@@ -320,15 +339,15 @@ def joint_crlb(obs: Observations, range_sigma_m: float, corner_sigma_px: float, 
 
 
 def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
-               range_sigma_m: float | None = None, loss: str = "linear", f_scale: float = 2.5,
-               max_iter: int = 50) -> tuple[np.ndarray, np.ndarray, dict]:
+               range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
+               max_iter: int = MAX_ITER) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
     (T_lidar_cam, covariance, info) with ``info["covariance_model"] = JOINT_MODEL`` and the noise figures.
 
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
-                     f_scale=f_scale, max_iter=max_iter)
+                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter)
     info = {"covariance_model": JOINT_MODEL, "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m,
             "corner_rms_px": j.corner_rms_px, "range_rms_m": j.range_rms_m, "joint_cost": j.cost,
             "joint_iterations": j.iterations, "joint_converged": j.converged}

@@ -18,10 +18,11 @@ from scipy.spatial.transform import Rotation
 from ..data.lines import tls_line
 from ..data.observations import Observations
 from ..data.residuals import RESIDUALS
-from ..data.result import SolveFailure
+from ..errors import SolveFailure, UncertaintyError
 from ..geometry.mounting import PARAMS, UNIT_NAMES, T_from_params, params_from_T, params_jacobian, with_units
 from ..geometry.transforms import make_T
-from .uncertainty import UncertaintyError, refinement_covariance
+from .refine import loss_name
+from .uncertainty import refinement_covariance
 
 PLANAR_FIXED = np.array([True, True, False, False, False, True])
 """roll, pitch and z given: the planar case, with a closed-form start (``planar_start``)."""
@@ -95,7 +96,7 @@ def vertical_start(obs: Observations, z: float = 0.0) -> tuple[np.ndarray, float
 
 
 def _refine_free(obs: Observations, theta0: np.ndarray, free: np.ndarray, residual: str, loss: str,
-                 f_scale: float, max_nfev: int):
+                 f_scale_m: float, max_nfev: int):
     """Minimise the ``residual`` cost over ``theta[free]`` from ``theta0``; returns (theta, scipy result)."""
     fn = RESIDUALS[residual]
     data = obs.scan_data
@@ -112,13 +113,13 @@ def _refine_free(obs: Observations, theta0: np.ndarray, free: np.ndarray, residu
         th = full(x)
         return fn(T_from_params(th), data, jacobian=True)[1] @ params_jacobian(th)[:, free]
 
-    sol = least_squares(fun, theta0[free], jac=jac, method="trf", loss=loss, f_scale=f_scale, max_nfev=max_nfev,
-                        x_scale="jac")
+    sol = least_squares(fun, theta0[free], jac=jac, method="trf", loss=loss_name(loss), f_scale=f_scale_m,
+                        max_nfev=max_nfev, x_scale="jac")
     return full(sol.x), sol
 
 
 def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.ndarray, starts: list[np.ndarray],
-                    *, residual: str = "range", loss: str = "linear", f_scale: float = 0.02,
+                    *, residual: str = "range", loss: str = "linear", f_scale_m: float = 1.0,
                     range_sigma_m: float | None = None, max_nfev: int = 100) -> tuple[np.ndarray, dict]:
     """Refine the free mounting parameters from each start (its fixed parameters replaced by the given values)
     and keep the least cost; returns ``T_lidar_cam`` and ``info``.
@@ -139,7 +140,7 @@ def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.
     for T0 in starts:
         theta0 = params_from_T(T0)
         theta0[fixed_mask] = np.asarray(fixed_values, float)[fixed_mask]
-        theta, sol = _refine_free(obs, theta0, free, residual, loss, f_scale, max_nfev)
+        theta, sol = _refine_free(obs, theta0, free, residual, loss, f_scale_m, max_nfev)
         if best is None or sol.cost < best[1].cost:
             best = (theta, sol)
     theta, sol = best

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -11,6 +12,28 @@ from ..data.observations import ScanData
 from ..data.residuals import RESIDUALS, perturb
 from ..errors import CalibrationError
 from ..geometry.transforms import skew
+
+
+class Loss(StrEnum):
+    """The robust losses of ``scipy.optimize.least_squares`` (``rho`` of the squared, scaled residual)."""
+
+    LINEAR = "linear"
+    SOFT_L1 = "soft_l1"
+    HUBER = "huber"
+    CAUCHY = "cauchy"
+    ARCTAN = "arctan"
+
+
+F_SCALE_SIGMAS = 2.5
+"""Default scale of a robust loss, in units of the range-noise std (residuals beyond 2.5 stds are down-weighted)."""
+
+
+def loss_name(loss) -> str:
+    """The scipy name of ``loss`` (a ``Loss`` or its name); CalibrationError for an unknown one."""
+    try:
+        return Loss(loss).value
+    except ValueError:
+        raise CalibrationError(f"unknown loss {loss!r}; choose from {sorted(m.value for m in Loss)}") from None
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,16 +57,20 @@ class RefineResult:
 
 
 def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str = "linear",
-           f_scale: float = 0.02, max_nfev: int = 100, x_scale: np.ndarray | None = None) -> RefineResult:
+           f_scale_m: float | None = None, max_nfev: int = 100, x_scale: np.ndarray | None = None) -> RefineResult:
     """Minimise ``sum rho(e_k^2)`` over the 6-dof extrinsic from ``T0``.
 
     Args:
         data: the problem's scan points and planes.
         T0: initial 4x4 ``T_lidar_cam``.
         residual: ``"range"`` (along-beam, the true noise model) or ``"plane"`` (point-to-plane distance).
-        loss: scipy loss name (``"linear"``, ``"huber"``, ``"cauchy"``, ...); ``f_scale`` its scale (metres),
-            e.g. 2-3 times the range noise std.
+        loss: a ``Loss`` or its scipy name; ``f_scale_m`` its scale (metres), e.g. ``F_SCALE_SIGMAS`` times the
+            range noise std (required for a robust loss).
     """
+    loss = loss_name(loss)
+    if loss != Loss.LINEAR and f_scale_m is None:
+        raise CalibrationError(f"the robust loss {loss!r} needs its scale f_scale_m (metres)")
+    f_scale = 1.0 if f_scale_m is None else float(f_scale_m)
     try:
         fn = RESIDUALS[residual]
     except KeyError:
@@ -73,13 +100,13 @@ _RHO = {"linear": lambda z: z, "huber": lambda z: np.where(z <= 1, z, 2 * np.sqr
         "soft_l1": lambda z: 2 * (np.sqrt(1 + z) - 1), "cauchy": np.log1p, "arctan": np.arctan}
 
 
-def robust_cost(e: np.ndarray, loss: str = "linear", f_scale: float = 1.0) -> float:
-    """``0.5 * f^2 * sum rho((e/f)^2)``: the cost scipy's ``least_squares`` minimises for that loss."""
-    if loss not in _RHO:
-        raise CalibrationError(f"unknown loss {loss!r}; choose from {sorted(_RHO)}")
+def robust_cost(e: np.ndarray, loss: str = "linear", scale: float = 1.0) -> float:
+    """``0.5 * f^2 * sum rho((e/f)^2)``, ``f = scale`` in the residuals' units: the cost scipy's ``least_squares``
+    minimises for that loss."""
+    loss = loss_name(loss)
     if loss == "linear":
         return 0.5 * float(e @ e)
-    return 0.5 * f_scale**2 * float(np.sum(_RHO[loss]((np.asarray(e) / f_scale) ** 2)))
+    return 0.5 * scale**2 * float(np.sum(_RHO[loss]((np.asarray(e) / scale) ** 2)))
 
 
 def so3_left_jacobian(w: np.ndarray) -> np.ndarray:

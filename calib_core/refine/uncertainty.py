@@ -14,15 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..data.lines import fit_line
+from ..data.lines import residual_sigma
 from ..data.observations import Observations, ScanData
 from ..data.residuals import range_residuals
-from ..errors import LidarcamError
+from ..errors import UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
-
-
-class UncertaintyError(LidarcamError):
-    """The uncertainty cannot be computed: too few residuals, a singular information matrix, no extrinsic."""
 
 
 def _inverse_information(A: np.ndarray, rcond: float) -> np.ndarray:
@@ -50,15 +46,17 @@ def covariance(jacobian: np.ndarray, residuals: np.ndarray, range_sigma_m: float
         UncertaintyError: fewer than 7 residuals with ``range_sigma_m=None``, or a singular ``J^T J``.
     """
     J = np.asarray(jacobian, float)
-    e = np.asarray(residuals, float)
-    if range_sigma_m is None:
-        dof = len(e) - J.shape[1]
-        if dof <= 0:
-            raise UncertaintyError(f"{len(e)} residuals leave no degrees of freedom to estimate the noise")
-        sigma2 = float(e @ e) / dof
-    else:
-        sigma2 = float(range_sigma_m) ** 2
-    return sigma2 * _inverse_information(J.T @ J, rcond)
+    return _noise_variance(residuals, J.shape[1], range_sigma_m) * _inverse_information(J.T @ J, rcond)
+
+
+def _noise_variance(residuals: np.ndarray, n_params: int, range_sigma_m: float | None) -> float:
+    """``range_sigma_m^2``, or estimated from the residuals (``lines.residual_sigma``, K - n_params degrees of
+    freedom); UncertaintyError when none are left."""
+    if range_sigma_m is not None:
+        return float(range_sigma_m) ** 2
+    if len(residuals) <= n_params:
+        raise UncertaintyError(f"{len(residuals)} residuals leave no degrees of freedom to estimate the noise")
+    return residual_sigma(residuals, n_params) ** 2
 
 
 def _extrinsic(obs: Observations, T_lidar_cam) -> np.ndarray:
@@ -140,30 +138,6 @@ def normal_spread_deg(obs: Observations) -> float:
     return float(np.degrees(np.arcsin(np.sqrt(np.clip(2 * lam[0], 0.0, 1.0)))))
 
 
-def scan_noise_estimate(obs: Observations, *, floor_m: float = 1e-6) -> float:
-    """Range-noise std (metres) estimated from the scan lines alone, without an extrinsic.
-
-    Each board's points are fitted with a 2D line; a range error ``n`` along beam ``b`` moves a point by
-    ``n |b . nu|`` off the line (``nu`` its normal), so ``sigma^2 = sum d^2 / sum (b . nu)^2``, with the two
-    degrees of freedom per line taken out. At least ``floor_m``.
-    """
-    num = den = 0.0
-    k = 0
-    for b in obs.boards:
-        if len(b.scan) < 3:
-            continue
-        ln = fit_line(b.scan, min_points=3, min_aspect=0.0)
-        nu = np.array([-ln.direction[1], ln.direction[0]])
-        d = (b.scan - ln.point) @ nu
-        c = (b.scan / np.linalg.norm(b.scan, axis=1, keepdims=True)) @ nu
-        num += float(d @ d)
-        den += float(c @ c) * (len(b.scan) - 2) / len(b.scan)
-        k += 1
-    if k == 0 or den <= 0:
-        raise UncertaintyError("no board has 3 or more scan points to estimate the noise from")
-    return max(float(np.sqrt(num / den)), floor_m)
-
-
 def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str = "range",
                           range_sigma_m: float | None = None, basis: np.ndarray | None = None) -> np.ndarray:
     """Covariance (6x6; kxk with ``basis``) of the minimiser of the ``residual`` least squares at ``T_lidar_cam``,
@@ -186,12 +160,7 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
         raise UncertaintyError(f"unknown residual {residual!r}; 'range' or 'plane'")
     from ..data.residuals import plane_residuals
 
-    if range_sigma_m is None:
-        if len(e_r) <= B.shape[1]:
-            raise UncertaintyError(f"{len(e_r)} residuals leave no degrees of freedom to estimate the noise")
-        sigma2 = float(e_r @ e_r) / (len(e_r) - B.shape[1])
-    else:
-        sigma2 = float(range_sigma_m) ** 2
+    sigma2 = _noise_variance(e_r, B.shape[1], range_sigma_m)
     _, J_p = plane_residuals(T, data, jacobian=True)
     J_p = J_p @ B
     m = (data.normals @ T[:3, :3].T)[data.board]

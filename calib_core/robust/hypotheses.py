@@ -1,33 +1,71 @@
 """Hypotheses of the extrinsic for the consensus search: the minimal solver on board triples (all of them while
 there are at most ``EXHAUSTIVE_TRIPLES``, else sampled in rounds until the MSAC / RANSAC stopping rule is met)
 and, from 5 boards on, Zhang & Pless on the whole set and on sampled subsets. Sampling is seeded from the data
-(``consensus.data_seed``), so a rerun on the same data gives the same answer.
+(``data_seed``), so a rerun on the same data gives the same answer.
 """
 
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..data.lines import triple_inputs
 from ..data.observations import Observations
-from ..data.result import SolveFailure
+from ..errors import SolveFailure
 from ..solvers.vasconcelos import board_triples, solve_triples
 from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
 from ..solvers.zhang_pless import zhang_pless_linear
-from .consensus import (
-    EXHAUSTIVE_TRIPLES,
-    MAX_SAMPLED_TRIPLES,
-    SAMPLE_BATCH,
-    SCORE_TAU,
-    ZP_SUBSETS,
-    BoardLines,
-    board_statistics,
-    data_seed,
-    needed_samples,
-    sample_triples,
-)
+from .consensus import SCORE_TAU, board_statistics
+
+EXHAUSTIVE_TRIPLES = 220
+"""All board triples are solved while there are at most this many (12 boards); beyond, triples are sampled."""
+SAMPLE_BATCH = 48
+"""Triples sampled per round of the adaptive search."""
+MAX_SAMPLED_TRIPLES = 960
+"""Upper bound of sampled triples."""
+SEARCH_CONFIDENCE = 0.999
+"""Stop sampling once an all-inlier triple has been drawn with this probability (MSAC / RANSAC rule)."""
+ZP_SUBSETS = 8
+"""Zhang & Pless solutions on this many sampled board subsets (from 5 boards on) ..."""
+ZP_SUBSET_SHARE = 0.6
+"""... each of ``max(5, ZP_SUBSET_SHARE N)`` boards."""
+
+
+def data_seed(obs: Observations) -> int:
+    """A seed drawn from the data themselves (CRC32 of the scans and board poses): reruns are reproducible."""
+    crc = 0
+    for b in obs.boards:
+        crc = zlib.crc32(np.ascontiguousarray(b.scan).tobytes(), crc)
+        crc = zlib.crc32(np.ascontiguousarray(b.T_cam_board).tobytes(), crc)
+    return crc
+
+
+def needed_samples(inlier_share: float, confidence: float = SEARCH_CONFIDENCE, size: int = 3) -> float:
+    """Samples of ``size`` boards needed to draw one all-inlier sample with ``confidence`` (the RANSAC rule)."""
+    w = inlier_share**size
+    if w >= 1.0:
+        return 1.0
+    if w <= 0.0:
+        return math.inf
+    return math.log(1.0 - confidence) / math.log(1.0 - w)
+
+
+def sample_triples(n_boards: int, count: int, rng: np.random.Generator, seen: set) -> np.ndarray:
+    """Up to ``count`` distinct, not yet ``seen`` sorted triples of board indices (``seen`` is updated)."""
+    out = []
+    for _ in range(8 * count):
+        if len(out) >= count:
+            break
+        tri = tuple(sorted(rng.choice(n_boards, 3, replace=False).tolist()))
+        if tri not in seen:
+            seen.add(tri)
+            out.append(tri)
+    return np.array(out, dtype=int).reshape(-1, 3)
+
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,23 +90,21 @@ class Hypotheses:
         return ~np.any(self.source & ~boards[None], axis=1)
 
 
-def _solve(obs: Observations, lines: BoardLines, tri: np.ndarray, solver_options: dict):
-    n, d = obs.planes_cam()
-    u = np.stack([lines.normal[:, 1], -lines.normal[:, 0]], axis=1)
-    sol = solve_triples(n[tri], d[tri], lines.centroid[tri], u[tri], **solver_options)
+def _solve(obs: Observations, tri: np.ndarray, solver_options: dict):
+    sol = solve_triples(*triple_inputs(obs, tri), **solver_options)
     src = np.zeros((len(sol.T_lidar_cam), obs.n_boards), bool)
     src[np.arange(len(src))[:, None], tri[sol.triple]] = True
     return sol.T_lidar_cam, src
 
 
-def triple_hypotheses(obs: Observations, lines: BoardLines, outline_sigma_m: float, solver_options: dict):
+def triple_hypotheses(obs: Observations, sigma_m: float, outline_sigma_m: float, solver_options: dict):
     """(T, source, q, exhaustive, n_triples): all triples while few, else adaptive sampling."""
     N = obs.n_boards
     n_all = math.comb(N, 3)
     if n_all <= EXHAUSTIVE_TRIPLES:
         all_tri = board_triples(N)
-        T, src = _solve(obs, lines, all_tri, solver_options)
-        return T, src, board_statistics(obs, lines, T, outline_sigma_m), True, len(all_tri)
+        T, src = _solve(obs, all_tri, solver_options)
+        return T, src, board_statistics(obs, T, sigma_m, outline_sigma_m), True, len(all_tri)
     rng = np.random.default_rng(data_seed(obs))
     seen: set = set()
     Ts, srcs, qs = [], [], []
@@ -77,8 +113,8 @@ def triple_hypotheses(obs: Observations, lines: BoardLines, outline_sigma_m: flo
         tri = sample_triples(N, SAMPLE_BATCH, rng, seen)
         if len(tri) == 0:
             break
-        T, src = _solve(obs, lines, tri, solver_options)
-        q = board_statistics(obs, lines, T, outline_sigma_m)
+        T, src = _solve(obs, tri, solver_options)
+        q = board_statistics(obs, T, sigma_m, outline_sigma_m)
         Ts.append(T), srcs.append(src), qs.append(q)
         if len(q):
             best_inliers = max(best_inliers, int(np.max(np.sum(q < SCORE_TAU, axis=1))))
@@ -91,13 +127,13 @@ def triple_hypotheses(obs: Observations, lines: BoardLines, outline_sigma_m: flo
 
 
 def zp_hypotheses(obs: Observations, rng: np.random.Generator, n_subsets: int = ZP_SUBSETS):
-    """Zhang & Pless on all boards and on ``n_subsets`` random subsets of ``max(5, 0.6 N)`` boards:
+    """Zhang & Pless on all boards and on ``n_subsets`` random subsets of ``max(5, ZP_SUBSET_SHARE N)`` boards:
     (T (M,4,4), source (M,N), reasons)."""
     N = obs.n_boards
     if N < ZP_MIN_BOARDS:
         return np.zeros((0, 4, 4)), np.zeros((0, N), bool), []
     subsets = [np.arange(N)]
-    size = max(ZP_MIN_BOARDS, int(np.ceil(0.6 * N)))
+    size = max(ZP_MIN_BOARDS, int(np.ceil(ZP_SUBSET_SHARE * N)))
     if size < N:
         subsets += [np.sort(rng.choice(N, size, replace=False)) for _ in range(n_subsets)]
     Ts, srcs, reasons = [], [], []
@@ -113,10 +149,11 @@ def zp_hypotheses(obs: Observations, rng: np.random.Generator, n_subsets: int = 
     return (np.array(Ts).reshape(-1, 4, 4), np.array(srcs, bool).reshape(-1, N), reasons)
 
 
-def hypotheses(obs: Observations, lines: BoardLines, outline_sigma_m: float, *, use_zhang_pless: bool = True,
+def hypotheses(obs: Observations, sigma_m: float, outline_sigma_m: float, *, use_zhang_pless: bool = True,
                **solver_options) -> Hypotheses:
-    """Every hypothesis of the consensus search with its per-board statistics."""
-    T, src, q, exhaustive, n_tri = triple_hypotheses(obs, lines, outline_sigma_m, solver_options)
+    """Every hypothesis of the consensus search with its per-board statistics (``consensus.board_statistics`` at
+    range noise ``sigma_m``)."""
+    T, src, q, exhaustive, n_tri = triple_hypotheses(obs, sigma_m, outline_sigma_m, solver_options)
     reasons: list[str] = [] if len(T) else [f"minimal solver: {n_tri} triples, no real solution"]
     if use_zhang_pless:
         Tz, sz, rz = zp_hypotheses(obs, np.random.default_rng(data_seed(obs) + 1))
@@ -124,5 +161,5 @@ def hypotheses(obs: Observations, lines: BoardLines, outline_sigma_m: float, *, 
         if len(Tz):
             T = np.concatenate([T, Tz])
             src = np.concatenate([src, sz])
-            q = np.concatenate([q, board_statistics(obs, lines, Tz, outline_sigma_m)])
+            q = np.concatenate([q, board_statistics(obs, Tz, sigma_m, outline_sigma_m)])
     return Hypotheses(T, src, q, exhaustive, n_tri, tuple(reasons))

@@ -14,8 +14,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..data.lines import MIN_LINE_POINTS, tls_line
+from ..data.lines import MAD_TO_SIGMA, MIN_LINE_POINTS, mad_sigma, tls_line
 from ..data.observations import Observations
+from ..data.residuals import MIN_BEAM_INCIDENCE
 
 TRIM_SIGMAS = 4.0
 """A scan point whose range residual against its board's robust line exceeds this many pooled noise stds is
@@ -25,8 +26,10 @@ MAX_TRIM_SHARE = 0.5
 """A board that would lose more than this share of its points is not a single straight segment: it is kept
 whole and left to the board-level consensus, which then rejects it as a whole."""
 
-MAD_TO_SIGMA = 1.4826
-"""Median absolute deviation of a Gaussian sample to its standard deviation."""
+NEAR_SIGMAS = 3.0
+"""The robust line is refitted by total least squares on the points within this many robust stds of it."""
+MIN_SIGMA_M = 1e-6
+"""Floor (metres) of the robust scales: exact (noise-free) scans keep a finite test."""
 
 _PAIR_GAPS = (2, 3)
 _MAX_PAIRS = 24
@@ -68,7 +71,7 @@ def line_range_residuals(points: np.ndarray, normal: np.ndarray, offset) -> np.n
     r = np.linalg.norm(points, axis=1)
     b = points / np.where(r > 0, r, 1.0)[:, None]
     nb = np.atleast_2d(normal) @ b.T                                          # (L,K)
-    nb = np.where(np.abs(nb) < 1e-6, np.copysign(1e-6, nb), nb)
+    nb = np.where(np.abs(nb) < MIN_BEAM_INCIDENCE, np.copysign(MIN_BEAM_INCIDENCE, nb), nb)
     return r[None] - np.asarray(offset, float).reshape(-1, 1) / nb
 
 
@@ -85,8 +88,8 @@ def _pairs(K: int) -> tuple[np.ndarray, np.ndarray]:
 
 def robust_line_residuals(points: np.ndarray) -> np.ndarray | None:
     """Range residuals (K,) of a board's points against its robust line: the least-median-of-|residual| line
-    through point pairs, refitted by total least squares on the points within 3 robust stds of it; None when
-    no pair of points spans a line (one point repeated: the line fit refuses the board)."""
+    through point pairs, refitted by total least squares on the points within ``NEAR_SIGMAS`` robust stds of it;
+    None when no pair of points spans a line (one point repeated: the line fit refuses the board)."""
     P = np.asarray(points, float)
     i, j = _pairs(len(P))
     d = P[j] - P[i]
@@ -100,7 +103,7 @@ def robust_line_residuals(points: np.ndarray) -> np.ndarray | None:
     med = np.median(np.abs(e), axis=1)
     e = e[int(np.argmin(med))]
     scale = MAD_TO_SIGMA * max(float(np.min(med)), 1e-9)
-    near = np.abs(e) <= 3.0 * scale
+    near = np.abs(e) <= NEAR_SIGMAS * scale
     if near.sum() >= MIN_LINE_POINTS:
         c, u, _, _ = tls_line(P[near])
         nrm = np.array([-u[1], u[0]])
@@ -113,9 +116,8 @@ def trim_points(obs: Observations, *, n_sigmas: float = TRIM_SIGMAS, max_share: 
     """Which scan points of each board lie on its line (``TrimReport``); the test scale is the pooled robust
     std of all boards' residuals (one noise model for the lidar)."""
     res = [robust_line_residuals(b.scan) if len(b.scan) > min_points else None for b in obs.boards]
-    pooled = np.concatenate([np.abs(e) for e in res if e is not None] or [np.zeros(1)])
-    sigma = MAD_TO_SIGMA * float(np.median(pooled)) if pooled.size else 0.0
-    sigma = max(sigma, 1e-6)
+    pooled = np.concatenate([e for e in res if e is not None] or [np.zeros(1)])
+    sigma = max(mad_sigma(pooled), MIN_SIGMA_M)
     keep, off, ends, untrimmed = [], [], [], []
     for i, (b, e) in enumerate(zip(obs.boards, res, strict=True)):
         K = len(b.scan)
@@ -129,6 +131,25 @@ def trim_points(obs: Observations, *, n_sigmas: float = TRIM_SIGMAS, max_share: 
         ends.append(n_end)
         off.append(int(K - good.sum()) - n_end)
     return TrimReport(tuple(keep), tuple(off), tuple(ends), sigma, tuple(untrimmed))
+
+
+@dataclass(frozen=True)
+class TrimOptions:
+    """Point trimming: ``enabled``; a point is left out beyond ``n_sigmas`` pooled robust stds of its board's line,
+    unless its board would lose more than ``max_share`` of its points."""
+
+    enabled: bool = True
+    n_sigmas: float = TRIM_SIGMAS
+    max_share: float = MAX_TRIM_SHARE
+
+
+def trim(obs: Observations, options: TrimOptions | None = None) -> tuple[Observations, TrimReport | None]:
+    """The observations with the points off their boards' lines left out, and the report (None when disabled)."""
+    options = options or TrimOptions()
+    if not options.enabled:
+        return obs, None
+    rep = trim_points(obs, n_sigmas=options.n_sigmas, max_share=options.max_share)
+    return apply_trim(obs, rep), rep
 
 
 def apply_trim(obs: Observations, report: TrimReport) -> Observations:

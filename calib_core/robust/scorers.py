@@ -9,6 +9,8 @@ inside the board outline, boards in front of the camera).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.special import logsumexp
 
@@ -16,14 +18,12 @@ from ..data.observations import Observations
 from ..data.residuals import (
     candidate_chunk,
     in_chunks,
-    outside_outline,
+    outside_outlines,
     plane_residuals,
     point_line_errors,
-    points_in_boards,
     range_residuals,
 )
-from ..data.result import SolveFailure
-from ..errors import CalibrationError
+from ..errors import CalibrationError, SolveFailure
 
 EDGE_SIGMA_M = 0.03
 """Scale (metres) of the endpoint-against-edge term of the ``lidarcam`` score: absorbs the range noise and the beam
@@ -31,6 +31,10 @@ spacing at the board edges (0.25 deg at 5 m is 22 mm)."""
 
 OUTLINE_SIGMA_M = 0.03
 """Scale (metres) of the points-inside-the-outline term of the ``lidarcam`` score."""
+
+DEFAULT_RANGE_SIGMA_M = 0.02
+"""Range-noise std (metres) of the ``lidarcam`` scorer when its caller gives none (the simulator's default
+noise; the method always passes its own estimate)."""
 
 
 def exact_outline_boards(obs: Observations) -> np.ndarray:
@@ -172,7 +176,35 @@ def _peng_normaliser(log_pi_of, blocks, N: int, normalise: bool):
     return (best + np.log(total))[None], arg
 
 
-def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float = 0.02,
+@dataclass(frozen=True)
+class ScoreOptions:
+    """Scales (metres) of the ``lidarcam`` score's endpoint and outline terms, and its cost per board behind the
+    camera (``lidarcam``)."""
+
+    edge_sigma_m: float = EDGE_SIGMA_M
+    outline_sigma_m: float = OUTLINE_SIGMA_M
+    behind_penalty: float = np.inf
+
+    def kwargs(self) -> dict:
+        return {"edge_sigma_m": self.edge_sigma_m, "outline_sigma_m": self.outline_sigma_m,
+                "behind_penalty": self.behind_penalty}
+
+
+def _evidence(obs: Observations, C: np.ndarray, range_sigma_m: float, edge_sigma_m: float, outline_sigma_m: float):
+    """The ``lidarcam`` score's normalised residuals of (M,4,4) candidates: range (M,K), endpoints and outline
+    distances of the boards with an exact outline (scan-data order), and the number of boards behind the camera
+    (M,)."""
+    data = obs.scan_data
+    exact = exact_outline_boards(obs)
+    rng = range_residuals(C, data) / range_sigma_m
+    edge = point_line_errors(obs, C)[:, exact].reshape(len(C), -1) / edge_sigma_m
+    out = outside_outlines(obs, C)[:, np.isin(data.board, exact)] / outline_sigma_m
+    centres = np.array([b.scan_3d.mean(axis=0) for b in obs.boards])                  # (N,3)
+    depth = np.einsum("mna,ma->mn", centres[None] - C[:, None, :3, 3], C[:, :3, 2])  # z of R^T (c - t)
+    return rng, edge, out, np.sum(depth <= 0, axis=1).astype(float)
+
+
+def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
              edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
              behind_penalty: float = np.inf, return_details: bool = False):
     """Our selection cost: a negative log-likelihood over all the evidence, per candidate (lower is better).
@@ -198,17 +230,10 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
                 "behind_penalty": behind_penalty}
         out = in_chunks(lambda C: lidarcam(obs, C, **opts, return_details=True), obs, candidates)
         return out if return_details else out[0]
-    rng_term = 0.5 * np.sum((range_residuals(candidates, obs.scan_data) / range_sigma_m) ** 2, axis=1)
-    exact = exact_outline_boards(obs)
-    edge_term = 0.5 * np.sum((point_line_errors(obs, candidates)[:, exact] / edge_sigma_m) ** 2, axis=(1, 2))
-    out_term = np.zeros(len(candidates))
-    behind = np.zeros(len(candidates))
-    R, t = candidates[:, :3, :3], candidates[:, :3, 3]
-    for b, P in zip(obs.boards, points_in_boards(obs, candidates), strict=True):
-        if b.outline_exact:
-            out_term += 0.5 * np.sum((outside_outline(P[..., :2], b.outline) / outline_sigma_m) ** 2, axis=1)
-        depth = np.einsum("ma,ma->m", R[:, :, 2], b.scan_3d.mean(axis=0) - t)   # z of R^T (c - t)
-        behind += depth <= 0
+    rng, edge, out, behind = _evidence(obs, candidates, range_sigma_m, edge_sigma_m, outline_sigma_m)
+    rng_term = 0.5 * np.sum(rng**2, axis=1)
+    edge_term = 0.5 * np.sum(edge**2, axis=1)
+    out_term = 0.5 * np.sum(out**2, axis=1)
     with np.errstate(invalid="ignore"):
         pen = np.where(behind > 0, behind * behind_penalty, 0.0)
     cost = rng_term + edge_term + out_term + pen
@@ -218,19 +243,17 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
     return cost
 
 
-def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float = 0.02,
-                       edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M) -> np.ndarray:
+def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
+                       edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
+                       behind_penalty: float = np.inf) -> np.ndarray:
     """The residual vector of the ``lidarcam`` cost at one extrinsic (its squared norm / 2 is the cost without the
-    behind-the-camera penalty): range residuals / sigma, endpoint errors / edge sigma, outline distances / outline
-    sigma. A (M,4,4) batch of extrinsics gives (M, n), one row each."""
+    behind-the-camera penalty, which is not a residual): range residuals / sigma, endpoint errors / edge sigma,
+    outline distances / outline sigma. A (M,4,4) batch of extrinsics gives (M, n), one row each."""
     T = np.asarray(T_lidar_cam, float)
     C = T.reshape(-1, 4, 4)
-    parts = [range_residuals(C, obs.scan_data) / range_sigma_m,
-             point_line_errors(obs, C)[:, exact_outline_boards(obs)].reshape(len(C), -1) / edge_sigma_m]
-    parts += [outside_outline(P[..., :2], b.outline) / outline_sigma_m
-              for b, P in zip(obs.boards, points_in_boards(obs, C), strict=True) if b.outline_exact]
-    out = np.concatenate(parts, axis=1)
-    return out[0] if T.ndim == 2 else out
+    rng, edge, out, _ = _evidence(obs, C, range_sigma_m, edge_sigma_m, outline_sigma_m)
+    res = np.concatenate([rng, edge, out], axis=1)
+    return res[0] if T.ndim == 2 else res
 
 
 PENG2022_OPTIONS = ("delta_m", "normalise_candidates", "beta_norm", "beta_eps", "error", "weighting")

@@ -1,5 +1,6 @@
-"""The robust front and back of ``lidarcam``: point trimming, the consensus search over boards (hypotheses, MSAC
-scores, local optimisation on consensus sets) and the final per-board and per-point tests after refinement.
+"""The consensus search over boards of ``lidarcam`` (hypotheses, MSAC scores, local optimisation on consensus
+sets) on the trimmed observations, and the final per-board and per-point tests of the refined answer (which say
+whether the method must refine again; they do not refine).
 
 Board indices in everything reported (``boards_used``, ``boards_rejected``) are those of the caller's
 observations. Lidar frame, metres, radians.
@@ -7,21 +8,19 @@ observations. Lidar frame, metres, radians.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..data.lines import fit_line
+from ..data.lines import scan_lines
 from ..data.observations import Observations
 from ..data.residuals import range_residuals
-from ..data.result import SolveFailure
-from ..geometry.transforms import matrix_to_rotvec
-from ..refine.refine import refine
-from ..refine.uncertainty import scan_noise_estimate
-from .consensus import SCORE_TAU, TEST_CHI2, BoardLines, board_lines, board_statistics, inflation, msac_cost
+from ..errors import SolveFailure
+from ..refine.refine import F_SCALE_SIGMAS, Loss, refine
+from .choose import distinct_order
+from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
-from .inliers import TRIM_SIGMAS, TrimReport, apply_trim, trim_points
+from .inliers import TRIM_SIGMAS, TrimReport
 
 POOL_MAX = 64
 """The final selection scores at most this many hypotheses, the best by MSAC cost (the per-board statistics are
@@ -35,8 +34,25 @@ LO_STARTS_ALL = 2
 """... and distinct best hypotheses by the untruncated sum of the statistics, optimised on all boards first (so a
 consensus that leaves a good board out must beat the one that keeps every board)."""
 LO_ROUNDS = 4
+"""At most this many refine-and-retest rounds of one local optimisation."""
+LO_LOSS = Loss.SOFT_L1
+"""The local optimisation's robust loss (its scale ``F_SCALE_SIGMAS`` range-noise stds): a board still in the
+consensus set but off must not drag the pose."""
 MIN_TESTABLE = 4
 """Boards are tested and rejected only from this many on: three boards fit every minimal solution exactly."""
+FINAL_MIN_POINTS = 3
+"""The final point test leaves a board at least this many points (else it keeps them all)."""
+
+
+@dataclass(frozen=True)
+class ConsensusOptions:
+    """The consensus search: ``reject_boards`` (test boards and leave out those that fail), ``use_zhang_pless``
+    (Zhang & Pless hypotheses beside the minimal solver's), ``solver`` (options of the minimal solver,
+    ``solvers.vasconcelos.solve_triples``, as (name, value) pairs)."""
+
+    reject_boards: bool = True
+    use_zhang_pless: bool = True
+    solver: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,7 +63,6 @@ class Search:
     obs: Observations
     trim: TrimReport | None
     good: np.ndarray
-    lines: BoardLines
     hyps: Hypotheses
     used: np.ndarray
     pool: np.ndarray
@@ -72,19 +87,8 @@ def _rejection(index: int, reason: str, statistic: float | None = None) -> dict:
     return {"index": int(index), "reason": reason, "statistic": None if statistic is None else float(statistic)}
 
 
-def _distinct_order(T: np.ndarray, cost: np.ndarray, n: int) -> list[int]:
-    out: list[int] = []
-    for j in np.argsort(cost, kind="stable"):
-        if not np.isfinite(cost[j]) or len(out) >= n:
-            break
-        if all(np.linalg.norm(matrix_to_rotvec(T[j, :3, :3] @ T[k, :3, :3].T)) > 0.02
-               or np.linalg.norm(T[j, :3, 3] - T[k, :3, 3]) > 0.05 for k in out):
-            out.append(int(j))
-    return out
-
-
-def local_optimise(obs: Observations, lines: BoardLines, T0: np.ndarray, q0: np.ndarray, sigma_m: float,
-                   outline_sigma_m: float, start_all: bool = False):
+def local_optimise(obs: Observations, T0: np.ndarray, q0: np.ndarray, sigma_m: float, outline_sigma_m: float,
+                   start_all: bool = False):
     """Refine ``T0`` on the boards it explains (``q0 < SCORE_TAU``; every board in front of the camera with
     ``start_all``), re-test every board, repeat until the consensus set is stable: (T, used (N,) bool, q (N,),
     inflation, MSAC cost at the final threshold plus ``N log(inflation)``)."""
@@ -93,9 +97,9 @@ def local_optimise(obs: Observations, lines: BoardLines, T0: np.ndarray, q0: np.
     for _ in range(LO_ROUNDS):
         if used.sum() < 3:
             break
-        T = refine(obs.subset(np.flatnonzero(used)).scan_data, T, residual="range", loss="soft_l1",
-                   f_scale=2.5 * sigma_m).T_lidar_cam
-        q = board_statistics(obs, lines, T, outline_sigma_m)[0]
+        T = refine(obs.subset(np.flatnonzero(used)).scan_data, T, residual="range", loss=LO_LOSS,
+                   f_scale_m=F_SCALE_SIGMAS * sigma_m).T_lidar_cam
+        q = board_statistics(obs, T, sigma_m, outline_sigma_m)[0]
         s2 = inflation(q[used])
         new = q <= TEST_CHI2 * s2
         if np.array_equal(new, used):
@@ -104,59 +108,60 @@ def local_optimise(obs: Observations, lines: BoardLines, T0: np.ndarray, q0: np.
     return T, used, q, s2, float(msac_cost(q[None], TEST_CHI2 * s2)[0]) + np.log(s2) * len(q)
 
 
-def consensus_search(obs: Observations, *, range_sigma_m: float | None, outline_sigma_m: float, trim: bool = True,
-                     reject: bool = True, use_zhang_pless: bool = True, **solver_options) -> Search:
-    """Trim points, keep boards with a line-like scan, search hypotheses and the consensus set among them."""
-    rep = trim_points(obs) if trim else None
-    obs_t = apply_trim(obs, rep) if rep is not None else obs
-    good, rejected = [], []
-    for i, b in enumerate(obs_t.boards):
-        try:
-            fit_line(b.scan)
-            good.append(i)
-        except SolveFailure as fail:
-            rejected.append(_rejection(i, f"no line fits its scan: {fail.reason}"))
-    good = np.array(good, dtype=int)
+def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_m: float | None,
+                     outline_sigma_m: float, options: ConsensusOptions | None = None) -> Search:
+    """On ``obs`` (already trimmed, ``trim`` says how): keep the boards with a line-like scan, search hypotheses
+    and the consensus set among them (noise ``range_sigma_m``, default the scan lines' RMS estimate)."""
+    options = options or ConsensusOptions()
+    lines = scan_lines(obs)
+    good = np.flatnonzero(lines.line_like)
+    rejected = [_rejection(i, f"no line fits its scan: {lines.problem[i]}") for i in np.flatnonzero(~lines.line_like)]
     if len(good) < 3:
         raise SolveFailure(f"lidarcam: only {len(good)} boards with a line-like scan (at least 3 are needed): "
                            + "; ".join(f"board {r['index']}: {r['reason']}" for r in rejected))
-    obs_g = obs_t.subset(good)
-    sigma = range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs_g)
-    lines = board_lines(obs_g, sigma)
-    H = hypotheses(obs_g, lines, outline_sigma_m, use_zhang_pless=use_zhang_pless, **solver_options)
+    obs_g = obs.subset(good)
+    sigma = range_sigma_m if range_sigma_m is not None else scan_lines(obs_g).sigma_m
+    H = hypotheses(obs_g, sigma, outline_sigma_m, use_zhang_pless=options.use_zhang_pless, **dict(options.solver))
     if len(H.T) == 0:
         raise SolveFailure("no candidate: " + "; ".join(H.reasons))
-    cost = msac_cost(H.q)
     used = np.ones(len(good), bool)
     lo_T: list[np.ndarray] = []
-    if reject and len(good) >= MIN_TESTABLE:
-        # starts: the best MSAC hypotheses, and the best by the untruncated sum (all boards, no rejection)
-        starts = [(j, False) for j in _distinct_order(H.T, cost, LO_STARTS)]
-        starts += [(j, True) for j in _distinct_order(H.T, np.sum(H.q, axis=1), LO_STARTS_ALL)]
-        done: dict = {}  # a start's result by (hypothesis, initial board set): the same start is optimised once
-        for j, a in starts:
-            key = (j, (np.isfinite(H.q[j]) if a else H.q[j] < SCORE_TAU).tobytes())
-            if key not in done:
-                done[key] = local_optimise(obs_g, lines, H.T[j], H.q[j], sigma, outline_sigma_m, a)
-        results = list(done.values())
-        lo_T = [res[0] for res in results]
-        # compare them at one truncation (the largest inflation among them): a solution must not win by
-        # leaving out boards that inflate its own noise estimate
-        tau = TEST_CHI2 * max((res[3] for res in results), default=1.0)
-        best = min(results, key=lambda res: float(msac_cost(res[2][None], tau)[0])) if results else None
-        if best is None:
-            raise SolveFailure("lidarcam: no hypothesis puts the boards in front of the camera", H.T)
-        used = best[1]
-        for k in np.flatnonzero(~used):
-            rejected.append(_rejection(good[k], board_reason(best[2][k], TEST_CHI2 * best[3]), best[2][k]))
-        if used.sum() < 3:
-            raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(good)} boards agree on one extrinsic "
-                               f"(at least 3 are needed); the others fail the per-board test", H.T)
+    if options.reject_boards and len(good) >= MIN_TESTABLE:
+        used, lo_T, rejected = _consensus(obs_g, H, sigma, outline_sigma_m, good, rejected)
     within = np.flatnonzero(H.within(used))
     cap = POOL_MAX if H.exhaustive else POOL_MAX_SAMPLED
     within = within[np.argsort(msac_cost(H.q[within][:, used]), kind="stable")[:cap]]
     pool = np.concatenate([H.T[within]] + ([np.array(lo_T)] if lo_T else []))
-    return Search(obs_t, rep, good, lines, H, used, pool, sigma, outline_sigma_m, rejected)
+    return Search(obs, trim, good, H, used, pool, sigma, outline_sigma_m, rejected)
+
+
+def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m: float, good: np.ndarray,
+               rejected: list):
+    """Local optimisation of the best starts and the consensus set of the best: (used (N,) bool, the optimised
+    extrinsics, the rejections so far plus the boards left out)."""
+    cost = msac_cost(H.q)
+    # starts: the best MSAC hypotheses, and the best by the untruncated sum (all boards, no rejection)
+    starts = [(j, False) for j in distinct_order(H.T, cost, LO_STARTS)]
+    starts += [(j, True) for j in distinct_order(H.T, np.sum(H.q, axis=1), LO_STARTS_ALL)]
+    done: dict = {}  # a start's result by (hypothesis, initial board set): the same start is optimised once
+    for j, a in starts:
+        key = (j, (np.isfinite(H.q[j]) if a else H.q[j] < SCORE_TAU).tobytes())
+        if key not in done:
+            done[key] = local_optimise(obs_g, H.T[j], H.q[j], sigma, outline_sigma_m, a)
+    results = list(done.values())
+    if not results:
+        raise SolveFailure("lidarcam: no hypothesis puts the boards in front of the camera", H.T)
+    # compare them at one truncation (the largest inflation among them): a solution must not win by
+    # leaving out boards that inflate its own noise estimate
+    tau = TEST_CHI2 * max(res[3] for res in results)
+    best = min(results, key=lambda res: float(msac_cost(res[2][None], tau)[0]))
+    used = best[1]
+    rejected = rejected + [_rejection(good[k], board_reason(best[2][k], TEST_CHI2 * best[3]), best[2][k])
+                           for k in np.flatnonzero(~used)]
+    if used.sum() < 3:
+        raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(good)} boards agree on one extrinsic "
+                           f"(at least 3 are needed); the others fail the per-board test", H.T)
+    return used, [res[0] for res in results], rejected
 
 
 def board_reason(q: float, threshold: float) -> str:
@@ -168,19 +173,20 @@ def board_reason(q: float, threshold: float) -> str:
 
 
 @dataclass(frozen=True, eq=False)
-class Finish:
-    """After the final tests: the boards used (as Observations), the refit (None when nothing changed), the
-    warnings and the ``info`` entries (``boards_used``, ``boards_rejected``, ``points_trimmed``, ``consensus``)."""
+class FinalTests:
+    """The final tests of a refined answer: the boards used (as Observations, points failing the point test left
+    out), whether that changed anything (then the method refines again on them), the warnings and the ``info``
+    entries (``boards_used``, ``boards_rejected``, ``points_trimmed``, ``consensus``)."""
 
     obs_used: Observations
-    refit: tuple | None
+    changed: bool
     warnings: list
     info: dict
 
 
 def _point_test(obs: Observations, T: np.ndarray, sigma_m: float) -> tuple[Observations, int]:
     """Boards of ``obs`` without the scan points whose range residual at ``T`` exceeds ``TRIM_SIGMAS`` stds
-    (a board keeps at least 3 points); and how many were left out."""
+    (a board keeps at least ``FINAL_MIN_POINTS`` points); and how many were left out."""
     e = range_residuals(T, obs.scan_data)
     bad = np.abs(e) > TRIM_SIGMAS * sigma_m
     if not bad.any():
@@ -188,7 +194,7 @@ def _point_test(obs: Observations, T: np.ndarray, sigma_m: float) -> tuple[Obser
     boards, n = [], 0
     for i, b in enumerate(obs.boards):
         keep = ~bad[obs.scan_data.board == i]
-        if keep.all() or keep.sum() < 3:
+        if keep.all() or keep.sum() < FINAL_MIN_POINTS:
             boards.append(b)
             continue
         n += int((~keep).sum())
@@ -196,10 +202,10 @@ def _point_test(obs: Observations, T: np.ndarray, sigma_m: float) -> tuple[Obser
     return replace(obs, boards=tuple(boards), meta=dict(obs.meta)), n
 
 
-def finish_search(s: Search, T: np.ndarray, *, reject: bool, refit: Callable) -> Finish:
+def final_tests(s: Search, T: np.ndarray, *, reject: bool) -> FinalTests:
     """The final per-board test at the refined ``T`` (boards that fail are left out, boards that pass are taken
-    back) and the point test on the boards kept; ``refit(obs, T)`` refines again when either changed anything."""
-    q = board_statistics(s.obs_good, s.lines, T, s.outline_sigma_m)[0]
+    back) and the point test on the boards kept."""
+    q = board_statistics(s.obs_good, T, s.sigma_m, s.outline_sigma_m)[0]
     s2 = inflation(q[s.used])
     used = q <= TEST_CHI2 * s2 if reject and len(q) >= MIN_TESTABLE else s.used
     if used.sum() < 3:
@@ -209,7 +215,6 @@ def finish_search(s: Search, T: np.ndarray, *, reject: bool, refit: Callable) ->
     rejected = [r for r in s.rejected if r["index"] not in set(s.good.tolist())]
     rejected += [_rejection(s.good[k], board_reason(q[k], TEST_CHI2 * s2), q[k]) for k in np.flatnonzero(~used)]
     obs_u, n_pts = _point_test(s.obs.subset(s.good[used]), T, s.sigma_m)
-    out = refit(obs_u, T) if (n_pts or not np.array_equal(used, s.used)) else None
     warnings = [f"board {r['index']} left out: {r['reason']}" for r in sorted(rejected, key=lambda r: r["index"])]
     trimmed = s.trim.summary() if s.trim is not None else {"total": 0}
     trimmed["in_fit"] = n_pts
@@ -222,4 +227,4 @@ def finish_search(s: Search, T: np.ndarray, *, reject: bool, refit: Callable) ->
             "consensus": {"n_hypotheses": int(len(s.hyps.T)), "n_triples": int(s.hyps.n_triples),
                           "exhaustive": bool(s.hyps.exhaustive), "inflation": float(s2),
                           "statistics": [float(v) for v in q]}}
-    return Finish(obs_u, out, warnings, info)
+    return FinalTests(obs_u, bool(n_pts or not np.array_equal(used, s.used)), warnings, info)

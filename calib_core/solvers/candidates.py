@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..data.lines import fit_lines
+from ..data.lines import scan_lines, triple_inputs
 from ..data.observations import Observations
 from ..data.result import SolveFailure
 from ..errors import CalibrationError
@@ -48,6 +48,7 @@ def minimal_candidates(obs: Observations, solver: str = "vasconcelos", **solver_
     if solver not in MINIMAL_SOLVERS:
         raise CalibrationError(f"unknown minimal solver {solver!r}; choose from {', '.join(MINIMAL_SOLVERS)}")
     # the solver modules are the heavy part: load on use
+    from .vasconcelos import board_triples
     if solver == "zhou2014":
         from .zhou2014 import solve_triples
     elif solver == "vasconcelos_dual":
@@ -55,20 +56,7 @@ def minimal_candidates(obs: Observations, solver: str = "vasconcelos", **solver_
     else:
         from .vasconcelos import solve_triples
 
-    tri, n, d, p, u = triple_inputs(obs)
-    sol = solve_triples(n, d, p, u, **solver_options)
-    return CandidateSet(sol.T_lidar_cam, sol.triple, tri, sol.reasons)
-
-
-def triple_inputs(obs: Observations):
-    """The minimal solvers' input for every board triple of ``obs``: the triples (C,3) and, per triple, the camera
-    planes ``n`` (C,3,3), ``d`` (C,3) and the scan lines' points ``p`` and directions ``u`` (C,3,2), lines fitted
-    once per board."""
-    from .vasconcelos import board_triples
-
-    lines = fit_lines(obs)
-    n, d = obs.planes_cam()
-    p = np.array([ln.point for ln in lines])
-    u = np.array([ln.direction for ln in lines])
+    scan_lines(obs).require_line_like()
     tri = board_triples(obs.n_boards)
-    return tri, n[tri], d[tri], p[tri], u[tri]
+    sol = solve_triples(*triple_inputs(obs, tri), **solver_options)
+    return CandidateSet(sol.T_lidar_cam, sol.triple, tri, sol.reasons)

@@ -1,0 +1,81 @@
+"""The last steps every method of ours shares (``lidarcam`` and the suffix methods ``X+ml``, ``X+plane``,
+``X+joint``), each written once: the refusal of directions the board geometry does not determine, the joint step
+over image corners and ranges (or why it does not apply), the range model's covariance, and the calibration with
+fixed mounting parameters."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, undetermined_directions
+from ..data.lines import scan_noise_estimate
+from ..data.observations import Observations
+from ..errors import JointError, SolveFailure, UncertaintyError
+from ..geometry.mounting import parse_fixed
+from ..refine.joint import JointOptions, joint_step
+from ..refine.partial import calibrate_fixed, fixed_starts
+from ..refine.refine import F_SCALE_SIGMAS
+from ..refine.uncertainty import refinement_covariance
+
+
+def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str,
+                        range_sigma_m: float | None, options: DegeneracyOptions | None = None) -> Degeneracy:
+    """The degeneracy analysis at ``T`` (``checks.degeneracy.undetermined_directions``); a SolveFailure naming
+    the directions the board geometry leaves free, with the analysis and the board-set warnings in its info."""
+    options = options or DegeneracyOptions()
+    deg = undetermined_directions(obs, T, range_sigma_m, max_scaled_sigma=options.max_scaled_sigma,
+                                  null_conditioning=options.min_conditioning)
+    if not deg.determined:
+        raise SolveFailure(f"{who}: {deg.message()}", candidates,
+                           {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
+    return deg
+
+
+NO_CORNERS = "no image corners"
+"""``try_joint``'s reason when a board carries no image corners."""
+
+
+def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, loss: str,
+              options: JointOptions | None = None) -> tuple[tuple | None, str | None]:
+    """The joint step (``refine.joint.joint_step``) from ``T``: ((T, covariance, info), None) when it applies and
+    succeeds; (None, why) otherwise (``why`` None when the corners are switched off)."""
+    options = options or JointOptions()
+    if not options.use_corners:
+        return None, None
+    if not obs.has_corners:
+        return None, NO_CORNERS
+    try:
+        return joint_step(obs, T, corner_sigma_px=options.corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
+                          f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter), None
+    except (JointError, UncertaintyError) as err:
+        return None, f"joint refinement failed ({err})"
+
+
+def range_covariance(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str, residual: str = "range",
+                     range_sigma_m: float | None = None) -> np.ndarray:
+    """The range model's covariance at ``T`` (``refine.uncertainty.refinement_covariance``; board poses taken as
+    exact); a SolveFailure with the reason when it cannot be computed."""
+    try:
+        return refinement_covariance(obs.scan_data, T, residual, range_sigma_m)
+    except UncertaintyError as err:
+        raise SolveFailure(f"{who}: {err}", candidates) from None
+
+
+def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray], *,
+                      residual: str = "range", loss: str = "linear", f_scale_m: float | None = None,
+                      f_scale_sigmas: float = F_SCALE_SIGMAS, range_sigma_m: float | None = None,
+                      max_nfev: int = 100) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Calibrate the free mounting parameters with ``fixed`` ones held (``refine.partial``): from the closed-form
+    planar start when roll, pitch and z are given, else from ``full_start()`` (a full calibration's answer);
+    refined on ``residual`` (robust scale ``f_scale_m``, default ``f_scale_sigmas`` noise stds). Returns
+    (T_lidar_cam, starts, info)."""
+    mask, values = parse_fixed(fixed)
+    sigma = range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs)
+    starts = fixed_starts(obs, mask, values, full_start)
+    T, info = calibrate_fixed(obs, mask, values, starts, residual=residual, loss=loss,
+                              f_scale_m=f_scale_m if f_scale_m is not None else f_scale_sigmas * sigma,
+                              range_sigma_m=range_sigma_m, max_nfev=max_nfev)
+    return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "refine_residual": residual,
+                                   "refine_loss": str(loss), "warnings": board_set_warnings(obs)}
