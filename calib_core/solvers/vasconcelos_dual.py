@@ -55,6 +55,19 @@ def _closest_point(U: np.ndarray, C: np.ndarray, W: np.ndarray) -> np.ndarray:
     return np.linalg.solve(Pu + proj(W), np.einsum("...ij,...j->...i", Pu, C)[..., None])[..., 0]
 
 
+def _translation_mm(R: np.ndarray, a: np.ndarray, u3: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Step 4: the translation (K,3) in millimetres of our frame (scan plane z = 0) of rotations R (K,3,3), from
+    the dual plane points ``a``, the scan lines' directions ``u3`` and moments ``m`` (K,3,3)."""
+    r = np.einsum("kij,knj->kni", R, a)                                       # rotated camera planes
+    C = cross(u3, m) / np.sum(m**2, axis=-1, keepdims=True)                   # dual lines' closest points
+    lpt = _closest_point(m, C, r / r[..., 2:])
+    M = np.concatenate([-lpt[..., :, None] * r[..., None, :], (lpt - r)[..., None]], axis=-1).reshape(-1, 9, 4)
+    V = np.linalg.svd(M)[2][:, -1]
+    t = V[:, :3] / V[:, 3:]
+    t[:, 2] -= SCAN_PLANE_Z_MM
+    return t
+
+
 def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *, real_parts: bool = True,
                   imag_tol: float = 1e-8, min_plane_sv: float = 1e-3, min_line_sin: float = 1e-3,
                   quartic: str = "eig", root_newton_iters: int = 2) -> MinimalSolutions:
@@ -119,13 +132,7 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
 
     Rh, _ = kabsch(P[kt], s[:, :, None] * k[kt])                             # maps P onto s k
     R = np.swapaxes(Rh, 1, 2)
-    r = np.einsum("kij,knj->kni", R, a[kt])                                   # rotated camera planes (R,3,3)
-    C = cross(u3[kt], m[kt]) / np.sum(m[kt] ** 2, axis=-1, keepdims=True)      # dual lines' closest points
-    lpt = _closest_point(m[kt], C, r / r[..., 2:])
-    M = np.concatenate([-lpt[..., :, None] * r[..., None, :], (lpt - r)[..., None]], axis=-1).reshape(-1, 9, 4)
-    V = np.linalg.svd(M)[2][:, -1]
-    t = V[:, :3] / V[:, 3:]
-    t[:, 2] -= SCAN_PLANE_Z_MM
+    t = _translation_mm(R, a[kt], u3[kt], m[kt])
     T = np.zeros((len(kt), 4, 4))
     T[:, :3, :3] = R
     T[:, :3, 3] = t / 1e3
