@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from rig.markdown import md_table
+
 from .aggregate import load_summary, load_trials, write_tables
 from .catalog import method_label
 from .claim_stats import claim_values, sweep_arrays
@@ -52,8 +54,7 @@ def claim_one_rows(trials: pd.DataFrame) -> list[str]:
     """Claim 1 (and every other board-sweep claim against Francisco) under each reading, per board count with its
     paired 95% interval, and the verdict with intervals."""
     arrays = sweep_arrays(trials, "n_boards")
-    lines = ["| # | Paper's claim | vs (reading) | Peng 2022 - it, per board count [95% CI] | verdict |",
-             "|---|---|---|---|---|"]
+    rows = []
     for i, claim, _ in francisco_twins():
         if claim.sweep != "boards":
             continue
@@ -64,9 +65,9 @@ def claim_one_rows(trials: pd.DataFrame) -> list[str]:
             per = "; ".join(f"{int(b)}: {txt[3 * k]} [{txt[3 * k + 1]}, {txt[3 * k + 2]}]"
                             for k, b in enumerate(v["n_boards"]))
             reading = READINGS.get(m, "the authors' code, refined output")
-            lines.append(f"| {i} | {claim.text} | `{m}` ({reading}) | {per} | "
-                         f"**{claim_verdict(c, v['value'], v['lo95'], v['hi95'])}** |")
-    return lines
+            rows.append([i, claim.text, f"`{m}` ({reading})", per,
+                         f"**{claim_verdict(c, v['value'], v['lo95'], v['hi95'])}**"])
+    return md_table(["#", "Paper's claim", "vs (reading)", "Peng 2022 - it, per board count [95% CI]", "verdict"], rows)
 
 
 def report_lines(out: Path, trials: int, more_trials: int, seconds: float) -> list[str]:

@@ -102,9 +102,7 @@ def readings_section(tables: dict[str, Path], ct: pd.DataFrame, presets: list[st
     """Every claim against Francisco under both readings, per preset, and which one the paper's numbers fit."""
     twins = francisco_twins()
     code = claims_table(tables, [(i, twin) for i, _, twin in twins])
-    lines = ["| # | Paper's claim | " + " | ".join(
-        f"{p}: {READINGS[FRANCISCO]} / {READINGS[FRANCISCO_CODE]} -> fit" for p in presets) + " |",
-        "|---|---|" + "---|" * len(presets)]
+    rows = []
     for i, claim, _ in twins:
         cells = []
         for p in presets:
@@ -114,8 +112,9 @@ def readings_section(tables: dict[str, Path], ct: pd.DataFrame, presets: list[st
             vc = c["verdict"].iloc[0] if len(c) else "not run"
             cells.append(f"{_cell(d, claim.kind) if len(d) else 'not run'} / "
                          f"{_cell(c, claim.kind) if len(c) else 'not run'} -> {reading_fit(vd, vc)}")
-        lines.append(f"| {i} | {claim.text} | " + " | ".join(cells) + " |")
-    return lines
+        rows.append([i, claim.text, *cells])
+    return md_table(["#", "Paper's claim", *(f"{p}: {READINGS[FRANCISCO]} / {READINGS[FRANCISCO_CODE]} -> fit"
+                                             for p in presets)], rows)
 
 
 def _values(vals: list, key: str) -> str:

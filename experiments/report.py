@@ -96,14 +96,14 @@ def _range_text(v: ClaimCheck) -> str:
 
 def readings_rows(sweeps: dict[str, pd.DataFrame]) -> list[str]:
     """Every claim against Francisco under both readings side by side, and which one the paper's numbers fit."""
-    lines = [f"| # | Paper's claim | {READINGS[FRANCISCO]} (`{FRANCISCO}`): range, verdict | "
-             f"{READINGS[FRANCISCO_CODE]} (`{FRANCISCO_CODE}`): range, verdict | the paper's numbers fit |",
-             "|---|---|---|---|---|"]
+    rows = []
     for i, claim, twin in francisco_twins():
         d, c = check_claim(claim, sweeps), check_claim(twin, sweeps)
-        lines.append(f"| {i} | {claim.text} | {_range_text(d)}, **{d.verdict}** | {_range_text(c)}, "
-                     f"**{c.verdict}** | {reading_fit(d.verdict, c.verdict)} |")
-    return lines
+        rows.append([i, claim.text, f"{_range_text(d)}, **{d.verdict}**", f"{_range_text(c)}, **{c.verdict}**",
+                     reading_fit(d.verdict, c.verdict)])
+    return md_table(["#", "Paper's claim", f"{READINGS[FRANCISCO]} (`{FRANCISCO}`): range, verdict",
+                     f"{READINGS[FRANCISCO_CODE]} (`{FRANCISCO_CODE}`): range, verdict", "the paper's numbers fit"],
+                    rows)
 
 
 def _claim_rows(verdicts: list[ClaimCheck]) -> list[str]:

@@ -22,6 +22,7 @@ from calib_core.data.lines import triple_inputs
 from calib_core.geometry.metrics import rotation_error_deg, translation_error_m
 from calib_core.solvers.candidates import MINIMAL_SOLVERS
 from calib_core.solvers.vasconcelos import board_triples
+from rig.markdown import md_table
 from simulate import SimOptions, generate
 
 NOISE_LEVELS_MM = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
@@ -64,14 +65,11 @@ def solver_rows(n_problems: int, noise_mm: float, n_boards: int = 6, seed: int =
 
 def table(rows: list[dict]) -> list[str]:
     """Markdown table of ``solver_rows`` rows."""
-    out = [f"| solver | noise mm | triples | candidate within {NEAR_DEG:g} deg / {1e3 * NEAR_M:g} mm | "
-           f"within {EXACT_DEG:g} deg | candidates per triple | refused | us per triple |",
-           "|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        out.append(f"| {r['solver']} | {r['noise_mm']:g} | {r['triples']} | {100 * r['near_rate']:.1f}% | "
-                   f"{100 * r['exact_rate']:.1f}% | {r['candidates']:.2f} | {100 * r['refused']:.1f}% | "
-                   f"{r['us_per_triple']:.1f} |")
-    return out
+    head = ["solver", "noise mm", "triples", f"candidate within {NEAR_DEG:g} deg / {1e3 * NEAR_M:g} mm",
+            f"within {EXACT_DEG:g} deg", "candidates per triple", "refused", "us per triple"]
+    return md_table(head, [[r["solver"], f"{r['noise_mm']:g}", r["triples"], f"{100 * r['near_rate']:.1f}%",
+                            f"{100 * r['exact_rate']:.1f}%", f"{r['candidates']:.2f}", f"{100 * r['refused']:.1f}%",
+                            f"{r['us_per_triple']:.1f}"] for r in rows])
 
 
 def run(n_problems: int = 50, noise_levels: Sequence[float] = NOISE_LEVELS_MM,
