@@ -51,8 +51,21 @@ def setting_columns(df: pd.DataFrame) -> list[str]:
     return [c for c in cols if c in LABEL_COLUMNS or c in varying]
 
 
-def _nanmean(s: pd.Series) -> float:
-    return float(s.mean()) if s.notna().any() else np.nan
+def nanmean(a, axis: int = -1):
+    """Mean over ``axis`` of the non-NaN values; NaN where there is none (no warning). A 1-D input gives a float."""
+    a = np.asarray(a, float)
+    with np.errstate(invalid="ignore"):
+        n = np.sum(~np.isnan(a), axis=axis)
+        s = np.nansum(a, axis=axis)
+        out = np.where(n > 0, s / np.maximum(n, 1), np.nan)
+    return float(out) if out.ndim == 0 else out
+
+
+def rms(x) -> float:
+    """Root mean square of the finite values of ``x``; NaN when there is none."""
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x**2))) if len(x) else np.nan
 
 
 def _top_reason(reasons: pd.Series) -> str:
@@ -67,16 +80,15 @@ def _top_reason(reasons: pd.Series) -> str:
 def _efficiency(v: pd.DataFrame) -> dict[str, float]:
     """Over the valid trials ``v``: RMS errors, their ratio to the RMS of the CRLB (1 = efficient), and the mean and
     median NEES (6 = honest covariance)."""
-    def rms(col):
-        x = v[col].to_numpy(float) if col in v else np.array([])
-        x = x[np.isfinite(x)]
-        return float(np.sqrt(np.mean(x**2))) if len(x) else np.nan
+    def col_rms(col):
+        return rms(v[col]) if col in v else np.nan
 
-    rms_R, rms_t = rms("e_R_deg"), 1000 * rms("e_t_m")
+    rms_R, rms_t = col_rms("e_R_deg"), 1000 * col_rms("e_t_m")
     nees = v["nees"].to_numpy(float) if "nees" in v else np.array([])
     nees = nees[np.isfinite(nees)]
     return {"rms_e_R_deg": rms_R, "rms_e_t_mm": rms_t,
-            "rms_over_crlb_rot": rms_R / rms("crlb_rot_deg"), "rms_over_crlb_trans": rms_t / rms("crlb_trans_mm"),
+            "rms_over_crlb_rot": rms_R / col_rms("crlb_rot_deg"),
+            "rms_over_crlb_trans": rms_t / col_rms("crlb_trans_mm"),
             "mean_nees": float(nees.mean()) if len(nees) else np.nan,
             "median_nees": float(np.median(nees)) if len(nees) else np.nan}
 
@@ -97,16 +109,16 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
         rows.append({**dict(zip(keys, key, strict=True)),
                      "n_trials": n, "n_ok": int(ok.sum()), "n_failed": int((~ok).sum()), "n_valid": int(valid.sum()),
                      "valid_rate": valid.mean(), "valid_lo95": float(lo), "valid_hi95": float(hi),
-                     "mean_e_R_deg": _nanmean(e_R), "median_e_R_deg": float(e_R.median()) if len(e_R) else np.nan,
-                     "mean_e_t_m": _nanmean(e_t), "median_e_t_m": float(e_t.median()) if len(e_t) else np.nan,
-                     "mean_e_R_valid_deg": _nanmean(g.loc[valid, "e_R_deg"]),
-                     "mean_e_t_valid_m": _nanmean(g.loc[valid, "e_t_m"]),
+                     "mean_e_R_deg": nanmean(e_R), "median_e_R_deg": float(e_R.median()) if len(e_R) else np.nan,
+                     "mean_e_t_m": nanmean(e_t), "median_e_t_m": float(e_t.median()) if len(e_t) else np.nan,
+                     "mean_e_R_valid_deg": nanmean(g.loc[valid, "e_R_deg"]),
+                     "mean_e_t_valid_m": nanmean(g.loc[valid, "e_t_m"]),
                      "truth_among_rate": g["true_among_candidates"].astype(bool).mean(),
                      "some_candidate_valid_rate": g["some_candidate_valid"].astype(bool).mean(),
                      "mean_n_candidates": float(g["n_candidates"].mean()),
                      "median_seconds": float(g["seconds"].median()) if g["seconds"].notna().any() else np.nan,
-                     "mean_crlb_rot_deg": _nanmean(g["crlb_rot_deg"]),
-                     "mean_crlb_trans_mm": _nanmean(g["crlb_trans_mm"]),
+                     "mean_crlb_rot_deg": nanmean(g["crlb_rot_deg"]),
+                     "mean_crlb_trans_mm": nanmean(g["crlb_trans_mm"]),
                      **_efficiency(g.loc[valid]),
                      "median_conditioning": float(g["conditioning"].median()) if g["conditioning"].notna().any()
                      else np.nan,

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from .aggregate import nanmean
 from .claims import FRANCISCO, Claim
 from .claims import PAPER as OURS
 
@@ -35,13 +36,6 @@ def sweep_arrays(trials: pd.DataFrame, x: str) -> dict:
     return out
 
 
-def _nanmean(a: np.ndarray) -> np.ndarray:
-    with np.errstate(invalid="ignore"):
-        n = np.sum(~np.isnan(a), axis=-1)
-        s = np.nansum(a, axis=-1)
-        return np.where(n > 0, s / np.maximum(n, 1), np.nan)
-
-
 def claim_statistic(kind: str, ours: dict, other: dict | None, idx: np.ndarray, smooth: float = 0.0) -> np.ndarray:
     """The claim's statistic on the trials ``idx`` (shape (B, n): B resamples); shape (B,).
 
@@ -57,7 +51,7 @@ def claim_statistic(kind: str, ours: dict, other: dict | None, idx: np.ndarray, 
         with np.errstate(divide="ignore", invalid="ignore"):
             return 100 * ((po * n + smooth) / (px * n + smooth) - 1)
     key, scale = ("e_R", 1.0) if kind == "err_deg" else ("e_t", 1000.0)
-    return scale * (_nanmean(other[key][idx]) - _nanmean(ours[key][idx]))
+    return scale * (nanmean(other[key][idx]) - nanmean(ours[key][idx]))
 
 
 def claim_values(trials: pd.DataFrame | None, claim: Claim, x: str, n_boot: int = 0, smooth: float = 0.0,

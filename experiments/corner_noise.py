@@ -26,8 +26,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from rig.markdown import md_table, num  # noqa: E402
+
 from .aggregate import summarise, write_tables  # noqa: E402
 from .catalog import PAPER_METHODS, method_colour, method_label, method_order  # noqa: E402
+from .figures import save_figure  # noqa: E402
 from .fingerprint import write_stamped
 from .reproduce import experiment_cells  # noqa: E402
 from .runner import run_cells  # noqa: E402
@@ -92,16 +95,10 @@ def draw_corner_boards(summary: pd.DataFrame, out: Path) -> Path:
 
 
 def _save(fig, out: Path, name: str) -> Path:
-    out.mkdir(parents=True, exist_ok=True)
+    """The figure saved under ``out`` (``figures.save_figure``); its path relative to the report."""
     fig.tight_layout()
-    for ext in ("png", "pdf"):
-        fig.savefig(out / f"{name}.{ext}", dpi=120)
-    plt.close(fig)
+    save_figure(fig, out, name, dpi=120)
     return Path("figures") / f"{name}.png"
-
-
-def _f(v, fmt="{:.2f}") -> str:
-    return "n/a" if v is None or not np.isfinite(v) else fmt.format(v)
 
 
 def noise_section(summary: pd.DataFrame, share: pd.DataFrame, fig: Path) -> list[str]:
@@ -113,30 +110,31 @@ def noise_section(summary: pd.DataFrame, share: pd.DataFrame, fig: Path) -> list
              "mean squared error that the corner noise adds, `1 - MSE(0 px) / MSE(px)` (sampling noise can make it "
              "negative). The RMS is over valid trials only, i.e. truncated at the validity thresholds, so at few "
              "boards a ratio below 1 reflects the truncation, not an estimator beating the bound.", "",
-             f"![corner noise]({fig})",
-             "", "| boards | mm | px | method | valid % | RMS e_R (deg) | RMS/CRLB rot | RMS/CRLB trans | mean NEES "
-             "| camera share R | camera share t |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             f"![corner noise]({fig})", ""]
     key = ["n_boards", "noise_mm", PX, "method"]
     merged = summary.merge(share[key + ["camera_share_R", "camera_share_t"]], on=key, how="left")
-    for _, r in merged.iterrows():
-        lines.append(f"| {r.n_boards} | {r.noise_mm:g} | {r[PX]:g} | {r.method} | {100 * r.valid_rate:.0f} | "
-                     f"{_f(r.rms_e_R_deg)} | {_f(r.rms_over_crlb_rot)} | {_f(r.rms_over_crlb_trans)} | "
-                     f"{_f(r.mean_nees, '{:.1f}')} | {_f(r.camera_share_R, '{:.0%}')} | "
-                     f"{_f(r.camera_share_t, '{:.0%}')} |")
-    return lines + [""]
+
+    def f(v, spec=".2f"):
+        return num(v, spec, missing="n/a")
+
+    rows = [[r.n_boards, f"{r.noise_mm:g}", f"{r[PX]:g}", r.method, f"{100 * r.valid_rate:.0f}", f(r.rms_e_R_deg),
+             f(r.rms_over_crlb_rot), f(r.rms_over_crlb_trans), f(r.mean_nees, ".1f"), f(r.camera_share_R, ".0%"),
+             f(r.camera_share_t, ".0%")] for _, r in merged.iterrows()]
+    head = ["boards", "mm", "px", "method", "valid %", "RMS e_R (deg)", "RMS/CRLB rot", "RMS/CRLB trans",
+            "mean NEES", "camera share R", "camera share t"]
+    return lines + md_table(head, rows) + [""]
 
 
 def boards_section(summary: pd.DataFrame, fig: Path) -> list[str]:
     methods = method_order(summary["method"].unique())
-    lines = ["## Valid rate under camera noise (0.5 px, 20 mm)", "", f"![valid rate]({fig})", "",
-             "| boards | " + " | ".join(methods) + " | lidarcam >= every seed method |",
-             "|---" * (len(methods) + 2) + "|"]
+    rows = []
     for nb, g in summary.groupby("n_boards"):
         rate = dict(zip(g["method"], 100 * g["valid_rate"], strict=True))
         seeds = [rate[m] for m in PAPER_METHODS if m in rate]
         ok = "yes" if "lidarcam" in rate and all(rate["lidarcam"] >= s for s in seeds) else "no"
-        lines.append(f"| {nb} | " + " | ".join(f"{rate.get(m, np.nan):.0f}" for m in methods) + f" | {ok} |")
-    return lines + [""]
+        rows.append([nb, *(f"{rate.get(m, np.nan):.0f}" for m in methods), ok])
+    return (["## Valid rate under camera noise (0.5 px, 20 mm)", "", f"![valid rate]({fig})", ""]
+            + md_table(["boards", *methods, "lidarcam >= every seed method"], rows) + [""])
 
 
 def corner_noise(trials: int = 100, boards_trials: int = 100, results_dir: str = "results", n_jobs: int = -1,

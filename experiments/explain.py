@@ -26,9 +26,11 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from calib_core.methods.ablations import ABLATIONS, INVARIANT, SCALE_ONLY  # noqa: E402
+from rig.markdown import md_table  # noqa: E402
 
-from .aggregate import summarise, write_tables  # noqa: E402
+from .aggregate import Z95, summarise, write_tables  # noqa: E402
 from .catalog import method_colour, method_label, method_order  # noqa: E402
+from .figures import save_figure  # noqa: E402
 from .fingerprint import write_stamped
 from .reproduce import experiment_cells  # noqa: E402
 from .runner import run_cells  # noqa: E402
@@ -67,10 +69,10 @@ def paired_differences(df: pd.DataFrame, base: str = BASE) -> pd.DataFrame:
             de = (e_R[m] - e_R[base]).dropna()
             rows.append({"n_boards": nb, "noise_mm": nz, "method": m, "n_trials": len(dv),
                          "valid_base": 100 * valid[base].mean(), "valid_method": 100 * valid[m].mean(),
-                         "d_valid_pts": dv.mean(), "d_valid_ci95": 1.96 * dv.std(ddof=1) / np.sqrt(len(dv))
+                         "d_valid_pts": dv.mean(), "d_valid_ci95": Z95 * dv.std(ddof=1) / np.sqrt(len(dv))
                          if len(dv) > 1 else np.nan,
                          "n_both_ok": len(de), "d_e_R_deg": de.mean() if len(de) else np.nan,
-                         "d_e_R_ci95": 1.96 * de.std(ddof=1) / np.sqrt(len(de)) if len(de) > 1 else np.nan,
+                         "d_e_R_ci95": Z95 * de.std(ddof=1) / np.sqrt(len(de)) if len(de) > 1 else np.nan,
                          "share_same_choice": float((e_R[m] == e_R[base]).mean())})
     return pd.DataFrame(rows)
 
@@ -98,14 +100,14 @@ def ablation_section(paired: pd.DataFrame) -> list[str]:
              "keep the argmax except where a beta_i falls under the zero guard (beta_eps = 1e-12 relative to s), "
              "whose weight 1/eps does not scale with s. `equal` (no uncertainty weights), `plane` (point-plane "
              "instead of point-line error) and the delta variants (delta shapes both the likelihood and, via "
-             "O_i U_i, the weights) can.", "",
-             "| boards | noise (mm) | variant | what | peng2022 valid % | variant valid % | d valid (pts) | "
-             "d mean e_R (deg) | same |", "|---|---|---|---|---|---|---|---|---|"]
-    for r in paired.itertuples():
-        lines.append(f"| {r.n_boards} | {r.noise_mm:g} | `{r.method}` | {_why(r.method)} | {r.valid_base:.1f} | "
-                     f"{r.valid_method:.1f} | {r.d_valid_pts:+.1f} +- {r.d_valid_ci95:.1f} | "
-                     f"{r.d_e_R_deg:+.2f} +- {r.d_e_R_ci95:.2f} | {100 * r.share_same_choice:.0f}% |")
-    return lines + [""]
+             "O_i U_i, the weights) can.", ""]
+    rows = [[r.n_boards, f"{r.noise_mm:g}", f"`{r.method}`", _why(r.method), f"{r.valid_base:.1f}",
+             f"{r.valid_method:.1f}", f"{r.d_valid_pts:+.1f} +- {r.d_valid_ci95:.1f}",
+             f"{r.d_e_R_deg:+.2f} +- {r.d_e_R_ci95:.2f}", f"{100 * r.share_same_choice:.0f}%"]
+            for r in paired.itertuples()]
+    head = ["boards", "noise (mm)", "variant", "what", "peng2022 valid %", "variant valid %", "d valid (pts)",
+            "d mean e_R (deg)", "same"]
+    return lines + md_table(head, rows) + [""]
 
 
 # ------------------------------------------------------------------------------------------------ sensitivity
@@ -132,12 +134,7 @@ def draw_sensitivity(summary: pd.DataFrame, x: str, xlabel: str, out: Path, name
                 ax.set_ylabel("valid (%)")
     axes[0, -1].legend(fontsize=6, loc="lower right")
     fig.tight_layout()
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [out / f"{name}.png", out / f"{name}.pdf"]
-    for p in paths:
-        fig.savefig(p, dpi=130 if p.suffix == ".png" else None, bbox_inches="tight")
-    plt.close(fig)
-    return paths
+    return save_figure(fig, out, name, dpi=130)
 
 
 def _rate(s: pd.DataFrame, m: str) -> float:
@@ -176,16 +173,14 @@ def sensitivity_section(summaries: dict[str, pd.DataFrame], figs: dict[str, Path
     for exp, summary in summaries.items():
         x, label = SENSITIVITY[exp]
         n = int(summary["n_trials"].min())
-        lines += [f"### {label} (`{exp}`, {n} trials per point)", "", f"![{exp}]({figs[exp].as_posix()})", "",
-                  "| boards | noise (mm) | " + " | ".join(f"{x}={v:g}" for v in sorted(summary[x].unique())) +
-                  " |", "|---|---|" + "---|" * summary[x].nunique()]
+        lines += [f"### {label} (`{exp}`, {n} trials per point)", "", f"![{exp}]({figs[exp].as_posix()})", ""]
+        values = sorted(summary[x].unique())
+        rows = []
         for (nb, nz), s in summary.groupby(list(PANEL)):
-            cells = []
-            for v in sorted(summary[x].unique()):
-                sv = s[s[x] == v]
-                cells.append(f"P {_rate(sv, BASE):.0f} / V {_rate(sv, 'vasconcelos'):.0f} / "
-                             f"Z {_rate(sv, 'zhang_pless_linear'):.0f}")
-            lines.append(f"| {nb} | {nz:g} | " + " | ".join(cells) + " |")
+            rows.append([nb, f"{nz:g}", *(f"P {_rate(sv, BASE):.0f} / V {_rate(sv, 'vasconcelos'):.0f} / "
+                                          f"Z {_rate(sv, 'zhang_pless_linear'):.0f}"
+                                          for sv in (s[s[x] == v] for v in values))])
+        lines += md_table(["boards", "noise (mm)", *(f"{x}={v:g}" for v in values)], rows)
         lines += ["", "(valid %: P peng2022, V vasconcelos, Z zhang_pless_linear)", ""]
     return lines
 
@@ -199,12 +194,10 @@ def fit_section(fit: pd.DataFrame) -> list[str]:
     if fit.empty:
         return lines + ["No sensitivity sweep was run.", ""]
     gap_cols = [c for c in fit.columns if c.startswith("gap_")]
-    lines += ["| setting | value | " + " | ".join(c[4:] for c in gap_cols) + " | rel. vs Zhang lin. | distance |",
-              "|---|---|" + "---|" * (len(gap_cols) + 2)]
-    for r in fit.head(8).itertuples(index=False):
-        d = r._asdict()
-        lines.append(f"| {r.setting} | {r.value:g} | " + " | ".join(f"{d[c]:+.1f}" for c in gap_cols) +
-                     f" | {r.mean_rel_vs_zhang_linear_pct:+.0f}% | {r.distance:.1f} |")
+    rows = [[r["setting"], f"{r['value']:g}", *(f"{r[c]:+.1f}" for c in gap_cols),
+             f"{r['mean_rel_vs_zhang_linear_pct']:+.0f}%", f"{r['distance']:.1f}"]
+            for r in fit.head(8).to_dict("records")]
+    lines += md_table(["setting", "value", *(c[4:] for c in gap_cols), "rel. vs Zhang lin.", "distance"], rows)
     best = fit.iloc[0]
     g630 = best.get("gap_6b_30mm", np.nan)
     verdict = (f"Closest: `{best.setting}={best.value:g}`, gap at 6 boards 30 mm {g630:+.1f} points "

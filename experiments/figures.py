@@ -56,10 +56,13 @@ def sweep_figures(sweep: str, summary: pd.DataFrame) -> SweepFigures:
     return SweepFigures(x, x, f"{sweep}_valid", f"{sweep}_mean_error", f"{sweep}_error_distribution")
 
 
-def _save(fig, out: Path, name: str) -> list[Path]:
+def save_figure(fig, out: Path, name: str, dpi: int = 150) -> list[Path]:
+    """``<out>/<name>.png`` (at ``dpi``) and ``<out>/<name>.pdf``, trimmed to the drawing, the folder made if
+    needed; the figure is closed. The one figure saver of the experiments."""
+    out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}.png", out / f"{name}.pdf"]
     for p in paths:
-        fig.savefig(p, dpi=150 if p.suffix == ".png" else None, bbox_inches="tight")
+        fig.savefig(p, dpi=dpi if p.suffix == ".png" else None, bbox_inches="tight")
     plt.close(fig)
     return paths
 
@@ -142,10 +145,11 @@ def draw_sweep(tables_dir: str | Path, sweep: str, out_dir: str | Path | None = 
     summary, trials = load_summary(tables_dir, sweep), load_trials(tables_dir, sweep)
     spec = sweep_figures(sweep, summary)
     n = int(summary["n_trials"].max())
-    paths = _save(plot_valid(summary, spec, f"Valid-solution probability ({n} trials per point)"), out, spec.valid)
-    paths += _save(plot_mean(summary, spec, f"Mean errors of the returned solutions ({n} trials per point)"),
-                   out, spec.mean)
-    paths += _save(plot_box(trials, spec, "Error distributions of the returned solutions"), out, spec.box)
+    paths = save_figure(plot_valid(summary, spec, f"Valid-solution probability ({n} trials per point)"), out,
+                        spec.valid)
+    paths += save_figure(plot_mean(summary, spec, f"Mean errors of the returned solutions ({n} trials per point)"),
+                         out, spec.mean)
+    paths += save_figure(plot_box(trials, spec, "Error distributions of the returned solutions"), out, spec.box)
     return paths
 
 

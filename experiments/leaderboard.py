@@ -200,7 +200,7 @@ def run_leaderboard(suite_file: str | Path = DEFAULT_SUITE, *, full: bool = Fals
             "full": full, "overrides": list(overrides), "real": sorted(real_rows),
             "suite_overrides": {s.name: list(s.overrides) for s in suites}}
     report = out / "REPORT.md"
-    write_stamped(report, build_report(table, real_table(real_rows), info, crlb))
+    write_stamped(report, build_leaderboard_report(table, real_table(real_rows), info, crlb))
     return {"out": out, "report": report, **info, "total_s": time.perf_counter() - t0}
 
 
@@ -211,7 +211,7 @@ def _suite_text(name: str, info: dict) -> str:
     return f"`{name}` ({what}{', ' + ' '.join(fixed) if fixed else ''})"
 
 
-def build_report(table: pd.DataFrame, real: pd.DataFrame | None, info: dict, crlb: set[str]) -> str:
+def build_leaderboard_report(table: pd.DataFrame, real: pd.DataFrame | None, info: dict, crlb: set[str]) -> str:
     """The text of REPORT.md."""
     suites = ", ".join(_suite_text(k, info) for k in info["cells"]) or "none"
     lines = ["# Leaderboard (generated)", "",

@@ -23,13 +23,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from .aggregate import summarise, wilson_interval  # noqa: E402
+from rig.markdown import md_table, num, pct  # noqa: E402
+
+from .aggregate import rms, summarise, wilson_interval  # noqa: E402
 from .catalog import method_colour  # noqa: E402
-
-
-def _rms(x: pd.Series) -> float:
-    x = x.dropna()
-    return float(np.sqrt(np.mean(np.square(x)))) if len(x) else np.nan
+from .figures import save_figure  # noqa: E402
 
 
 def _median(x: pd.Series) -> float:
@@ -37,7 +35,7 @@ def _median(x: pd.Series) -> float:
     return float(x.median()) if len(x) else np.nan
 
 
-def _weighted_rms(ratio: pd.Series, weight: pd.Series) -> float:
+def _weightedrms(ratio: pd.Series, weight: pd.Series) -> float:
     ok = ratio.notna() & (weight > 0)
     return float(np.sqrt(np.average(ratio[ok] ** 2, weights=weight[ok]))) if ok.any() else np.nan
 
@@ -55,10 +53,10 @@ def method_row(g: pd.DataFrame, summary: pd.DataFrame, crlb_suites: set[str]) ->
     row = {"n_trials": len(g), "n_valid": int(valid.sum()), "valid_rate": float(valid.mean()),
            "valid_lo95": float(lo), "valid_hi95": float(hi),
            "median_e_R_deg": _median(g.loc[ok, "e_R_deg"]), "median_e_t_mm": 1000 * _median(g.loc[ok, "e_t_m"]),
-           "rms_e_R_deg": _rms(v["e_R_deg"]), "rms_e_t_mm": 1000 * _rms(v["e_t_m"])}
+           "rms_e_R_deg": rms(v["e_R_deg"]), "rms_e_t_mm": 1000 * rms(v["e_t_m"])}
     b = summary[summary["suite"].isin(crlb_suites)]
-    row["rms_over_crlb_rot"] = _weighted_rms(b["rms_over_crlb_rot"], b["n_valid"])
-    row["rms_over_crlb_trans"] = _weighted_rms(b["rms_over_crlb_trans"], b["n_valid"])
+    row["rms_over_crlb_rot"] = _weightedrms(b["rms_over_crlb_rot"], b["n_valid"])
+    row["rms_over_crlb_trans"] = _weightedrms(b["rms_over_crlb_trans"], b["n_valid"])
     nees = v["nees"].dropna() if "nees" in v else pd.Series(dtype=float)
     row["mean_nees"], row["n_nees"] = (float(nees.mean()) if len(nees) else np.nan), len(nees)
     row["median_ms"] = 1000 * _median(g["seconds"])
@@ -96,20 +94,12 @@ def real_table(rows: dict[str, pd.DataFrame]) -> pd.DataFrame | None:
     return pd.DataFrame(out)
 
 
-def _f(v, fmt: str) -> str:
-    return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, fmt)
-
-
-def _pct(v) -> str:
-    return _f(100 * v if v is not None and np.isfinite(v) else np.nan, ".0f")
-
-
 def markdown_table(t: pd.DataFrame) -> list[str]:
     """The table as Markdown lines (leaderboard or real-data table)."""
     if "valid_rate" not in t:  # real data
         head = ["method", "returned / files", "ms per call", "vs reference: median e_R (deg) / e_t (mm)"]
-        body = [[f"`{r.method}`", f"{r.returned}/{r.files}", _f(r.median_ms, ".1f"),
-                 f"{_f(r.median_e_R_deg, '.3f')} / {_f(r.median_e_t_mm, '.1f')}" if r.n_reference else "no reference"]
+        body = [[f"`{r.method}`", f"{r.returned}/{r.files}", num(r.median_ms, ".1f"),
+                 f"{num(r.median_e_R_deg, '.3f')} / {num(r.median_e_t_mm, '.1f')}" if r.n_reference else "no reference"]
                 for r in t.itertuples()]
     else:
         suites = [c[len("valid_"):] for c in t.columns if c.startswith("valid_") and c not in (
@@ -117,15 +107,19 @@ def markdown_table(t: pd.DataFrame) -> list[str]:
         head = ["#", "method", "origin", "valid % [95%]", *(f"{s} %" for s in suites),
                 "median e_R deg / e_t mm", "RMS e_R deg / e_t mm", "RMS / CRLB rot / trans", "NEES", "ms"]
         body = []
+
+        def share(v):
+            return pct(v, sign="")
+
         for r in t.to_dict("records"):
             body.append([str(r["rank"]), f"`{r['method']}`", r["origin"],
-                         f"{_pct(r['valid_rate'])} [{_pct(r['valid_lo95'])}, {_pct(r['valid_hi95'])}]",
-                         *(_pct(r.get(f"valid_{s}", np.nan)) for s in suites),
-                         f"{_f(r['median_e_R_deg'], '.3f')} / {_f(r['median_e_t_mm'], '.1f')}",
-                         f"{_f(r['rms_e_R_deg'], '.3f')} / {_f(r['rms_e_t_mm'], '.1f')}",
-                         f"{_f(r['rms_over_crlb_rot'], '.2f')} / {_f(r['rms_over_crlb_trans'], '.2f')}",
-                         _f(r["mean_nees"], ".1f"), _f(r["median_ms"], ".1f")])
-    return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head), *("| " + " | ".join(b) + " |" for b in body)]
+                         f"{share(r['valid_rate'])} [{share(r['valid_lo95'])}, {share(r['valid_hi95'])}]",
+                         *(share(r.get(f"valid_{s}", np.nan)) for s in suites),
+                         f"{num(r['median_e_R_deg'], '.3f')} / {num(r['median_e_t_mm'], '.1f')}",
+                         f"{num(r['rms_e_R_deg'], '.3f')} / {num(r['rms_e_t_mm'], '.1f')}",
+                         f"{num(r['rms_over_crlb_rot'], '.2f')} / {num(r['rms_over_crlb_trans'], '.2f')}",
+                         num(r["mean_nees"], ".1f"), num(r["median_ms"], ".1f")])
+    return md_table(head, body)
 
 
 def figure(t: pd.DataFrame, suites: Sequence[str], out: Path) -> list[Path]:
@@ -155,8 +149,4 @@ def figure(t: pd.DataFrame, suites: Sequence[str], out: Path) -> list[Path]:
     b.set(xlabel="RMS / CRLB (solid: rotation, hatched: translation)", xscale="log")
     b.grid(alpha=0.3, axis="x")
     fig.tight_layout()
-    paths = [out / "leaderboard.png", out / "leaderboard.pdf"]
-    for p in paths:
-        fig.savefig(p, dpi=130 if p.suffix == ".png" else None, bbox_inches="tight")
-    plt.close(fig)
-    return paths
+    return save_figure(fig, out, "leaderboard", dpi=130)

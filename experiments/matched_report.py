@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from rig.markdown import md_table
+
 from .aggregate import load_summary, load_trials
 from .catalog import method_label
 from .claim_stats import claim_values, sweep_arrays, term_name
@@ -70,8 +72,7 @@ def _sensitivity(verdicts: pd.DataFrame, claim: int) -> str:
 
 
 def claims_section(ct: pd.DataFrame, presets: list[str], verdicts: pd.DataFrame | None) -> list[str]:
-    lines = ["| # | Paper's claim | vs | " + " | ".join(f"{p}: ours per setting [95% CI]" for p in presets) +
-             " | holds at coarse search points |", "|---|---|---|" + "---|" * (len(presets) + 1)]
+    rows = []
     for i, claim in enumerate(paper_claims(), 1):
         cells = []
         for p in presets:
@@ -79,15 +80,16 @@ def claims_section(ct: pd.DataFrame, presets: list[str], verdicts: pd.DataFrame 
             cells.append(_cell(g, claim.kind) if len(g) else "not run")
         sens = _sensitivity(verdicts, i) if verdicts is not None else "search not run"
         vs = method_label(claim.other) if claim.other else "-"
-        lines.append(f"| {i} | {claim.text} | {vs} | " + " | ".join(cells) + f" | {sens} |")
-    return lines
+        rows.append([i, claim.text, vs, *cells, sens])
+    return md_table(["#", "Paper's claim", "vs", *(f"{p}: ours per setting [95% CI]" for p in presets),
+                     "holds at coarse search points"], rows)
 
 
 def _values(vals: list, key: str) -> str:
     return ", ".join(f"{v:g}" for v in vals) + (" px" if key == "corner_noise_px" else "")
 
 
-def sensitivity_section(sens: pd.DataFrame | None, conf) -> list[str]:
+def sensitivity_verdicts_section(sens: pd.DataFrame | None, conf) -> list[str]:
     """Per claim and setting: the values (the others at the winner's) at which the claim holds."""
     if sens is None:
         return ["The sensitivity stage has not run (`python -m experiments.search --stage sensitivity`)."]
@@ -97,10 +99,9 @@ def sensitivity_section(sens: pd.DataFrame | None, conf) -> list[str]:
              f"values over each setting's searched range, {n} trials per setting of the sweeps, common random numbers; "
              "each claim judged as above (paired 95% intervals). A cell lists the values at which the claim holds: "
              "*all* = over the whole range searched (the verdict does not hinge on that setting), *none* = at none.",
-             "", "| # | Paper's claim | vs | " + " | ".join(LABELS[k] for k in SPACE_KEYS) + " |",
-             "|---|---|---|" + "---|" * len(SPACE_KEYS)]
-    claims = paper_claims()
-    for i, claim in enumerate(claims, 1):
+             ""]
+    rows = []
+    for i, claim in enumerate(paper_claims(), 1):
         cells = []
         for k in SPACE_KEYS:
             r = ranges[(ranges["claim"] == i) & (ranges["setting"] == k)]
@@ -110,8 +111,8 @@ def sensitivity_section(sens: pd.DataFrame | None, conf) -> list[str]:
             held, tried = r["holds_at"].iloc[0], r["tried"].iloc[0]
             cells.append("all" if len(held) == len(tried) else "none" if not held else _values(held, k))
         vs = method_label(claim.other) if claim.other else "-"
-        lines.append(f"| {i} | {claim.text} | {vs} | " + " | ".join(cells) + " |")
-    return lines
+        rows.append([i, claim.text, vs, *cells])
+    return lines + md_table(["#", "Paper's claim", "vs", *(LABELS[k] for k in SPACE_KEYS)], rows)
 
 
 def meaning(ct: pd.DataFrame, presets: list[str], verdicts: pd.DataFrame | None) -> list[str]:
@@ -156,12 +157,12 @@ def _search_lines(search_dir: Path) -> list[str]:
         t = pd.read_csv(path)
         lines += [f"**Stage {stage}**: {len(t)} points x {int(t['trials'].min())} trials per setting "
                   "(boards 3-8, noise 5-30 mm), best first" + (" (top 8)" if len(t) > 8 else "") + ":", "",
-                  "| point | " + " | ".join(LABELS[k] for k in SPACE_KEYS) +
-                  " | objective (Zhang linear / refined) | best |", "|---|" + "---|" * (len(SPACE_KEYS) + 2)]
-        for r in t.head(8).itertuples():
-            lines.append(f"| {r.point} | " + " | ".join(f"{getattr(r, k):g}" for k in SPACE_KEYS) +
-                         f" | {r.objective_zhang_pless_linear:.3f} / {r.objective_zhang_pless:.3f} | "
-                         f"{r.objective:.3f} |")
+                  ]
+        rows = [[r.point, *(f"{getattr(r, k):g}" for k in SPACE_KEYS),
+                 f"{r.objective_zhang_pless_linear:.3f} / {r.objective_zhang_pless:.3f}", f"{r.objective:.3f}"]
+                for r in t.head(8).itertuples()]
+        lines += md_table(["point", *(LABELS[k] for k in SPACE_KEYS), "objective (Zhang linear / refined)", "best"],
+                          rows)
         lines.append("")
     return lines
 
@@ -248,7 +249,7 @@ def build(tables: Path, preset: str, search_dir: Path) -> str:
               "numbers: `claims.csv`.", ""]
     lines += claims_section(ct, presets, verdicts)
     lines += ["", f"## How sensitive each verdict is (`{search_dir.name}/verdicts_sensitivity.csv`)", ""]
-    lines += sensitivity_section(sens, conf)
+    lines += sensitivity_verdicts_section(sens, conf)
     held = verdicts if sens is None else pd.concat([d for d in (verdicts, sens) if d is not None])
     lines += ["", "## What it means", ""] + meaning(ct, presets, held)
     for p, folder in folders.items():

@@ -13,6 +13,8 @@ import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
+from rig.markdown import md_table
+
 from .claim_stats import claim_values, sweep_arrays, term_name
 from .claims import Claim, paper_claims
 from .figures import PAPER_SWEEPS
@@ -69,14 +71,15 @@ def score(trials: dict[str, pd.DataFrame], obj: DictConfig) -> pd.DataFrame:
 def objective_lines(obj: DictConfig) -> list[str]:
     """The objective as a markdown table (term, claim, weight, scale) for the reports."""
     claims = {term_name(c): c for c in paper_claims()}
-    lines = ["| term | the paper's claim | band | weight | one unit of miss |", "|---|---|---|---|---|"]
+    rows = []
     units = {"points": "pt", "at_least": "pt", "relative": "x2 (log2 ratio)", "err_deg": "deg", "err_mm": "mm"}
     for name, w in obj.weights.items():
         c = claims[name]
         band = f"{c.lo:g}" if c.lo == c.hi else f"{c.lo:g}..{c.hi:g}"
         scale = obj.scales[c.kind]
-        lines.append(f"| `{name}` | {c.text} ({c.source}) | {band} | {w:g} | "
-                     f"{'' if c.kind == 'relative' else f'{scale:g} '}{units[c.kind]} |")
+        rows.append([f"`{name}`", f"{c.text} ({c.source})", band, f"{w:g}",
+                     f"{'' if c.kind == 'relative' else f'{scale:g} '}{units[c.kind]}"])
+    lines = md_table(["term", "the paper's claim", "band", "weight", "one unit of miss"], rows)
     return lines + ["", f"A miss is capped at {obj.cap:g} units per setting; a value that does not exist (no "
                     f"mean error where Zhang & Pless returns nothing) misses by {obj.missing:g}. Relative valid-rate "
                     f"gains count {obj.smooth_trials:g} extra valid trials on each side. Objective = weighted mean "

@@ -20,8 +20,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from rig.markdown import md_table, pct
+
 from .aggregate import write_tables
 from .catalog import method_colour, method_label, method_order
+from .figures import save_figure
 from .fingerprint import write_stamped
 from .reproduce import experiment_cells
 from .runner import run_cells
@@ -43,7 +46,7 @@ def case_label(row) -> str:
     return ", ".join(parts) if len(parts) > 1 else parts[0] + ", clean"
 
 
-def summarise(df: pd.DataFrame) -> pd.DataFrame:
+def summarise_outliers(df: pd.DataFrame) -> pd.DataFrame:
     """One row per contamination setting x method."""
     rows = []
     keys = ["n_boards", "wrong_segments", "gross_outlier_frac", "mixed_pixel_frac", "method"]
@@ -87,12 +90,7 @@ def draw(summary: pd.DataFrame, out: Path) -> list[Path]:
     axes[1].set_xticks(np.arange(len(cases)), cases, rotation=25, ha="right", fontsize=8)
     axes[0].legend(fontsize=8, ncol=len(methods))
     fig.tight_layout()
-    (out / "figures").mkdir(parents=True, exist_ok=True)
-    paths = [out / "figures" / "outliers.png", out / "figures" / "outliers.pdf"]
-    for p in paths:
-        fig.savefig(p, dpi=120)
-    plt.close(fig)
-    return paths
+    return save_figure(fig, out / "figures", "outliers", dpi=120)
 
 
 def report(summary: pd.DataFrame, trials: int, command: str) -> str:
@@ -103,19 +101,14 @@ def report(summary: pd.DataFrame, trials: int, command: str) -> str:
           "returns at 1-30 m within the board's bearing span; mixed pixels: beams just beyond the board ends, "
           "between the board and a background 0.2-3 m behind (`simulate/outliers.py`). Clean settings share their "
           "trials' geometry and noise with the contaminated ones.", "",
-          "![robustness](figures/outliers.png)", "",
-          f"| setting | method | trials | within {ACCURATE_ROT_DEG} deg / {1000 * ACCURATE_TRANS_M:g} mm | valid | "
-          "median e_R (deg) | median e_t (mm) | wrong boards caught | all wrong named | trials losing a good board |",
-          "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
-
-    def pct(v):
-        return "-" if not np.isfinite(v) else f"{100 * v:.0f}%"
-
-    for _, r in summary.iterrows():
-        md.append(f"| {r['case']} | {method_label(r['method'])} | {r['n_trials']} | {pct(r['accurate_rate'])} "
-                  f"| {pct(r['valid_rate'])} "
-                  f"| {r['median_e_R_deg']:.2f} | {r['median_e_t_mm']:.0f} | {pct(r['wrong_caught_share'])} | "
-                  f"{pct(r['all_wrong_named_rate'])} | {pct(r['good_lost_rate'])} |")
+          "![robustness](figures/outliers.png)", ""]
+    head = ["setting", "method", "trials", f"within {ACCURATE_ROT_DEG} deg / {1000 * ACCURATE_TRANS_M:g} mm", "valid",
+            "median e_R (deg)", "median e_t (mm)", "wrong boards caught", "all wrong named",
+            "trials losing a good board"]
+    rows = [[r["case"], method_label(r["method"]), r["n_trials"], pct(r["accurate_rate"]), pct(r["valid_rate"]),
+             f"{r['median_e_R_deg']:.2f}", f"{r['median_e_t_mm']:.0f}", pct(r["wrong_caught_share"]),
+             pct(r["all_wrong_named_rate"]), pct(r["good_lost_rate"])] for _, r in summary.iterrows()]
+    md += md_table(head, rows, "llrrrrrrrr")
     return "\n".join(md) + "\n"
 
 
@@ -128,7 +121,7 @@ def run(trials: int, results_dir: str, n_jobs: int, chunk_size: int = 0, compute
     out = Path(results_dir) / "outliers"
     out.mkdir(parents=True, exist_ok=True)
     write_tables(df, "outliers", out)                     # the standard per-setting tables
-    summary = summarise(df)
+    summary = summarise_outliers(df)
     summary.to_csv(out / "robustness_outliers.csv", index=False, float_format="%.6g")
     draw(summary, out)
     n = int(summary["n_trials"].min()) if len(summary) else 0

@@ -34,7 +34,7 @@ from calib_core.refine.plan_views import PlanRig, Workspace, board_poses_lidar, 
 from simulate import SimOptions, observe_poses
 from simulate.camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners
 
-from .plan_report import write_report
+from .plan_report import write_plan_report
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf" / "plan" / "check.yaml"
@@ -162,7 +162,7 @@ def main(argv=None) -> int:
     summary = summarise(results, pred, conf)
     summary["seconds"] = round(time.perf_counter() - t0, 1)
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    write_report(out, summary)
+    write_plan_report(out, summary)
     print(f"wrote {out / 'REPORT.md'}")
     return 0
 

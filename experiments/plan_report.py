@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rig.markdown import md_table
+
 from .fingerprint import write_stamped
 
 TOLERANCE = 0.2
@@ -65,7 +67,7 @@ def write_figure(path: Path, summary: dict) -> None:
     plt.close(fig)
 
 
-def write_report(out: Path, summary: dict) -> Path:
+def write_plan_report(out: Path, summary: dict) -> Path:
     """Write REPORT.md and plan_check.png into ``out``."""
     out = Path(out)
     write_figure(out / "plan_check.png", summary)
@@ -79,13 +81,15 @@ def write_report(out: Path, summary: dict) -> Path:
           "20 mm; corner noise 0.5 px or none, i.e. exact board poses) and calibrated. Empirical: the RMS over the "
           "redraws of the rotation error angle and of |t - t_true|; predicted: `rot_sigma_deg` and "
           "`trans_sigma_mm` of `lidarcam plan` (roots of the traces of the joint Cramer-Rao bound).", "",
-          "| corner noise | boards | ok / failed | rotation: predicted deg | empirical RMS deg | ratio | "
-          "translation: predicted mm | empirical RMS mm | ratio |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for r in summary["prediction"]:
-        md.append(f"| {'none' if r['mode'] == 'exact' else '0.5 px'} | {r['boards']} | {r['n']} / {r['failed']} | "
-                  f"{r['pred_rot_deg']:.3f} | {_ci(r['emp_rot_deg'])} | {r['ratio_rot']:.2f} "
-                  f"({_verdict(r['ratio_rot'])}) | {r['pred_trans_mm']:.1f} | {_ci(r['emp_trans_mm'])} | "
-                  f"{r['ratio_trans']:.2f} ({_verdict(r['ratio_trans'])}) |")
+          ]
+    md += md_table(["corner noise", "boards", "ok / failed", "rotation: predicted deg", "empirical RMS deg", "ratio",
+                    "translation: predicted mm", "empirical RMS mm", "ratio"],
+                   [["none" if r["mode"] == "exact" else "0.5 px", r["boards"], f"{r['n']} / {r['failed']}",
+                     f"{r['pred_rot_deg']:.3f}", _ci(r["emp_rot_deg"]),
+                     f"{r['ratio_rot']:.2f} ({_verdict(r['ratio_rot'])})",
+                     f"{r['pred_trans_mm']:.1f}", _ci(r["emp_trans_mm"]),
+                     f"{r['ratio_trans']:.2f} ({_verdict(r['ratio_trans'])})"] for r in summary["prediction"]],
+                   "lrrrrrrrr")
     md += ["", "## Planned against random feasible poses", "",
            f"Corner noise 0.5 px. At each K: the planner's K poses and {summary['random_sets']} sets of K random "
            "feasible poses (uniform over the workspace: 3-6 m, bearings +-30 deg, turn and lean +-40 deg; each in "
@@ -93,14 +97,16 @@ def write_report(out: Path, summary: dict) -> Path:
            "calibrated. Margin: the random sets' median RMS error over the planned set's, with its interval "
            "(bootstrap over the random sets and the planned redraws); 'beaten': random sets whose RMS is above "
            "the planned set's.", "",
-           "| K | planned RMS rot deg (predicted) | random median deg | margin rot | beaten | planned RMS trans mm "
-           "(predicted) | random median mm | margin trans | beaten |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for r in summary["versus"]:
-        m = summary["random_sets"]
-        md.append(f"| {r['boards']} | {r['planned_rot_deg']:.3f} ({r['pred']['rot_sigma_deg']:.3f}) | "
-                  f"{r['random_median_rot_deg']:.3f} | x{_ci(r['ratio_rot_deg'])} | {r['beaten_rot_deg']}/{m} | "
-                  f"{r['planned_trans_mm']:.1f} ({r['pred']['trans_sigma_mm']:.1f}) | "
-                  f"{r['random_median_trans_mm']:.1f} | x{_ci(r['ratio_trans_mm'])} | {r['beaten_trans_mm']}/{m} |")
+           ]
+    m = summary["random_sets"]
+    md += md_table(["K", "planned RMS rot deg (predicted)", "random median deg", "margin rot", "beaten",
+                    "planned RMS trans mm (predicted)", "random median mm", "margin trans", "beaten"],
+                   [[r["boards"], f"{r['planned_rot_deg']:.3f} ({r['pred']['rot_sigma_deg']:.3f})",
+                     f"{r['random_median_rot_deg']:.3f}", f"x{_ci(r['ratio_rot_deg'])}", f"{r['beaten_rot_deg']}/{m}",
+                     f"{r['planned_trans_mm']:.1f} ({r['pred']['trans_sigma_mm']:.1f})",
+                     f"{r['random_median_trans_mm']:.1f}", f"x{_ci(r['ratio_trans_mm'])}",
+                     f"{r['beaten_trans_mm']}/{m}"]
+                    for r in summary["versus"]], "r" * 9)
     v = summary["vertical"]
     md += ["", "## Vertical boards, before any data", "",
            f"The same rig with a workspace of vertical boards (lean 0, turn +-40 deg), {v['boards']} planned "

@@ -30,7 +30,6 @@ from rig.report import capture_verdict, save_overlay
 
 from .fingerprint import write_stamped
 from .real_eval import (
-    HAVE_LIBRARY_CV,
     degeneracy_verdict,
     leaderboard,
     leaderboard_md,
@@ -214,9 +213,6 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     md = ["# lidarcam on real data", "", "Written by `make real-data` (`python -m experiments.real_data`) from "
           f"`{args.data}`; each data set's SOURCE.md gives its repository, licence and formats.", ""]
-    if not HAVE_LIBRARY_CV:
-        md += ["Held-out residuals from the fallback in `experiments/real_eval.py` (the library has no "
-               "`calib_core.crossval` in this build).", ""]
     summary = {}
     for name, run in RUNNERS:
         folder = data / name

@@ -1,70 +1,37 @@
-"""Evaluation of methods on one real rig without ground truth: full fit, leave-one-pose-out residual, agreement
-with a published result, time, and the degeneracy verdict. Uses ``calib_core.crossval`` and
-``calib_core.checks.degeneracy`` when the library has them; otherwise the small fallbacks below (marked in the report).
+"""Evaluation of methods on one real rig without ground truth: full fit, leave-one-pose-out residual
+(``calib_core.crossval``), agreement with a published result, time, and the degeneracy verdict
+(``calib_core.checks.degeneracy``).
 """
 
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
 import calib_core
+from calib_core.checks.degeneracy import undetermined_directions
+from calib_core.crossval import leave_one_out
+from calib_core.data.lines import scan_noise_estimate
 from calib_core.data.observations import Observations
 from calib_core.geometry.metrics import pose_errors
+from calib_core.geometry.mounting import UNIT_NAMES
 from calib_core.geometry.transforms import invert_T
+from rig.markdown import md_table, num
 from rig.report import board_plane_distances as plane_distances
-
-try:  # leave-one-pose-out cross-validation of the library
-    from calib_core.crossval import leave_one_out as _library_loo
-except ImportError:  # pragma: no cover - depends on the library version
-    _library_loo = None
-try:
-    from calib_core.checks.degeneracy import undetermined_directions as _library_degeneracy
-except ImportError:  # pragma: no cover
-    _library_degeneracy = None
-try:
-    from calib_core.data.lines import scan_noise_estimate as _library_noise
-except ImportError:  # pragma: no cover
-    _library_noise = None
-
-HAVE_LIBRARY_CV = _library_loo is not None
 
 
 def range_noise_m(obs: Observations) -> float:
-    """Range-noise std (m) from the scan lines alone (no extrinsic): the library's estimate where it has one,
-    else the pooled total-least-squares line residual over the boards (2 degrees of freedom per line removed)."""
-    if _library_noise is not None:
-        return float(_library_noise(obs))
-    from calib_core.data.lines import tls_line
-
-    num = den = 0.0
-    for b in obs.boards:
-        if len(b.scan) >= 3:
-            r = tls_line(b.scan)[2]
-            num, den = num + float(r @ r), den + len(r) - 2
-    return math.sqrt(num / den) if den > 0 else math.nan
+    """Range-noise std (m) from the scan lines alone (no extrinsic): the library's estimate."""
+    return float(scan_noise_estimate(obs))
 
 
 def held_out(obs: Observations, method: str, sigma_m: float, **options) -> dict:
     """Leave-one-pose-out: pooled RMS of the held-out poses' point-to-plane distances (mm and in units of the
     range noise), folds that failed, seconds."""
-    if _library_loo is not None:
-        cv = _library_loo(obs, method, range_sigma_m=sigma_m, **options)
-        return {"rms_mm": cv.overall_rms_mm, "rms_sigmas": cv.overall_rms_sigmas, "n_ok": cv.n_ok,
-                "n": len(cv.names), "seconds": cv.seconds, "source": "calib_core.crossval"}
-    t0, sq, n, ok = time.perf_counter(), 0.0, 0, 0
-    N = obs.n_boards
-    for i in range(N):
-        res = calib_core.calibrate(obs.subset([j for j in range(N) if j != i]), method, **options)
-        if res.ok:
-            b = obs.boards[i]
-            e = plane_distances(invert_T(res.T_lidar_cam), b.T_cam_board, b.scan)
-            sq, n, ok = sq + float(e @ e), n + len(e), ok + 1
-    rms = math.sqrt(sq / n) if n else math.nan
-    return {"rms_mm": 1000 * rms, "rms_sigmas": rms / sigma_m, "n_ok": ok, "n": N,
-            "seconds": time.perf_counter() - t0, "source": "fallback (point-to-plane / sigma)"}
+    cv = leave_one_out(obs, method, range_sigma_m=sigma_m, **options)
+    return {"rms_mm": cv.overall_rms_mm, "rms_sigmas": cv.overall_rms_sigmas, "n_ok": cv.n_ok,
+            "n": len(cv.names), "seconds": cv.seconds, "source": "calib_core.crossval"}
 
 
 def in_sample_rms_mm(obs: Observations, T_lidar_cam: np.ndarray) -> float:
@@ -100,21 +67,9 @@ def leaderboard(obs: Observations, methods, sigma_m: float, published: np.ndarra
 
 
 def degeneracy_verdict(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: float) -> tuple[str, bool | None]:
-    """(one sentence, determined?) from the library's information-matrix analysis, else the board-normal
-    spread only (``determined`` None: not assessed)."""
-    if _library_degeneracy is not None:
-        d = _library_degeneracy(obs, T_lidar_cam, sigma_m)
-        return d.message(), d.determined
-    from calib_core.checks.degeneracy import pair_angle_deg
-    from calib_core.refine.uncertainty import normal_spread_deg
-
-    return (f"not assessed by an information-matrix analysis here; board normals: largest pair angle "
-            f"{pair_angle_deg(obs):.1f} deg, spread {normal_spread_deg(obs):.1f} deg"), None
-
-
-def fmt(v, spec: str = ".2f", none: str = "-") -> str:
-    """``v`` formatted, or ``none`` for None / NaN."""
-    return none if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, spec)
+    """(one sentence, determined?) from the library's information-matrix analysis."""
+    d = undetermined_directions(obs, T_lidar_cam, sigma_m)
+    return d.message(), d.determined
 
 
 def leaderboard_md(rows: list[dict], sigma_m: float, published: bool) -> list[str]:
@@ -123,20 +78,20 @@ def leaderboard_md(rows: list[dict], sigma_m: float, published: bool) -> list[st
         v = (r.get("cv") or {}).get("rms_mm")
         return (0, v) if v is not None and math.isfinite(v) else (1, 0.0)
 
-    head = "| method | ok | held-out RMS (mm) | held-out (x noise) | folds ok | fit RMS (mm) | 1-sigma rot (deg) / " \
-           "trans (mm) |" + (" vs published (deg / mm) |" if published else "") + " time (s) |"
-    sep = "|---|---|---:|---:|---:|---:|---:|" + ("---:|" if published else "") + "---:|"
-    out = [head, sep]
+    head = ["method", "ok", "held-out RMS (mm)", "held-out (x noise)", "folds ok", "fit RMS (mm)",
+            "1-sigma rot (deg) / trans (mm)", *(["vs published (deg / mm)"] if published else []), "time (s)"]
+    body = []
     for r in sorted(rows, key=key):
         cv = r.get("cv") or {}
-        cells = [f"`{r['method']}`", "yes" if r["ok"] else f"no: {r['reason']}", fmt(cv.get("rms_mm"), ".1f"),
-                 fmt(cv.get("rms_sigmas"), ".2f"), f"{cv.get('n_ok', '-')}/{cv.get('n', '-')}",
-                 fmt(r.get("fit_rms_mm"), ".1f"),
-                 f"{fmt(r.get('sigma_rot_deg'), '.2f')} / {fmt(r.get('sigma_trans_mm'), '.1f')}"]
+        cells = [f"`{r['method']}`", "yes" if r["ok"] else f"no: {r['reason']}", num(cv.get("rms_mm"), ".1f"),
+                 num(cv.get("rms_sigmas"), ".2f"), f"{cv.get('n_ok', '-')}/{cv.get('n', '-')}",
+                 num(r.get("fit_rms_mm"), ".1f"),
+                 f"{num(r.get('sigma_rot_deg'), '.2f')} / {num(r.get('sigma_trans_mm'), '.1f')}"]
         if published:
-            cells.append(f"{fmt(r.get('vs_published_deg'), '.3f')} / {fmt(r.get('vs_published_mm'), '.2f')}")
-        cells.append(fmt(r["seconds"] + cv.get("seconds", 0.0), ".2f"))
-        out.append("| " + " | ".join(cells) + " |")
+            cells.append(f"{num(r.get('vs_published_deg'), '.3f')} / {num(r.get('vs_published_mm'), '.2f')}")
+        cells.append(num(r["seconds"] + cv.get("seconds", 0.0), ".2f"))
+        body.append(cells)
+    out = md_table(head, body, "ll" + "r" * (len(head) - 2))
     out += ["", f"Range noise (from the scan lines, no extrinsic): {1000 * sigma_m:.1f} mm. Held-out: each pose "
             "calibrated from the others, its scan points against its board plane from the camera; time: the full "
             "fit plus every fold."]
@@ -147,10 +102,6 @@ def planar_calibration(obs: Observations, verdict_axes, given: dict | None = Non
                        ) -> tuple[list[str], np.ndarray | None]:
     """(Markdown lines, T_lidar_cam or None): ``lidarcam`` with the undetermined mounting parameters fixed
     (``calibrate(..., fixed=)``; ``given`` values, else 0) and the estimated ones with their 1-sigma."""
-    try:
-        from calib_core.geometry.mounting import UNIT_NAMES
-    except ImportError:
-        return ["Calibration with fixed mounting parameters: not available in this build of the library."], None
     names = [f"{a}_deg" if f"{a}_deg" in UNIT_NAMES else f"{a}_m" for a in verdict_axes]
     fixed = {n: (given or {}).get(n, 0.0) for n in names}
     res = calib_core.calibrate(obs, "lidarcam", fixed=fixed)

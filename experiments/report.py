@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from calib_core.geometry.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
+from rig.markdown import md_table
 
 from .aggregate import load_settings, load_summary
 from .catalog import method_label, method_order
@@ -75,16 +76,15 @@ def check_claims(tables: Path, sweeps: dict[str, pd.DataFrame]) -> list[ClaimChe
 
 
 def _claim_rows(verdicts: list[ClaimCheck]) -> list[str]:
-    lines = ["| # | Paper's claim | Source | vs | Ours, per setting | Our range | Verdict |",
-             "|---|---|---|---|---|---|---|"]
+    rows = []
     for i, v in enumerate(verdicts, 1):
         c = v.claim
         per = ", ".join(f"{x:g}: {claim_value_text(val, c.kind)}" for x, val in zip(v.xs, v.values, strict=True)) or "-"
         finite = [val for val in v.values if not math.isnan(val)]
         rng = f"{claim_value_text(min(finite), c.kind)} .. {claim_value_text(max(finite), c.kind)}" if finite else "-"
         vs = method_label(c.other) if c.other else "-"
-        lines.append(f"| {i} | {c.text} | {c.source} | {vs} | {per} | {rng} | **{v.verdict}** |")
-    return lines
+        rows.append([i, c.text, c.source, vs, per, rng, f"**{v.verdict}**"])
+    return md_table(["#", "Paper's claim", "Source", "vs", "Ours, per setting", "Our range", "Verdict"], rows)
 
 
 def _mean_rate(summary: pd.DataFrame, method: str, col: str, mask=None) -> float:
@@ -94,11 +94,9 @@ def _mean_rate(summary: pd.DataFrame, method: str, col: str, mask=None) -> float
     return float(s[col].mean()) if len(s) else float("nan")
 
 
-def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verdicts: list[ClaimCheck]) -> list[str]:
-    """Generated paragraphs on where and why our numbers differ from the paper's."""
+def _zhang_note(boards: pd.DataFrame | None, verdicts: list[ClaimCheck]) -> list[str]:
+    """Zhang & Pless needs 5 boards, and which of our variants the paper's "Zhang" resembles."""
     paras: list[str] = []
-    boards, noise = sweeps.get("boards"), sweeps.get("noise")
-    # 1. Zhang needs 5 boards, and which of our variants the paper's "Zhang" resembles.
     if boards is not None and all(z in set(boards["method"]) for z in ZHANGS):
         few = boards[(boards["n_boards"] < 5) & boards["method"].isin(ZHANGS)]
         fails, runs = int(few["n_failed"].sum()), int(few["n_trials"].sum())
@@ -120,7 +118,12 @@ def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verd
         else:
             txt += "."
         paras.append(txt)
-    # 2. Where selection loses: the truth among the candidates vs the candidate picked.
+    return paras
+
+
+def _selection_notes(boards: pd.DataFrame | None, noise: pd.DataFrame | None) -> list[str]:
+    """Where selection loses: the truth among the candidates vs the candidate picked, per sweep."""
+    paras: list[str] = []
     for name, summary in (("boards", boards), ("noise", noise)):
         if summary is None or not {PAPER, FRANCISCO} <= set(summary["method"]):
             continue
@@ -137,7 +140,12 @@ def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verd
             f"selector in {100 * fv:.0f}%: {verdict}, and at most {100 * (cand - max(pv, fv)):.0f} points "
             "are left to a better selector. Where no candidate is valid (degenerate triples, noise, a board the "
             "line fit rejects), no selector can help.")
-    # 3. Failures: methods that returned nothing, and the commonest reason.
+    return paras
+
+
+def _failure_notes(boards: pd.DataFrame | None, noise: pd.DataFrame | None) -> list[str]:
+    """Methods that returned nothing in more than 5% of a setting's runs, and the commonest reason."""
+    paras: list[str] = []
     for name, summary in (("boards", boards), ("noise", noise)):
         if summary is None:
             continue
@@ -151,7 +159,12 @@ def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verd
         paras.append(f"**Runs that returned nothing, sweep {name}** (more than 5% of a point, commonest reason): "
                      + "; ".join(parts) + ". These count as invalid; a data check that rejects noisy boards "
                      "(e.g. the scan-line fit's shape test) shows up here before it shows up as a solver weakness.")
-    # 4. Board placement and the unstated assumptions.
+    return paras
+
+
+def _placement_note(settings: dict[str, dict]) -> list[str]:
+    """Board placement and the assumptions the paper does not state."""
+    paras: list[str] = []
     st = settings.get("boards") or settings.get("noise") or {}
     if st:
         tilt = st.get("max_tilt_deg")
@@ -166,12 +179,21 @@ def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verd
             "minimal solver's candidate set noisier; a smaller board gives fewer scan points. Both move every "
             "method's valid rate, so absolute rates are not comparable with the paper's; the ranking and the "
             "sign of the differences are what this reproduction can test.")
-    # 5. Means include invalid solutions.
-    paras.append("**Mean errors.** Like the paper's Fig. 4 and 6 (whose differences of tens of degrees can only "
-                 "come from invalid solutions), our means are over every solution a method returned, valid or not; "
-                 "runs that returned nothing are excluded from the means and counted invalid in Fig. 3. A few "
-                 "wrong candidates dominate such means: the medians in the tables are the steadier comparison.")
     return paras
+
+
+MEAN_ERRORS_NOTE = ("**Mean errors.** Like the paper's Fig. 4 and 6 (whose differences of tens of degrees can only "
+                    "come from invalid solutions), our means are over every solution a method returned, valid or "
+                    "not; runs that returned nothing are excluded from the means and counted invalid in Fig. 3. A "
+                    "few wrong candidates dominate such means: the medians in the tables are the steadier "
+                    "comparison.")
+
+
+def differences(sweeps: dict[str, pd.DataFrame], settings: dict[str, dict], verdicts: list[ClaimCheck]) -> list[str]:
+    """Generated paragraphs on where and why our numbers differ from the paper's."""
+    boards, noise = sweeps.get("boards"), sweeps.get("noise")
+    return (_zhang_note(boards, verdicts) + _selection_notes(boards, noise) + _failure_notes(boards, noise)
+            + _placement_note(settings) + [MEAN_ERRORS_NOTE])
 
 
 def _distance_to_claim(v: ClaimCheck | None) -> float:
@@ -183,7 +205,7 @@ def _distance_to_claim(v: ClaimCheck | None) -> float:
     return abs(min(vals) - v.claim.lo) + abs(max(vals) - v.claim.hi)
 
 
-def build_report(tables: str | Path) -> str:
+def build_paper_report(tables: str | Path) -> str:
     """The text of REPORT.md from the tables in ``tables``."""
     tables = Path(tables)
     sweeps, settings = {}, {}
@@ -227,16 +249,16 @@ def build_report(tables: str | Path) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
-def write_report(tables: str | Path) -> Path:
+def write_paper_report(tables: str | Path) -> Path:
     path = Path(tables) / "REPORT.md"
-    write_stamped(path, build_report(tables))
+    write_stamped(path, build_paper_report(tables))
     return path
 
 
 def main(argv: Sequence[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--tables", default="results/paper", help="folder of the summary tables")
-    print(write_report(ap.parse_args(argv).tables))
+    print(write_paper_report(ap.parse_args(argv).tables))
 
 
 if __name__ == "__main__":

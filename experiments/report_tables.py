@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pandas as pd
 
+from rig.markdown import md_table
+
 from .catalog import method_label, method_order
 
 
@@ -11,13 +13,11 @@ def method_table(summary: pd.DataFrame, x: str, cell) -> list[str]:
     """A markdown table: one row per value of ``x``, one column per method, ``cell(summary row)`` in each (``-``
     where the method has no row, or ``cell`` returns None)."""
     methods = method_order(summary["method"].unique())
-    lines = [f"| {x} | " + " | ".join(method_label(m) for m in methods) + " |",
-             "|---|" + "---|" * len(methods)]
+    rows = []
     for xv, g in summary.groupby(x, sort=True):
-        rows = [g[g["method"] == m] for m in methods]
-        cells = [(cell(r.iloc[0]) if not r.empty else None) or "-" for r in rows]
-        lines.append(f"| {xv:g} | " + " | ".join(cells) + " |")
-    return lines
+        per = [g[g["method"] == m] for m in methods]
+        rows.append([f"{xv:g}", *((cell(r.iloc[0]) if not r.empty else None) or "-" for r in per)])
+    return md_table([x, *(method_label(m) for m in methods)], rows)
 
 
 def valid_cell(r) -> str:

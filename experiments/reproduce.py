@@ -23,7 +23,7 @@ from .aggregate import write_tables
 from .cell import Cell
 from .config import cell_from_cfg, register_configs
 from .figures import draw_sweep
-from .report import write_report
+from .report import write_paper_report
 from .runner import run_cells
 from .store import load_cell
 
@@ -71,7 +71,7 @@ def reproduce(trials: int = 100, results_dir: str = "results", n_jobs: int = -1,
     for sweep, cs in cells.items():
         write_tables(pd.concat([load_cell(c) for c in cs], ignore_index=True), sweep, out)
         draw_sweep(out, sweep)
-    report = write_report(out)
+    report = write_paper_report(out)
     return {"out": out, "report": report, "cells": len(all_cells), "trials": sum(c.n_trials for c in all_cells),
             "methods": all_cells[0].methods, "run_s": t_run, "total_s": time.perf_counter() - t0}
 

@@ -46,42 +46,12 @@ def _cmd_calibrate(args) -> int:
     from calib_core import calibrate
     from calib_core.data.exports import frame_export
     from calib_core.data.io import extrinsic_yaml, load_observations
-    from calib_core.geometry.metrics import pose_errors
 
     frames = _frames(args)
     obs = load_observations(args.observations)
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
     res = calibrate(obs, method=args.method, **options)
-    if not res.ok:
-        print(f"{args.method}: failed: {res.reason}")
-    else:
-        print(f"{args.method}: ok, {res.n_candidates} candidates, {1000 * res.seconds:.1f} ms")
-        print("T_lidar_cam (maps camera points into the lidar frame, metres):")
-        for row in res.T_lidar_cam:
-            print("  " + "  ".join(f"{v: .6f}" for v in row))
-        if res.covariance is not None:
-            model = res.info.get("covariance_model")
-            print(f"1-sigma: rotation {res.sigma_rot_deg:.3f} deg, translation {res.sigma_trans_mm:.1f} mm"
-                  + (f" (covariance model: {model})" if model else ""))
-        if "mounting" in res.info:
-            print("mounting (camera pose in the lidar frame; degrees and metres):")
-            for k, v in res.info["mounting"].items():
-                s = res.info["mounting_sigma"].get(k)
-                print(f"  {k:>9} = {v: .4f}  " + ("(fixed, given)" if s is None else f"+- {s:.4f} (1-sigma)"))
-        if "conditioning" in res.info:
-            print(f"conditioning (inverse condition number, 1 = ideal, < 1e-3 poor): {res.info['conditioning']:.2e}")
-        if res.boards_used is not None:
-            print(f"boards used ({len(res.boards_used)} of {obs.n_boards}): "
-                  + ", ".join(map(str, res.boards_used)))
-            for r in res.boards_rejected:
-                stat = "" if r.get("statistic") is None else f" (statistic {r['statistic']:.3g})"
-                print(f"board {r['index']} rejected{stat}: {r['reason']}")
-        for w in res.warnings:
-            if not (res.boards_rejected and w.startswith("board ") and " left out: " in w):
-                print(f"warning: {w}")
-        if obs.T_lidar_cam_true is not None:
-            e_R, e_t = pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)
-            print(f"against ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm")
+    print("\n".join(res.summary_lines(obs.n_boards, obs.T_lidar_cam_true)))
     ros = frame_export(res.T_lidar_cam, *frames) if res.ok and frames else None
     if ros is not None:
         _print_ros(ros)

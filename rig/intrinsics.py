@@ -15,6 +15,7 @@ import numpy as np
 
 from .dataset import BoardSpec, CameraModel, Dataset, DatasetError
 from .detect import find_chessboard
+from .markdown import md_table
 
 PARAM_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 MIN_VIEWS = 3
@@ -81,10 +82,10 @@ def format_intrinsics(fit: IntrinsicsFit) -> list[str]:
     """Markdown lines: the fitted parameters with their 1-sigma, the RMS and the views used."""
     K, d = fit.camera.K, fit.camera.dist
     vals = dict(zip(PARAM_NAMES, [K[0, 0], K[1, 1], K[0, 2], K[1, 2], *d], strict=False))
-    rows = [f"| {n} | {vals[n]:.4f} | {fit.sigma.get(n, math.nan):.4f} |" for n in PARAM_NAMES if n in vals]
+    rows = [[n, f"{vals[n]:.4f}", f"{fit.sigma.get(n, math.nan):.4f}"] for n in PARAM_NAMES if n in vals]
     return [f"`cv2.calibrateCameraExtended` on {len(fit.views)} detected boards: reprojection RMS "
             f"{fit.rms_px:.3f} px (per view {min(fit.per_view_px.values()):.3f}-{max(fit.per_view_px.values()):.3f}"
-            " px).", "", "| parameter | value | 1-sigma |", "|---|---:|---:|"] + rows
+            " px).", ""] + md_table(["parameter", "value", "1-sigma"], rows, "lrr")
 
 
 def with_corners(dataset: Dataset) -> tuple[Dataset, dict[str, np.ndarray | None]]:

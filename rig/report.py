@@ -24,6 +24,7 @@ from calib_core.geometry.transforms import invert_T, quaternion_xyzw, transform_
 from calib_core.refine.uncertainty import normal_spread_deg
 
 from .dataset import CameraModel, Dataset
+from .markdown import md_table, num
 
 OUTLIER_FACTOR = 3.0
 OVERLAY_CMAP = "turbo"  # saturated everywhere (a diverging map is grey at 0 mm: invisible on the board)
@@ -144,11 +145,11 @@ def _mounting_md(res: dict) -> list[str]:
     if not res.get("mounting"):
         return []
     sig, fixed = res.get("mounting_sigma") or {}, res.get("fixed") or {}
-    rows = [f"| {k} | {v:.4f} | {'given (fixed)' if k in fixed else f'{sig[k]:.4f}' if k in sig else '-'} |"
+    rows = [[k, f"{v:.4f}", "given (fixed)" if k in fixed else f"{sig[k]:.4f}" if k in sig else "-"]
             for k, v in res["mounting"].items()]
     return ["### Mounting parameters", "", "The camera's pose in the lidar frame (`geometry.mounting`: x, y, z "
-            "the camera centre; roll, pitch, yaw of its body frame, Z-Y-X). " + str(res.get("note") or ""), "",
-            "| parameter | value | 1-sigma |", "|---|---:|---:|"] + rows + [""]
+            "the camera centre; roll, pitch, yaw of its body frame, Z-Y-X). " + str(res.get("note") or ""), ""
+            ] + md_table(["parameter", "value", "1-sigma"], rows, "lrr") + [""]
 
 
 def _pose_name(observations: Observations, i: int) -> str:
@@ -238,6 +239,88 @@ def _fmt_row(v) -> str:
     return ", ".join(f"{x: .6f}" for x in v)
 
 
+def _extrinsic_md(res: dict, T: np.ndarray, Ti: np.ndarray) -> list[str]:
+    """The extrinsic both ways (matrix, quaternion, translation, angle) and its 1-sigma, as markdown lines."""
+    md = ["## Extrinsic", "", "`T_a_b` maps points of frame b into frame a; metres. Lidar: scan plane z = 0, "
+          "x forward. Camera: z optical axis, y down.", ""]
+    for name, M, what in (("T_lidar_cam", T, "camera points into the lidar frame (p_L = R p_C + t)"),
+                          ("T_cam_lidar", Ti, "lidar points into the camera frame (used for the overlays)")):
+        q = quaternion_xyzw(M[:3, :3])
+        md += [f"### {name}: maps {what}", "", "```"] + [_fmt_row(r) for r in M] + ["```", "",
+               f"- quaternion (x, y, z, w): [{_fmt_row(q)}]",
+               f"- translation (m): [{_fmt_row(M[:3, 3])}]",
+               f"- rotation angle: {math.degrees(math.acos(np.clip((np.trace(M[:3, :3]) - 1) / 2, -1, 1))):.3f} deg,"
+               f" |t| = {np.linalg.norm(M[:3, 3]):.4f} m", ""]
+    cov = res.get("covariance")
+    if cov is None:
+        return md + ["No covariance in the result: no 1-sigma figures.", ""]
+    cov = np.asarray(cov, float)
+    sr = np.degrees(np.sqrt(np.diag(cov)[:3]))
+    st = 1000 * np.sqrt(np.diag(cov)[3:])
+    return md + ["### Uncertainty (1 sigma)", "",
+                 f"- rotation: {sigma_rot_deg(cov):.3f} deg overall; per axis (lidar frame, x y z): "
+                 f"{', '.join(f'{v:.3f}' for v in sr)} deg",
+                 f"- translation of T_lidar_cam: {1000 * sigma_trans_m(cov):.1f} mm overall; per axis (x y z): "
+                 f"{', '.join(f'{v:.1f}' for v in st)} mm",
+                 f"- covariance model: {res.get('covariance_model') or 'not stated'}", ""]
+
+
+def _board_plots(dataset: Dataset | None, observations: Observations, res: dict, Ti: np.ndarray, out: Path,
+                 summary: ReportSummary, rms_mm: list[float], clim: float) -> list[str]:
+    """Per board: its residual plot and (with a dataset) its overlay written under ``out``; the markdown links."""
+    rejected = {int(r["index"]): r for r in res.get("boards_rejected") or []}
+    links = []
+    for i, b in enumerate(observations.boards):
+        name = _pose_name(observations, i)
+        bearing = np.degrees(np.arctan2(b.scan[:, 1], b.scan[:, 0]))
+        d = 1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)
+        rp = out / f"residual_{name}.png"
+        _residual_plot(rp, bearing, d, f"pose {name} (board {i}): {len(d)} points")
+        summary.residual_plots.append(rp)
+        link = f"[residuals](residual_{name}.png)"
+        if dataset is not None:
+            try:
+                pose = dataset.pose(name)
+                gray = pose.read_image()
+                full = pose.scan.points if pose.scan is not None else None
+                op = out / f"overlay_{name}.png"
+                _overlay(op, gray, dataset.camera, Ti, b.T_cam_board, b.outline, full, b.scan, clim,
+                         f"pose {name}: {len(b.scan)} board points, RMS {rms_mm[i]:.1f} mm",
+                         rejected[i]["reason"] if i in rejected else None)
+                summary.overlays.append(op)
+                link = f"[overlay](overlay_{name}.png), " + link
+            except (KeyError, LidarcamError) as err:
+                summary.warnings.append(f"pose {name}: no overlay ({err})")
+        links.append(link)
+    return links
+
+
+def _boards_md(observations: Observations, res: dict, Ti: np.ndarray, rms_mm: list[float], mean_mm: list[float],
+               links: list[str]) -> list[str]:
+    """The per-board table (points, residual RMS and mean, corner reprojection, status, plots) and the totals."""
+    rejected = {int(r["index"]): r for r in res.get("boards_rejected") or []}
+    reproj = (observations.meta or {}).get("reproj_rms_px") or []
+    rows = []
+    for i, b in enumerate(observations.boards):
+        rp_px = reproj[i] if i < len(reproj) and reproj[i] is not None else math.nan
+        status = "rejected: " + str(rejected[i]["reason"]) if i in rejected else "used"
+        rows.append([i, f"`{_pose_name(observations, i)}`", len(b.scan), f"{rms_mm[i]:.1f}", f"{mean_mm[i]:+.1f}",
+                     num(rp_px, ".3f"), status, links[i]])
+    md = ["## Boards", "", "Residual: signed distance of the board's scan points to its plane (camera's pose of "
+          "the board), through the extrinsic.", ""]
+    md += md_table(["board", "pose", "points", "residual RMS (mm)", "mean (mm)", "corner reproj. RMS (px)", "status",
+                    "plots"], rows, "rlrrrrll") + [""]
+    finite = [r for r in rms_mm if math.isfinite(r)]
+    if finite:
+        every = np.concatenate([1000 * board_plane_distances(Ti, b.T_cam_board, b.scan) for b in observations.boards])
+        md += [f"Median board RMS: {float(np.median(finite)):.1f} mm; all points: "
+               f"{math.sqrt(np.mean(every ** 2)):.1f} mm.", ""]
+    if observations.n_boards >= 2:
+        md += [f"Board set: largest angle between two board normals {pair_angle_deg(observations):.1f} deg; "
+               f"normals {normal_spread_deg(observations):.1f} deg from one plane (spread).", ""]
+    return md
+
+
 def write_report(dataset: Dataset | None, observations: Observations, result, out_dir) -> ReportSummary:
     """Write the report of ``result`` on ``observations`` (extracted from ``dataset``) into ``out_dir``.
 
@@ -255,97 +338,31 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     if dataset is not None:
         md += [f"Dataset: `{dataset.root}`, {len(dataset.poses)} poses, {observations.n_boards} used.", ""]
     skipped = (observations.meta or {}).get("skipped") or {}
+    skipped_md = ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""] if skipped else []
     summary = ReportSummary(out / "report.md")
     if not res["ok"] or res["T_lidar_cam"] is None:
-        md += ["**The calibration failed**: " + str(res.get("reason")), ""]
+        md += ["**The calibration failed**: " + str(res.get("reason")), ""] + skipped_md
         summary.warnings.append(f"calibration failed: {res.get('reason')}")
-        if skipped:
-            md += ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""]
         summary.markdown.write_text("\n".join(md) + "\n")
         return summary
 
     T = np.asarray(res["T_lidar_cam"], float)
     Ti = invert_T(T)
-    cov = res.get("covariance")
-    (out / "extrinsic.yaml").write_text(extrinsic_yaml(T, {"method": res["method"]}, covariance=cov))
-
-    md += ["## Extrinsic", "", "`T_a_b` maps points of frame b into frame a; metres. Lidar: scan plane z = 0, "
-           "x forward. Camera: z optical axis, y down.", ""]
-    for name, M, what in (("T_lidar_cam", T, "camera points into the lidar frame (p_L = R p_C + t)"),
-                          ("T_cam_lidar", Ti, "lidar points into the camera frame (used for the overlays)")):
-        q = quaternion_xyzw(M[:3, :3])
-        md += [f"### {name}: maps {what}", "", "```"] + [_fmt_row(r) for r in M] + ["```", "",
-               f"- quaternion (x, y, z, w): [{_fmt_row(q)}]",
-               f"- translation (m): [{_fmt_row(M[:3, 3])}]",
-               f"- rotation angle: {math.degrees(math.acos(np.clip((np.trace(M[:3, :3]) - 1) / 2, -1, 1))):.3f} deg,"
-               f" |t| = {np.linalg.norm(M[:3, 3]):.4f} m", ""]
-    if cov is not None:
-        cov = np.asarray(cov, float)
-        sr = np.degrees(np.sqrt(np.diag(cov)[:3]))
-        st = 1000 * np.sqrt(np.diag(cov)[3:])
-        md += ["### Uncertainty (1 sigma)", "",
-               f"- rotation: {sigma_rot_deg(cov):.3f} deg overall; per axis (lidar frame, x y z): "
-               f"{', '.join(f'{v:.3f}' for v in sr)} deg",
-               f"- translation of T_lidar_cam: {1000 * sigma_trans_m(cov):.1f} mm overall; per axis (x y z): "
-               f"{', '.join(f'{v:.1f}' for v in st)} mm",
-               f"- covariance model: {res.get('covariance_model') or 'not stated'}", ""]
-    else:
-        md += ["No covariance in the result: no 1-sigma figures.", ""]
-    md += _mounting_md(res)
+    (out / "extrinsic.yaml").write_text(extrinsic_yaml(T, {"method": res["method"]}, covariance=res.get("covariance")))
+    md += _extrinsic_md(res, T, Ti) + _mounting_md(res)
     if observations.T_lidar_cam_true is not None:
         e_R, e_t = pose_errors(T, observations.T_lidar_cam_true)
         md += [f"Against the ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm.", ""]
 
-    rms_mm, mean_mm = [], []
-    for b in observations.boards:
-        d = 1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)
-        rms_mm.append(float(np.sqrt(np.mean(d ** 2))))
-        mean_mm.append(float(np.mean(d)))
+    d_mm = [1000 * board_plane_distances(Ti, b.T_cam_board, b.scan) for b in observations.boards]
+    rms_mm = [float(np.sqrt(np.mean(d ** 2))) for d in d_mm]
+    mean_mm = [float(np.mean(d)) for d in d_mm]
     summary.board_rms_mm = rms_mm
     finite = [r for r in rms_mm if math.isfinite(r)]
     clim = float(max(20.0, 3.0 * float(np.median(finite)) if finite else 20.0))
     clim = float(math.ceil(clim / 10.0) * 10.0)
-
-    rows = []
-    rejected = {int(r["index"]): r for r in res.get("boards_rejected") or []}
-    reproj = (observations.meta or {}).get("reproj_rms_px") or []
-    for i, b in enumerate(observations.boards):
-        name = _pose_name(observations, i)
-        bearing = np.degrees(np.arctan2(b.scan[:, 1], b.scan[:, 0]))
-        d = 1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)
-        rp = out / f"residual_{name}.png"
-        _residual_plot(rp, bearing, d, f"pose {name} (board {i}): {len(d)} points")
-        summary.residual_plots.append(rp)
-        links = f"[residuals](residual_{name}.png)"
-        if dataset is not None:
-            try:
-                pose = dataset.pose(name)
-                gray = pose.read_image()
-                full = pose.scan.points if pose.scan is not None else None
-                op = out / f"overlay_{name}.png"
-                _overlay(op, gray, dataset.camera, Ti, b.T_cam_board, b.outline, full, b.scan, clim,
-                         f"pose {name}: {len(b.scan)} board points, RMS {rms_mm[i]:.1f} mm",
-                         rejected[i]["reason"] if i in rejected else None)
-                summary.overlays.append(op)
-                links = f"[overlay](overlay_{name}.png), " + links
-            except (KeyError, LidarcamError) as err:
-                summary.warnings.append(f"pose {name}: no overlay ({err})")
-        rp_px = reproj[i] if i < len(reproj) and reproj[i] is not None else math.nan
-        status = "rejected: " + str(rejected[i]["reason"]) if i in rejected else "used"
-        rows.append(f"| {i} | `{name}` | {len(b.scan)} | {rms_mm[i]:.1f} | {mean_mm[i]:+.1f} | "
-                    f"{'-' if not math.isfinite(rp_px) else f'{rp_px:.3f}'} | {status} | {links} |")
-    md += ["## Boards", "", "Residual: signed distance of the board's scan points to its plane (camera's pose of "
-           "the board), through the extrinsic.", "",
-           "| board | pose | points | residual RMS (mm) | mean (mm) | corner reproj. RMS (px) | status | plots |",
-           "|---:|---|---:|---:|---:|---:|---|---|"] + rows + [""]
-    if finite:
-        md += [f"Median board RMS: {float(np.median(finite)):.1f} mm; all points: "
-               f"{math.sqrt(np.mean(np.concatenate([(1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)) ** 2 for b in observations.boards]))):.1f} mm.", ""]  # noqa: E501
-    if observations.n_boards >= 2:
-        md += [f"Board set: largest angle between two board normals {pair_angle_deg(observations):.1f} deg; "
-               f"normals {normal_spread_deg(observations):.1f} deg from one plane (spread).", ""]
-    if skipped:
-        md += ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""]
+    links = _board_plots(dataset, observations, res, Ti, out, summary, rms_mm, clim)
+    md += _boards_md(observations, res, Ti, rms_mm, mean_mm, links) + skipped_md
     summary.warnings = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
     md += ["## Capture plan", "", capture_verdict(observations, T), ""]

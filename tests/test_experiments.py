@@ -234,7 +234,7 @@ def test_tables_figures_report_from_a_small_sweep(tmp_path):
     for fig in ("fig3a_valid_vs_boards", "fig4_mean_error_vs_boards", "fig5_error_distribution_vs_boards",
                 "fig3b_valid_vs_noise", "fig6_mean_error_vs_noise", "fig7_error_distribution_vs_noise"):
         assert {f"{fig}.png", f"{fig}.pdf"} <= names
-    text = report.write_report(out).read_text()
+    text = report.write_paper_report(out).read_text()
     assert "valid-solution probability +2 to +20 points vs Francisco" in text
     assert text.count("| **") == len(claims.paper_claims())
     assert "## Where and why we differ" in text and "{" not in text.split("## Where and why we differ")[1]

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SolveFailure  # noqa: F401 -- re-exported: result.SolveFailure is public
-from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
+from ..geometry.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import invert_T
 
 RESULT_SCHEMA = "lidarcam.result/1"
@@ -114,6 +114,40 @@ class CalibrationResult:
 
     def save(self, path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+
+    def summary_lines(self, n_boards: int | None = None, T_true: np.ndarray | None = None) -> list[str]:
+        """The result for a reader, one line each: ok or the reason, ``T_lidar_cam`` (metres), the 1-sigma in
+        degrees and millimetres, mounting values, conditioning, boards used and rejected, warnings, and the errors
+        against ``T_true`` (a known ``T_lidar_cam``) when given. ``n_boards``: the boards the method was given."""
+        if not self.ok:
+            return [f"{self.method}: failed: {self.reason}"]
+        out = [f"{self.method}: ok, {self.n_candidates} candidates, {1000 * self.seconds:.1f} ms",
+               "T_lidar_cam (maps camera points into the lidar frame, metres):"]
+        out += ["  " + "  ".join(f"{v: .6f}" for v in row) for row in self.T_lidar_cam]
+        if self.covariance is not None:
+            model = self.info.get("covariance_model")
+            out.append(f"1-sigma: rotation {self.sigma_rot_deg:.3f} deg, translation {self.sigma_trans_mm:.1f} mm"
+                       + (f" (covariance model: {model})" if model else ""))
+        if "mounting" in self.info:
+            out.append("mounting (camera pose in the lidar frame; degrees and metres):")
+            for k, v in self.info["mounting"].items():
+                s = self.info["mounting_sigma"].get(k)
+                out.append(f"  {k:>9} = {v: .4f}  " + ("(fixed, given)" if s is None else f"+- {s:.4f} (1-sigma)"))
+        if "conditioning" in self.info:
+            out.append("conditioning (inverse condition number, 1 = ideal, < 1e-3 poor): "
+                       f"{self.info['conditioning']:.2e}")
+        if self.boards_used is not None:
+            of = "" if n_boards is None else f" of {n_boards}"
+            out.append(f"boards used ({len(self.boards_used)}{of}): " + ", ".join(map(str, self.boards_used)))
+            for r in self.boards_rejected:
+                stat = "" if r.get("statistic") is None else f" (statistic {r['statistic']:.3g})"
+                out.append(f"board {r['index']} rejected{stat}: {r['reason']}")
+        out += [f"warning: {w}" for w in self.warnings
+                if not (self.boards_rejected and w.startswith("board ") and " left out: " in w)]
+        if T_true is not None:
+            e_R, e_t = pose_errors(self.T_lidar_cam, T_true)
+            out.append(f"against ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm")
+        return out
 
 
 def load_result(path) -> dict:
