@@ -7,6 +7,7 @@ The table is filled explicitly: ``calib_core.methods.register_builtins`` adds th
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -68,8 +69,11 @@ def get_method(name: str) -> Method:
             return SUFFIXES[suffix](get_method(base))
         except CalibrationError:
             pass
-    raise CalibrationError(f"unknown method {name!r}; known: {', '.join(METHODS)} "
-                           f"(and X+{'/X+'.join(SUFFIXES)} for any X)")
+    close = difflib.get_close_matches(name, [*METHODS, *(f"{m}+{s}" for m in METHODS if "+" not in m
+                                                          for s in SUFFIXES)], n=1)
+    hint = f"did you mean {close[0]!r}? " if close else ""
+    raise CalibrationError(f"unknown method {name!r}; {hint}known: {', '.join(n for n in METHODS if '+' not in n)} "
+                           f"and X+{'/X+'.join(SUFFIXES)} for any X")
 
 
 def derived(base: Method, suffix: str, func: Callable, summary: str) -> Method:

@@ -168,7 +168,7 @@ def load_trials(out_dir: str | Path, sweep: str) -> pd.DataFrame:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("sweeps", nargs="*", default=["boards", "noise"])
     ap.add_argument("--results", default="results", help="results folder of the runner (default: results)")
     ap.add_argument("--out", default=None, help="where the tables go (default: <results>/paper)")
@@ -180,4 +180,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

@@ -82,7 +82,7 @@ def measure(args) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     p.add_argument("--seconds", type=float, default=120.0)
     p.add_argument("--fps", type=float, default=30.0)
     p.add_argument("--scan-hz", type=float, default=40.0)
@@ -109,4 +109,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from .entry import run_main
+
+    run_main(main)

@@ -53,7 +53,7 @@ def clean_check(trials: int, boards: Sequence[int] = (3, 4, 5, 6, 7, 8), method:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--trials", type=int, default=100)
     ap.add_argument("--boards", default="3,4,5,6,7,8")
     args = ap.parse_args(argv)
@@ -62,4 +62,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

@@ -163,7 +163,7 @@ def corner_noise(trials: int = 100, boards_trials: int = 100, results_dir: str =
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to both experiments")
     ap.add_argument("--trials", type=int, default=100, help="trials per corner-noise point")
     ap.add_argument("--boards-trials", type=int, default=100, help="trials per board count at 0.5 px")
@@ -175,4 +175,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

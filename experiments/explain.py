@@ -255,7 +255,7 @@ def explain(ablation_trials: int = 1000, sens_trials: int = 40, results_dir: str
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to every experiment")
     ap.add_argument("--ablation-trials", type=int, default=1000)
     ap.add_argument("--sens-trials", type=int, default=40, help="trials per sensitivity point (10-min budget)")
@@ -268,4 +268,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

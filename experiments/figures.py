@@ -154,7 +154,7 @@ def draw_sweep(tables_dir: str | Path, sweep: str, out_dir: str | Path | None = 
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("sweeps", nargs="*", default=["boards", "noise"])
     ap.add_argument("--tables", default="results/paper", help="folder of the summary/trial tables")
     ap.add_argument("--out", default=None, help="figure folder (default: <tables>/figures)")
@@ -165,4 +165,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

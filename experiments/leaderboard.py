@@ -248,7 +248,7 @@ def build_leaderboard_report(table: pd.DataFrame, real: pd.DataFrame | None, inf
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to every suite")
     ap.add_argument("--suite", default=str(DEFAULT_SUITE), help="suite file (default: %(default)s)")
     ap.add_argument("--full", action="store_true", help="full trial counts (the suite file's full_trials)")
@@ -272,4 +272,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

@@ -133,7 +133,7 @@ def matched(preset: str = "paper-matched", trials: int = 500, compare_trials: in
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to every sweep")
     ap.add_argument("--preset", default="paper-matched", help="conf/preset/<name>.yaml")
     ap.add_argument("--trials", type=int, default=500, help="trials per setting under the preset")
@@ -150,4 +150,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

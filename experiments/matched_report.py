@@ -267,7 +267,7 @@ def write_matched_report(tables: str | Path, preset: str, search_dir: str | Path
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--tables", default="results/paper-matched")
     ap.add_argument("--preset", default="paper-matched")
     ap.add_argument("--search", default="results/search")
@@ -276,4 +276,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

@@ -130,7 +130,7 @@ def run(trials: int, results_dir: str, n_jobs: int, chunk_size: int = 0, compute
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--trials", type=int, default=100)
     ap.add_argument("--results", default="results")
     ap.add_argument("--n-jobs", type=int, default=-1)
@@ -148,4 +148,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

@@ -134,7 +134,7 @@ def tasks(conf) -> tuple[list[dict], dict]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--conf", default=str(CONF), help="sizes and settings (default: %(default)s)")
     ap.add_argument("--out", default=str(OUT), help="results folder (default: %(default)s)")
     ap.add_argument("--jobs", type=int, default=2, help="parallel workers (default: %(default)s)")
@@ -218,4 +218,6 @@ def summarise(results: list[dict], pred: dict, conf) -> dict:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from .entry import run_main
+
+    run_main(main)

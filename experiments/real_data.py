@@ -204,7 +204,7 @@ RUNNERS = ((EDENSHIN, run_edenshin), (KAZMIERCZAK, run_kazmierczak), (ACFR, run_
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "real-data"), help="folder of the data sets")
     ap.add_argument("--out", default=str(ROOT / "results" / "real"), help="output folder")
     args = ap.parse_args(argv)
@@ -236,4 +236,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from .entry import run_main
+
+    run_main(main)

@@ -256,10 +256,12 @@ def write_paper_report(tables: str | Path) -> Path:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--tables", default="results/paper", help="folder of the summary tables")
     print(write_paper_report(ap.parse_args(argv).tables))
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

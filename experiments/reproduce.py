@@ -23,6 +23,7 @@ from .aggregate import write_tables
 from .cell import Cell
 from .config import cell_from_cfg, register_configs
 from .figures import draw_sweep
+from .overrides import check_overrides
 from .report import write_paper_report
 from .runner import run_cells
 from .store import load_cell
@@ -49,6 +50,7 @@ def experiment_cells(experiment: str, overrides: Sequence[str] = ()) -> list[Cel
     register_configs()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         base = [f"experiment={experiment}", *overrides]
+        check_overrides(base, lambda choices: compose(config_name="config", overrides=choices))
         cfg = compose(config_name="config", overrides=base, return_hydra_config=True)
         swept = {k for k, _ in (o.split("=", 1) for o in overrides)}
         params = {k: v for k, v in (cfg.hydra.sweeper.params or {}).items() if k not in swept}
@@ -77,7 +79,7 @@ def reproduce(trials: int = 100, results_dir: str = "results", n_jobs: int = -1,
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to both sweeps")
     ap.add_argument("--trials", type=int, default=100, help="trials per setting (paper: 100)")
     ap.add_argument("--results", default="results", help="results folder (default: results)")
@@ -92,4 +94,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

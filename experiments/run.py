@@ -49,5 +49,18 @@ def main(cfg: DictConfig) -> float:
     return float(df["valid"].mean()) if not df.empty else 0.0
 
 
+def check_argv(argv) -> None:
+    """The command line's overrides checked before Hydra composes them (``experiments.overrides``)."""
+    from hydra import compose, initialize_config_dir
+
+    from .overrides import CONF_DIR, check_overrides
+
+    overrides = [a for a in argv if "=" in a and not a.startswith("-")]
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        check_overrides(overrides, lambda choices: compose(config_name="config", overrides=choices))
+
+
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(lambda: check_argv(sys.argv[1:]) or main())

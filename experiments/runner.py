@@ -22,6 +22,7 @@ import pandas as pd
 from calib_core.plugins import load_plugins
 
 from .cell import CODE_COLUMN, Cell, RunnerError
+from .entry import SweepInterrupted
 from .fingerprint import method_codes, refresh_plugins, rerun_message
 from .store import load_cell, pending, prepare_cell, prune_stale, write_chunk
 from .trial import TrialFn, simulate_trial
@@ -114,6 +115,9 @@ def run_cells(cells: Sequence[Cell], *, n_jobs: int = -1, chunk_size: int = 0, p
                 par = Parallel(n_jobs=workers, return_as="generator_unordered", batch_size=1)
                 search_path = tuple(sys.path)
                 _consume(par(delayed(_run_chunk)(trial_fn, *task, search_path) for task in tasks), bar)
+    except KeyboardInterrupt:
+        raise SweepInterrupted(f"interrupted after {bar.done} of {bar.total} trials; the same command resumes") \
+            from None
     finally:
         bar.close()
     frames = [load_cell(c) for c in cells]

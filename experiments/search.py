@@ -223,7 +223,7 @@ def search(stage: str = "all", coarse_trials: int | None = None, fine_trials: in
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--stage", choices=("coarse", "fine", "sensitivity", "all"), default="all")
     ap.add_argument("--coarse-trials", type=int, default=None, help="trials per coarse point (config: 16)")
     ap.add_argument("--fine-trials", type=int, default=None, help="trials per fine point (config: 1000)")
@@ -240,4 +240,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from .entry import run_main
+
+    run_main(main)

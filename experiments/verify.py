@@ -20,7 +20,8 @@ from .store import verify_store
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m experiments.verify", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m experiments.verify",
+                                 description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("results_dir", nargs="?", default="results")
     ap.add_argument("--sweep", default=None, help="one sweep (default: all)")
     args = ap.parse_args(argv)
@@ -39,4 +40,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from .entry import run_main
+
+    run_main(main)

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import difflib
+import re
 import sys
 
 from calib_core.errors import LidarcamError
 
-from . import bag, importer, plan, rig, simulate
+from . import bag, demo, importer, plan, rig, simulate
 
 
 def _cmd_methods(args) -> int:
@@ -43,14 +45,14 @@ def _print_ros(ros) -> None:
 
 
 def _cmd_calibrate(args) -> int:
-    from calib_core import calibrate
+    from calib_core import calibrate, get_method
     from calib_core.data.exports import frame_export
     from calib_core.data.io import extrinsic_yaml, load_observations
 
     frames = _frames(args)
     obs = load_observations(args.observations)
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
-    res = calibrate(obs, method=args.method, **options)
+    res = calibrate(obs, method=get_method(args.method).name, **options)
     print("\n".join(res.summary_lines(obs.n_boards, obs.T_lidar_cam_true)))
     ros = frame_export(res.T_lidar_cam, *frames) if res.ok and frames else None
     if ros is not None:
@@ -117,17 +119,33 @@ def load_plugins(argv) -> None:
     load(pre.parse_known_args(argv)[0].plugin)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from calib_core.registry import METHODS
+EXIT_CODES = ("exit status: 0 an answer (or the verb's output), 1 no answer (the method could not solve, or no pose "
+              "passed), 2 bad input (file, option, method name), 130 interrupted (Ctrl-C)")
 
-    p = argparse.ArgumentParser(prog="lidarcam", description="2D lidar - camera extrinsic calibration")
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: a mistyped verb or choice gets the closest name ("did you mean ...")."""
+
+    def error(self, message: str):
+        m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if m:
+            names = [c.strip(" '") for c in m.group(2).split(",")]
+            close = difflib.get_close_matches(m.group(1), names, n=1)
+            message = (f"unknown {'verb' if message.startswith('argument VERB') else 'choice'} {m.group(1)!r}"
+                       + (f"; did you mean {close[0]!r}?" if close else f"; one of {', '.join(names)}"))
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = Parser(prog="lidarcam", description="2D lidar - camera extrinsic calibration", epilog=EXIT_CODES)
     _plugin_option(p)
     sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
     sp = sub.add_parser("methods", help="list the calibration methods")
     sp.set_defaults(func=_cmd_methods)
-    sp = sub.add_parser("calibrate", help="calibrate from an observation JSON file")
+    sp = sub.add_parser("calibrate", help="calibrate from an observation JSON file", epilog=EXIT_CODES)
     sp.add_argument("observations", help="lidarcam.observations/1 JSON file")
-    sp.add_argument("--method", default="lidarcam", choices=list(METHODS), help="method (default: %(default)s)")
+    sp.add_argument("--method", default="lidarcam", help="any name of `lidarcam methods`, X+ml, X+plane, X+joint, "
+                    "a plugin's method (default: %(default)s)")
     sp.add_argument("--out", help="write the result JSON (lidarcam.result/1) here")
     sp.add_argument("--yaml", help="write the extrinsic as YAML here")
     sp.add_argument("--fix", metavar="NAME=VALUE,...", help=FIX_HELP)
@@ -141,6 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     rig.add_parsers(sub)
     importer.add_parsers(sub)
     bag.add_parsers(sub)
+    demo.add_parsers(sub)
     plan.add_parsers(sub)
     return p
 
@@ -158,6 +177,10 @@ def main(argv=None) -> int:
     except LidarcamError as err:
         print(f"lidarcam {args.verb}: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"lidarcam {args.verb}: interrupted; nothing half-written is kept, run the same command again",
+              file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 
 def cmd_bag(args) -> int:
-    """``lidarcam bag``: pick, pair and write; prints the reason counts and the sync."""
+    """``lidarcam bag``: pick, pair and write; prints the reason counts and the sync (``--list-topics``: the
+    bag's topics only)."""
+    from rig.dataset import DatasetError
     from rig.extract import ExtractOptions
     from rig.frombag import bag_to_dataset
     from rig.stills import PickOptions
@@ -18,6 +20,14 @@ def cmd_bag(args) -> int:
                        min_run=args.min_run, scan_still_m=args.scan_still, min_angle_deg=args.min_angle,
                        min_move_m=args.min_move, sync_tol_s=args.sync_tol, time_offset_s=args.time_offset,
                        estimate_offset=args.estimate_offset, max_offset_s=args.max_offset_time)
+    if args.list_topics:
+        from .demo import list_topics
+
+        return list_topics(args.bag)
+    need = [f for f, v in (("--image-topic", args.image_topic), ("--scan-topic", args.scan_topic),
+                           ("--board", args.board), ("--out", args.out)) if v is None]
+    if need:
+        raise DatasetError(f"{', '.join(need)} required (or --list-topics to see the bag's topics)", file=args.bag)
     eo = ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma)
     conv = bag_to_dataset(args.bag, args.out, args.image_topic, args.scan_topic, args.board,
                           camera_info_topic=args.camera_info_topic, camera_path=args.camera, opts=opts,
@@ -43,12 +53,14 @@ def add_parsers(subparsers) -> None:
                     "of docs/dataset.md plus picking.json (why each frame was kept or skipped). Then run "
                     "`lidarcam extract DATASET` and `lidarcam calibrate`.")
     p.add_argument("bag", help="ROS 1 .bag file or ROS 2 bag folder")
-    p.add_argument("--image-topic", required=True, help="sensor_msgs/Image or CompressedImage topic")
-    p.add_argument("--scan-topic", required=True, help="sensor_msgs/LaserScan topic")
+    p.add_argument("--list-topics", action="store_true",
+                   help="list the bag's topics with their message types and counts, and stop")
+    p.add_argument("--image-topic", help="sensor_msgs/Image or CompressedImage topic")
+    p.add_argument("--scan-topic", help="sensor_msgs/LaserScan topic")
     p.add_argument("--camera-info-topic", help="sensor_msgs/CameraInfo topic (else --camera)")
     p.add_argument("--camera", help="camera.yaml, when the bag has no usable CameraInfo")
-    p.add_argument("--board", required=True, help="board.yaml of the checkerboard (docs/dataset.md)")
-    p.add_argument("--out", required=True, help="dataset folder to write")
+    p.add_argument("--board", help="board.yaml of the checkerboard (docs/dataset.md)")
+    p.add_argument("--out", help="dataset folder to write")
     g = p.add_argument_group("picking")
     g.add_argument("--max-poses", type=int, default=20, help="keep at most this many poses (default: %(default)s)")
     g.add_argument("--still-px", type=float, default=0.5, metavar="PX",

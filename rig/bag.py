@@ -85,6 +85,13 @@ class BagSource:
         """Topic -> message type of every connection in the bag."""
         return {c.topic: c.msgtype for c in self._reader.connections}
 
+    def message_counts(self) -> dict[str, int]:
+        """Topic -> number of messages in the bag."""
+        counts: dict[str, int] = {}
+        for c in self._reader.connections:
+            counts[c.topic] = counts.get(c.topic, 0) + int(c.msgcount)
+        return counts
+
     def connections(self, topic: str, types: tuple[str, ...], role: str) -> list:
         """The connections of ``topic``; BagError when it is absent or carries another message type."""
         conns = [c for c in self._reader.connections if c.topic == topic]

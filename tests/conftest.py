@@ -31,3 +31,38 @@ def plugin_dir(tmp_path, monkeypatch):
     plugins._LOADED.update(loaded)
     for name in set(sys.modules) - modules:
         del sys.modules[name]
+
+
+def pytest_addoption(parser):
+    parser.addoption("--shuffle", type=int, default=None, metavar="SEED",
+                     help="run the test modules, and the tests within each, in an order shuffled by SEED (the same "
+                          "order in every xdist worker); tests sharing a parametrised module fixture stay together")
+
+
+def _wide_params(item) -> tuple:
+    """The indices of the item's parameters of fixtures wider than a function (kept together when shuffling)."""
+    cs = getattr(item, "callspec", None)
+    if cs is None:
+        return ()
+    defs = item._fixtureinfo.name2fixturedefs
+    return tuple(cs.indices[n] for n in sorted(cs.indices) if n in defs and defs[n][-1].scope != "function")
+
+
+def pytest_collection_modifyitems(config, items):
+    seed = config.getoption("--shuffle")
+    if seed is None:
+        return
+    import random
+
+    rnd = random.Random(seed)
+    modules: dict[str, list] = {}
+    for it in items:
+        modules.setdefault(it.nodeid.split("::")[0], []).append(it)
+    order = list(modules)
+    rnd.shuffle(order)
+    out = []
+    for m in order:
+        group = modules[m]
+        rnd.shuffle(group)
+        out += sorted(group, key=_wide_params)   # stable: shuffled within each wide-fixture parameter
+    items[:] = out

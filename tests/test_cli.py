@@ -64,3 +64,55 @@ def test_bad_input_exits_2_with_one_line_naming_file_board_and_field(obs_file, c
 def test_missing_file_exits_2(tmp_path, capsys):
     assert main(["calibrate", str(tmp_path / "nope.json")]) == 2
     assert "nope.json" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("method", ["lidarcam+ml", "zhang_pless+ml", "vasconcelos+plane", "peng2022/equal",
+                                    "zhang_pless_linear+joint"])
+def test_every_name_the_registry_accepts_works_on_the_command_line(obs_file, capsys, method):
+    assert main(["calibrate", str(obs_file), "--method", method]) in (0, 1)
+    assert capsys.readouterr().out.splitlines()[-1] != ""
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["calibrate", "OBS", "--method", "pengg2022"], "did you mean 'peng2022'?"),
+    (["calibrate", "OBS", "--method", "lidarcam+mll"], "did you mean 'lidarcam+ml'?"),
+    (["calibrat", "OBS"], "unknown verb 'calibrat'; did you mean 'calibrate'?"),
+    (["calibrate", "OBS", "--parent-sensor", "camra"], "did you mean 'camera'?"),
+])
+def test_a_mistyped_name_is_one_line_with_the_closest_name(obs_file, capsys, argv, needle):
+    argv = [str(obs_file) if a == "OBS" else a for a in argv]
+    try:
+        code = main(argv)
+    except SystemExit as exc:   # argparse's own errors leave through exit()
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and needle in err, err
+
+
+def test_a_contradicted_answer_prints_its_warning_before_ok(tmp_path, capsys):
+    path = tmp_path / "obs.json"
+    main(["simulate", "--boards", "6", "--noise-mm", "20", "--seed", "1", "--out", str(path)])
+    capsys.readouterr()
+    assert main(["calibrate", str(path), "--method", "zhang_pless_linear"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    warn = next(i for i, ln in enumerate(out) if ln.startswith("warning: the data contradict this answer"))
+    assert warn < next(i for i, ln in enumerate(out) if ": ok," in ln)
+
+
+def test_exit_codes_are_in_the_help(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "0 an answer" in text and "1 no answer" in text and "2 bad input" in text and "130 interrupted" in text
+
+
+def test_ctrl_c_is_one_line_and_exit_130(obs_file, capsys, monkeypatch):
+    import calib_core
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(calib_core, "calibrate", interrupted)
+    assert main(["calibrate", str(obs_file)]) == 130
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "interrupted" in err

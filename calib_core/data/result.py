@@ -116,13 +116,15 @@ class CalibrationResult:
         Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
 
     def summary_lines(self, n_boards: int | None = None, T_true: np.ndarray | None = None) -> list[str]:
-        """The result for a reader, one line each: ok or the reason, ``T_lidar_cam`` (metres), the 1-sigma in
-        degrees and millimetres, mounting values, conditioning, boards used and rejected, warnings, and the errors
+        """The result for a reader, one line each: the warnings, ok or the reason, ``T_lidar_cam`` (metres), the
+        1-sigma in degrees and millimetres, mounting values, conditioning, boards used and rejected, and the errors
         against ``T_true`` (a known ``T_lidar_cam``) when given. ``n_boards``: the boards the method was given."""
         if not self.ok:
             return [f"{self.method}: failed: {self.reason}"]
-        out = [f"{self.method}: ok, {self.n_candidates} candidates, {1000 * self.seconds:.1f} ms",
-               "T_lidar_cam (maps camera points into the lidar frame, metres):"]
+        out = [f"warning: {w}" for w in self.warnings  # first: a contradicted answer is read with its warning
+               if not (self.boards_rejected and w.startswith("board ") and " left out: " in w)]
+        out += [f"{self.method}: ok, {self.n_candidates} candidates, {1000 * self.seconds:.1f} ms",
+                "T_lidar_cam (maps camera points into the lidar frame, metres):"]
         out += ["  " + "  ".join(f"{v: .6f}" for v in row) for row in self.T_lidar_cam]
         if self.covariance is not None:
             model = self.info.get("covariance_model")
@@ -142,8 +144,6 @@ class CalibrationResult:
             for r in self.boards_rejected:
                 stat = "" if r.get("statistic") is None else f" (statistic {r['statistic']:.3g})"
                 out.append(f"board {r['index']} rejected{stat}: {r['reason']}")
-        out += [f"warning: {w}" for w in self.warnings
-                if not (self.boards_rejected and w.startswith("board ") and " left out: " in w)]
         if T_true is not None:
             e_R, e_t = pose_errors(self.T_lidar_cam, T_true)
             out.append(f"against ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm")
