@@ -53,7 +53,7 @@ corner-noise: $(STAMP) ## Camera-noise sweeps (joint model over corners and rang
 	$(PY) -m experiments.corner_noise --trials 25 --boards-trials 25
 
 REAL_DATA ?= ../shared/real-data
-real-data: $(STAMP) ## The three public rigs end to end, write results/real/ (REAL_DATA=path to the data sets; ~64 s)
+real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; 2-9 min)
 	$(PY) -m experiments.real_data --data $(REAL_DATA)
 
 leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v1.yaml -> results/leaderboard/ (~7 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')

@@ -35,6 +35,8 @@ class CrossValidation:
         n_points: (N,) points per pose.
         range_sigma_m: the range noise std used as the unit (given, or estimated from the scan lines).
         seconds: wall time of all folds.
+        T_lidar_cam: (N,4,4) each fold's extrinsic (NaN where the fold failed): their spread is the leave-one-out
+            (jackknife) estimate of the answer's uncertainty.
     """
 
     method: str
@@ -48,6 +50,7 @@ class CrossValidation:
     range_sigma_m: float
     seconds: float
     options: dict = field(default_factory=dict)
+    T_lidar_cam: np.ndarray | None = None
 
     @property
     def n_ok(self) -> int:
@@ -111,16 +114,35 @@ def leave_one_out(obs: Observations, method: str = "lidarcam", *, range_sigma_m:
     reasons: list[str | None] = [None] * N
     rms, rms_s, mean = np.full(N, np.nan), np.full(N, np.nan), np.full(N, np.nan)
     n_points = np.array([len(b.scan) for b in obs.boards])
+    folds = np.full((N, 4, 4), np.nan)
     t0 = time.perf_counter()
     for i in range(N):
         res = calibrate(obs.subset([j for j in range(N) if j != i]), method, **options)
         if not res.ok:
             reasons[i] = res.reason
             continue
+        folds[i] = res.T_lidar_cam
         e, f = held_out_residuals(obs, i, res.T_lidar_cam)
         ok[i] = True
         rms[i] = 1000 * np.sqrt(np.mean(e**2))
         rms_s[i] = np.sqrt(np.mean((e / (sigma * np.maximum(f, 1e-6))) ** 2))
         mean[i] = 1000 * np.mean(e)
     return CrossValidation(method, names, ok, reasons, rms, rms_s, mean, n_points, sigma,
-                           time.perf_counter() - t0, dict(options))
+                           time.perf_counter() - t0, dict(options), folds)
+
+
+def jackknife_covariance(T_full: np.ndarray, folds: np.ndarray) -> np.ndarray | None:
+    """6x6 jackknife covariance of an extrinsic from its leave-one-out folds (N,4,4; NaN rows skipped): the fold
+    answers as left rotation perturbations of ``T_full`` in the lidar frame (rad) and translation offsets (m),
+    ``(n-1)/n sum (x_i - mean)(x_i - mean)^T`` (the covariance's convention, ``calib_core.data.result``). None with
+    fewer than 3 folds."""
+    from .geometry.transforms import matrix_to_rotvec
+
+    good = folds[np.all(np.isfinite(folds), axis=(1, 2))]
+    n = len(good)
+    if n < 3:
+        return None
+    R0, t0 = T_full[:3, :3], T_full[:3, 3]
+    x = np.array([np.concatenate([matrix_to_rotvec(T[:3, :3] @ R0.T), T[:3, 3] - t0]) for T in good])
+    d = x - x.mean(axis=0)
+    return (n - 1) / n * d.T @ d

@@ -216,6 +216,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         j = time_joint(nb, min(args.problems, 5), max(3, args.repeats // 4))
         print(f"joint model, {nb} boards with corners (0.5 px), median ms: joint_refine {j['joint_refine_ms']:.1f}, "
               f"calibrate zhang_pless_linear+joint {j['zpl_joint_ms']:.1f}, calibrate lidarcam {j['lidarcam_ms']:.1f}")
+    from .solver_bench import run as solver_bench  # both minimal solvers per triple over the sweeps' noise
+    solver_bench(out="results/bench")
 
 
 if __name__ == "__main__":

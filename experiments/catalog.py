@@ -7,7 +7,8 @@ import zlib
 
 # The paper's comparison, and ours plus the refined variants (these join a run only when registered).
 PAPER_METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022")
-OPTIONAL_METHODS = ("lidarcam", "peng2022+ml", "vasconcelos+ml")
+OPTIONAL_METHODS = ("lidarcam", "peng2022+ml", "vasconcelos+ml", "vasconcelos_msac", "vasconcelos_msac_refined",
+                    "zhou2014")
 
 METHOD_LABELS = {
     "zhang_pless_linear": "Zhang & Pless (linear)",
@@ -17,6 +18,9 @@ METHOD_LABELS = {
     "lidarcam": "lidarcam",
     "peng2022+ml": "Peng 2022 + ML",
     "vasconcelos+ml": "Vasconcelos + ML",
+    "vasconcelos_msac": "Vasconcelos MSAC (authors' code)",
+    "vasconcelos_msac_refined": "Vasconcelos MSAC refined (authors' code)",
+    "zhou2014": "Zhou 2014",
 }
 
 METHOD_COLOURS = {
@@ -27,6 +31,9 @@ METHOD_COLOURS = {
     "lidarcam": "#9467bd",
     "peng2022+ml": "#8c564b",
     "vasconcelos+ml": "#17becf",
+    "vasconcelos_msac": "#aec7e8",
+    "vasconcelos_msac_refined": "#6baed6",
+    "zhou2014": "#ff9896",
 }
 _SPARE = ("#7f7f7f", "#bcbd22", "#e377c2", "#393b79", "#637939", "#843c39")
 

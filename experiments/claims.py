@@ -12,12 +12,17 @@ interval lies wholly below p. Which method plays "Zhang" is reported for both of
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 PAPER = "peng2022"  # the method whose claims this report checks
 FRANCISCO = "vasconcelos"
+FRANCISCO_CODE = "vasconcelos_msac"
+"""The other reading of "Francisco": the authors' MATLAB (MSAC selection over the same minimal solutions), as
+against the paper's description (``FRANCISCO``, point-to-plane selection). Every claim against Francisco is judged
+under both (``francisco_twins``)."""
+READINGS = {FRANCISCO: "the paper's description", FRANCISCO_CODE: "the authors' code"}
 ZHANGS = ("zhang_pless_linear", "zhang_pless")
 
 
@@ -71,6 +76,21 @@ def paper_claims() -> list[Claim]:
     claims += [Claim("boards", "mean e_t 300-4200 mm lower than Zhang (3-8 boards)", "Fig. 4 text", "err_mm", z,
                      300, 4200) for z in ZHANGS]
     return claims
+
+
+def francisco_twins() -> list[tuple[int, Claim, Claim]]:
+    """Each claim against Francisco: its number in ``paper_claims``, the claim, and its twin against the authors'
+    code's reading (``FRANCISCO_CODE``)."""
+    return [(i, c, replace(c, other=FRANCISCO_CODE)) for i, c in enumerate(paper_claims(), 1) if c.other == FRANCISCO]
+
+
+def reading_fit(verdict_description: str, verdict_code: str) -> str:
+    """Which reading of Francisco the paper's numbers fit, from the claim's verdict under each: the one(s) under
+    which it holds, else "neither" ("not run" where a reading was not run)."""
+    if "not run" in (verdict_description, verdict_code):
+        return "not run"
+    fits = [r for r, v in zip(READINGS.values(), (verdict_description, verdict_code), strict=True) if v == "holds"]
+    return "both" if len(fits) == 2 else fits[0] if fits else "neither"
 
 
 def claim_verdict(claim: Claim, value, lo=None, hi=None) -> str:

@@ -4,7 +4,8 @@
                                   [--results results] [--n-jobs -1] [OVERRIDE ...]
 
 Runs ``conf/experiment/boards.yaml`` and ``noise.yaml`` with ``preset=<preset>`` (``conf/preset/``) and the
-paper's four methods (``methods=seed``: the claims compare only those), writes tables and figures into
+paper's four methods and Francisco as its authors' code runs it (``methods=readings``: the claims compare only
+those), writes tables and figures into
 ``<results>/<preset>/``; then, unless ``--compare-trials 0``, the same sweeps under the default preset into
 ``<results>/<preset>/default/`` (seeded as ``make reproduce-paper``: the same simulated
 trials, so its first 100 trials give the default report's valid rates). ``REPORT.md`` judges every claim under
@@ -36,7 +37,7 @@ from .reproduce import PAPER_EXPERIMENTS, experiment_cells
 from .runner import run_cells
 from .store import load_cell
 
-RUN_OVERRIDES = ("methods=seed", "metrics.uncertainty=false")  # the claims read neither the others nor CRLBs
+RUN_OVERRIDES = ("methods=readings", "metrics.uncertainty=false")  # the claims read neither the others nor CRLBs
 TARGET_HALF_WIDTH_PTS = 5.0
 """Widest 95% interval (+- percentage points) allowed for a valid rate, and for a paired valid-rate gap of the
 paper's method over another, at any setting: cells wider than this get more trials."""

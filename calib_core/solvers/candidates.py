@@ -9,6 +9,7 @@ import numpy as np
 from ..data.lines import scan_lines, triple_inputs
 from ..data.observations import Observations
 from ..data.result import SolveFailure
+from ..errors import CalibrationError
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,14 +34,27 @@ class CandidateSet:
         return f"{len(self.triples)} triples, no real solution" + (f" ({'; '.join(parts)})" if parts else "")
 
 
-def minimal_candidates(obs: Observations, **solver_options) -> CandidateSet:
-    """Run the Vasconcelos minimal solver on all ``C(N,3)`` board triples and pool the solutions.
+MINIMAL_SOLVERS = ("vasconcelos", "zhou2014", "vasconcelos_dual")
+"""The minimal solvers (modules of this package, each with ``solve_triples(n, d, p, u, **options)``)."""
+
+
+def minimal_candidates(obs: Observations, solver: str = "vasconcelos", **solver_options) -> CandidateSet:
+    """Run a minimal solver (``MINIMAL_SOLVERS``) on all ``C(N,3)`` board triples and pool the solutions.
 
     Raises SolveFailure for fewer than 3 boards or a board whose scan line cannot be fitted.
     """
     if obs.n_boards < 3:
         raise SolveFailure(f"the minimal solver needs at least 3 boards, got {obs.n_boards}")
-    from .vasconcelos import board_triples, solve_triples  # the solver module is the heavy part: load on use
+    if solver not in MINIMAL_SOLVERS:
+        raise CalibrationError(f"unknown minimal solver {solver!r}; choose from {', '.join(MINIMAL_SOLVERS)}")
+    # the solver modules are the heavy part: load on use
+    from .vasconcelos import board_triples
+    if solver == "zhou2014":
+        from .zhou2014 import solve_triples
+    elif solver == "vasconcelos_dual":
+        from .vasconcelos_dual import solve_triples
+    else:
+        from .vasconcelos import solve_triples
 
     scan_lines(obs).require_line_like()
     tri = board_triples(obs.n_boards)

@@ -288,7 +288,7 @@ def _lambdas(x, rev, g, iters: int) -> np.ndarray:
 
 
 def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
-                  imag_tol: float = 1e-8, near_real_tol: float | None = None,
+                  imag_tol: float = 1e-8, near_real_tol: float | None = None, real_parts: bool = False,
                   min_plane_sv: float = 1e-3, min_line_sin: float = 1e-3, min_triangle: float = 1e-3,
                   min_side: float = 1e-6,
                   quartic: str = "closed", root_newton_iters: int = 2,
@@ -308,6 +308,9 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
         near_real_tol: ``None`` (default) keeps only real roots.  A float keeps also each complex-conjugate
             pair with ``|Im x| <= near_real_tol * (1 + |x|)`` through its real part (one root per pair; noise
             can turn two real roots into such a pair); these candidates are marked ``near_real``.
+        real_parts: keep the real part of EVERY complex-conjugate pair, however far from real (one root per
+            pair, marked ``near_real``), as the authors' MATLAB P3P does (``unique(real(roots(...)))``); the
+            paper's ``vasconcelos`` keeps real roots only (off), ``vasconcelos_msac`` turns it on.
         min_plane_sv: degenerate when the smallest singular value of the unit-normal matrix ``N`` is below
             this (the planes' common point ``O`` is at or near infinity).
         min_line_sin: degenerate when two scan lines meet at an angle whose |sine| is below this.
@@ -341,7 +344,7 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     keep = ~bad_q
     idx, O, Vg, Qg, A, rev = idx[keep], O[keep], Vg[keep], Qg[keep], A[keep], rev[keep]
     g = tuple(v[keep] for v in g)
-    k_tr, x, near_k = _kept_roots(A, quartic, root_newton_iters, imag_tol, near_real_tol)
+    k_tr, x, near_k = _kept_roots(A, quartic, root_newton_iters, imag_tol, np.inf if real_parts else near_real_tol)
 
     s = _lambdas(x, rev[k_tr], tuple(v[k_tr] for v in g), lambda_newton_iters)
     # Lines, not rays: each root and its mirror through O.

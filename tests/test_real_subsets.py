@@ -1,0 +1,60 @@
+"""The real-data experiment's pieces: eq. 15, seeded subsets, validity against a reference, the jackknife spread."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+
+from calib_core.crossval import jackknife_covariance, leave_one_out
+from calib_core.geometry.transforms import make_T, rotvec_to_matrix
+from experiments import real_subsets as sub
+from simulate import SimOptions, generate
+
+
+def test_theta_mu_is_eq_15():
+    w = np.array([0.1, -0.2, 0.3])
+    T = make_T(rotvec_to_matrix(w), [3.0, 4.0, 12.0])
+    th, mu = sub.theta_mu(T)
+    assert np.isclose(th, np.degrees(np.linalg.norm(w))) and np.isclose(mu, 13.0)
+
+
+def test_subsets_are_seeded_distinct_boards_per_count():
+    a, b = sub.subsets("x", 12, n=5), sub.subsets("x", 12, n=5)
+    assert a == b and a != sub.subsets("y", 12, n=5)
+    assert [len(s) for s in a] == [k for k in sub.BOARD_COUNTS for _ in range(5)]
+    assert all(len(set(s)) == len(s) and max(s) < 12 for s in a)
+    assert all(len(s) <= 5 for s in sub.subsets("x", 5, n=2))          # counts above the boards are left out
+
+
+def test_valid_columns_against_the_reference():
+    T_ref = make_T(np.eye(3), [0.1, 0.0, 0.0])
+    near = make_T(rotvec_to_matrix([np.radians(1.0), 0, 0]), [0.12, 0.0, 0.0])
+    far = make_T(rotvec_to_matrix([np.radians(20.0), 0, 0]), [0.1, 0.0, 0.0])
+    df = pd.DataFrame({"ok": [True, True, False], "T": [json.dumps(near.tolist()), json.dumps(far.tolist()), ""],
+                       "n_boards": [3, 3, 3], "method": ["m"] * 3})
+    v = sub.valid_columns(df, T_ref, sigma_rot_deg=0.5, sigma_trans_m=0.01)
+    assert v["valid"].tolist() == [True, False, False]
+    assert v["valid_3sigma"].tolist() == [True, False, False]     # 1 deg < 1.5 deg, 20 mm < 30 mm
+    v = sub.valid_columns(df, T_ref, sigma_rot_deg=0.2, sigma_trans_m=0.01)
+    assert v["valid_3sigma"].tolist() == [False, False, False]
+    assert "67% / 0%" not in " ".join(sub.valid_table(v, ["m"])) and "33% / 0%" in " ".join(sub.valid_table(v, ["m"]))
+
+
+def test_jackknife_covariance_of_known_folds_and_against_the_reported_one():
+    T = make_T(np.eye(3), [1.0, 2.0, 3.0])
+    folds = np.array([make_T(np.eye(3), [1.0 + d, 2.0, 3.0]) for d in (-0.01, 0.0, 0.01)] + [np.full((4, 4), np.nan)])
+    cov = jackknife_covariance(T, folds)
+    assert np.isclose(cov[3, 3], 2 / 3 * 2e-4) and np.allclose(np.delete(np.delete(cov, 3, 0), 3, 1), 0)
+    assert jackknife_covariance(T, folds[:2]) is None
+    # on simulated data with the noise model right, the jackknife spread and the reported sigma agree
+    obs = generate(SimOptions(n_boards=10, noise_mm=20.0), seed=7, trial=0)
+    from calib_core import calibrate
+    from calib_core.geometry.metrics import sigma_trans_m
+
+    res = calibrate(obs, "zhang_pless+ml")
+    cv = leave_one_out(obs, "zhang_pless+ml")
+    jk = jackknife_covariance(res.T_lidar_cam, cv.T_lidar_cam)
+    ratio = sigma_trans_m(jk) / sigma_trans_m(res.covariance)
+    assert 0.4 < ratio < 2.5, ratio
