@@ -1,4 +1,5 @@
-"""``make bench``: the time of one ``calibrate`` per registered method on 8 boards (median over many
+"""``make bench``: lidarcam's median time per call and its ratio to peng2022's at 3-8 boards (exact poses, timed
+alternately in one run), the time of one ``calibrate`` per registered method on 8 boards (median over many
 repetitions), how the default method's time grows with the number of boards (8, 20, 40, 100), the minimal
 solver's throughput on one core (``calib_core.solvers.vasconcelos.solve_triples``) and its accuracy on noise-free
 simulated triples (closed-form and eigenvalue quartic roots), and the joint model over image corners and ranges at
@@ -7,6 +8,7 @@ range-only answer) and whole ``calibrate`` calls that end in it.
 
     python -m experiments.bench [--boards 8] [--problems 10] [--repeats 20] [--triples 10000] [--joint-boards 8 40]
                                 [--scaling 8,20,40,100] [--scaling-problems 3]
+                                [--ratio-boards 3,4,5,6,7,8] [--ratio-problems 10] [--ratio-repeats 3]
 
 Single process, run it with ``OMP_NUM_THREADS=1`` (the Makefile exports it) for one-core numbers.
 """
@@ -54,6 +56,26 @@ def time_methods(obs_list: list, repeats: int) -> list[dict]:
         rows.append({"method": m, "median_ms": 1e3 * float(np.median(times)) if times else float("nan"),
                      "p90_ms": 1e3 * float(np.percentile(times, 90)) if times else float("nan"),
                      "runs": len(times), "valid": f"{sum(valid)}/{len(valid)}" + (f" error {error}" if error else "")})
+    return rows
+
+
+def time_ratio(counts: Sequence[int], n_problems: int, repeats: int, method: str = "lidarcam",
+               reference: str = "peng2022") -> list[dict]:
+    """Per board count, the median ms of one ``calibrate`` of ``method`` and of ``reference`` on the same
+    ``n_problems`` problems (exact board poses, the simulator's defaults), the two timed alternately call by call
+    so that both see the same machine; ``ratio`` is method over reference."""
+    rows = []
+    for n in counts:
+        t: dict[str, list[float]] = {method: [], reference: []}
+        for obs in problems(n, n_problems, seed=4321):
+            for _ in range(repeats):
+                for m in (reference, method):
+                    t0 = time.perf_counter()
+                    calibrate(obs, m)
+                    t[m].append(time.perf_counter() - t0)
+        ms = {m: 1e3 * float(np.median(v)) for m, v in t.items()}
+        rows.append({"boards": n, "method_ms": ms[method], "reference_ms": ms[reference],
+                     "ratio": ms[method] / ms[reference], "runs": len(t[method])})
     return rows
 
 
@@ -161,7 +183,17 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--scaling", default="8,20,40,100", help="board counts of the default method's scaling table")
     ap.add_argument("--scaling-problems", type=int, default=3)
     ap.add_argument("--joint-boards", type=int, nargs="*", default=[8, 40])
+    ap.add_argument("--ratio-boards", default="3,4,5,6,7,8", help="board counts of the lidarcam / peng2022 table")
+    ap.add_argument("--ratio-problems", type=int, default=10)
+    ap.add_argument("--ratio-repeats", type=int, default=3)
     args = ap.parse_args(argv)
+    ratio_counts = [int(c) for c in args.ratio_boards.split(",") if c.strip()]
+    if ratio_counts:
+        print(f"lidarcam vs peng2022 per call, exact board poses, {args.ratio_problems} problems x "
+              f"{args.ratio_repeats} repetitions each, timed alternately:")
+        print(f"  {'boards':>6}{'lidarcam ms':>13}{'peng2022 ms':>13}{'ratio':>8}")
+        for r in time_ratio(ratio_counts, args.ratio_problems, args.ratio_repeats):
+            print(f"  {r['boards']:>6}{r['method_ms']:>13.2f}{r['reference_ms']:>13.2f}{r['ratio']:>8.1f}")
     counts = [int(c) for c in args.scaling.split(",") if c.strip()]
     if counts:
         print(f"default method (lidarcam) vs board count, {args.scaling_problems} problems each, one process:")

@@ -172,3 +172,20 @@ def test_polish_batched_jacobian_equals_scipy_forward_differences(seed):
     T_new = polish(obs, T0, 30, ScoreOptions(), 0.02)
     e_R, e_t = pose_errors(T_new, T_ref)
     assert e_R < 1e-6 and e_t < 1e-8
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_pruned_choice_of_starts_is_the_full_scoring_choice(seed):
+    """``best_starts`` scores the outline term only where it can matter: its starts are those of the full score."""
+    from calib_core.data.residuals import perturb
+    from calib_core.robust.choose import best_starts, distinct_order
+    from calib_core.robust.scorers import ScoreOptions
+    from calib_core.robust.scorers import lidarcam as lidarcam_score
+
+    rng = np.random.default_rng(seed)
+    obs = make_observations(rng, 3 + seed % 6, 0.02)
+    C = np.array([perturb(obs.T_lidar_cam_true, rng.normal(0, [0.05] * 3 + [0.1] * 3)) for _ in range(40)])
+    C[::7, :3, 3] *= -1                                  # some behind the camera: infinite costs
+    n = 1 + seed % 3
+    full = distinct_order(C, lidarcam_score(obs, C, range_sigma_m=0.02), n)
+    assert best_starts(obs, C, 0.02, ScoreOptions(), n) == full and len(full) == n

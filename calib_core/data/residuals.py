@@ -190,7 +190,8 @@ def scan_points_in_boards(obs: Observations, candidates: np.ndarray) -> np.ndarr
     ``p_W = Phi_i^T (R^T (p_L - t) - Delta_i)`` (metres)."""
     data = obs.scan_data
     R, t = candidates[:, :3, :3], candidates[:, :3, 3]
-    T_cb = np.array([b.T_cam_board for b in obs.boards])[data.board]              # (K,4,4)
+    T_cb = obs.derived("residuals.point_board_poses", lambda o: np.array([b.T_cam_board for b in o.boards])[
+        o.scan_data.board])                                                          # (K,4,4), once per obs
     p_C = np.einsum("mba,mkb->mka", R, data.points[None] - t[:, None, :])
     return np.einsum("kba,mkb->mka", T_cb[:, :3, :3], p_C - T_cb[None, :, :3, 3])
 
@@ -198,13 +199,16 @@ def scan_points_in_boards(obs: Observations, candidates: np.ndarray) -> np.ndarr
 def outside_outlines(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     """(M,K) distance (metres) of every scan point outside its board's exact outline under every candidate (0
     inside, and on boards without an exact outline; ``outside_outline`` per group of boards sharing one)."""
-    data = obs.scan_data
     P = scan_points_in_boards(obs, candidates)[..., :2]
     out = np.zeros(P.shape[:2])
-    for idx, outline in outline_groups(obs):
-        sel = np.isin(data.board, idx)
+    for sel, outline in obs.derived("residuals.outline_point_groups", _outline_point_groups):
         out[:, sel] = outside_outline(P[:, sel], outline)
     return out
+
+
+def _outline_point_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(scan-point mask, outline) of each group of ``outline_groups``."""
+    return [(np.isin(obs.scan_data.board, idx), outline) for idx, outline in outline_groups(obs)]
 
 
 def outside_outline(xy: np.ndarray, outline: np.ndarray) -> np.ndarray:

@@ -88,7 +88,10 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
         return J
 
     e0 = fun(np.zeros(6))
-    sol = least_squares(fun, np.zeros(6), jac=jac, method="trf", loss=loss, f_scale=f_scale,
+    # the plain likelihood by MINPACK's Levenberg-Marquardt (the same optimum, a fraction of trf's overhead per
+    # iteration); robust losses need trf
+    method = "lm" if loss == Loss.LINEAR and len(e0) >= 6 else "trf"
+    sol = least_squares(fun, np.zeros(6), jac=jac, method=method, loss=loss, f_scale=f_scale,
                         max_nfev=max_nfev, x_scale=x_scale if x_scale is not None else "jac")
     T = perturb(T0, sol.x)
     e, J = fn(T, data, jacobian=True)

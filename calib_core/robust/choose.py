@@ -102,6 +102,30 @@ def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions
     return perturb(T0, sol.x)
 
 
+PRUNE_FIRST = 8
+"""``best_starts`` scores the outline term of this many candidates (at least ``2 n``) first, doubling as needed."""
+
+
+def best_starts(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, n: int,
+                rot_deg: float = DISTINCT_ROT_DEG, trans_m: float = DISTINCT_TRANS_M) -> list[int]:
+    """``distinct_order(C, scorers.lidarcam(obs, C), n, ...)``, with the outline term (the dearest) scored only
+    where it can matter: the cost without it is a lower bound, so once the ``n`` starts chosen among the candidates
+    scored in full all cost less than the bound of every candidate not scored, those are the starts the full
+    scoring would choose (ties broken by index as there)."""
+    kw = {"range_sigma_m": sigma_m, **score.kwargs()}
+    bound = lidarcam_score(obs, C, **kw, with_outline=False)
+    bound = np.where(np.isnan(bound), np.inf, bound)
+    order = np.argsort(bound, kind="stable")
+    k = min(len(C), max(PRUNE_FIRST, 2 * n))
+    while True:
+        idx = np.sort(order[:k])
+        full = lidarcam_score(obs, C[idx], **kw)
+        picks = distinct_order(C[idx], full, n, rot_deg, trans_m)
+        if k == len(C) or (len(picks) == n and full[picks[-1]] < bound[order[k]]):
+            return [int(idx[j]) for j in picks]
+        k = min(len(C), 2 * k)
+
+
 @dataclass(frozen=True, eq=False)
 class Choice:
     """The chosen, refined extrinsic: ``cost`` its all-evidence score, ``refined`` the range refinement,
@@ -137,8 +161,7 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
     ``n_refine`` (default ``opts.n_refine``) best distinct ones (``refine_start``) and return the best."""
     C = np.asarray(C, float).reshape(-1, 4, 4)
     n = opts.n_refine if n_refine is None else n_refine
-    cost = lidarcam_score(obs, C, range_sigma_m=sigma_m, **score.kwargs())
-    starts = distinct_order(C, cost, n, opts.distinct_rot_deg, opts.distinct_trans_m)
+    starts = best_starts(obs, C, sigma_m, score, n, opts.distinct_rot_deg, opts.distinct_trans_m)
     if not starts:
         raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
     return min((refine_start(obs, C[j], sigma_m, score, opts) for j in starts), key=lambda c: c.cost)

@@ -190,23 +190,29 @@ class ScoreOptions:
                 "behind_penalty": self.behind_penalty}
 
 
-def _evidence(obs: Observations, C: np.ndarray, range_sigma_m: float, edge_sigma_m: float, outline_sigma_m: float):
+def _evidence_constants(obs: Observations):
+    """The exact-outline boards, the mask of their scan points and every board's scan centroid (N,3)."""
+    exact = exact_outline_boards(obs)
+    return exact, np.isin(obs.scan_data.board, exact), np.array([b.scan_3d.mean(axis=0) for b in obs.boards])
+
+
+def _evidence(obs: Observations, C: np.ndarray, range_sigma_m: float, edge_sigma_m: float, outline_sigma_m: float,
+              with_outline: bool = True):
     """The ``lidarcam`` score's normalised residuals of (M,4,4) candidates: range (M,K), endpoints and outline
     distances of the boards with an exact outline (scan-data order), and the number of boards behind the camera
     (M,)."""
     data = obs.scan_data
-    exact = exact_outline_boards(obs)
+    exact, on_exact, centres = obs.derived("scorers.evidence_constants", _evidence_constants)
     rng = range_residuals(C, data) / range_sigma_m
     edge = point_line_errors(obs, C)[:, exact].reshape(len(C), -1) / edge_sigma_m
-    out = outside_outlines(obs, C)[:, np.isin(data.board, exact)] / outline_sigma_m
-    centres = np.array([b.scan_3d.mean(axis=0) for b in obs.boards])                  # (N,3)
+    out = outside_outlines(obs, C)[:, on_exact] / outline_sigma_m if with_outline else np.zeros((len(C), 0))
     depth = np.einsum("mna,ma->mn", centres[None] - C[:, None, :3, 3], C[:, :3, 2])  # z of R^T (c - t)
     return rng, edge, out, np.sum(depth <= 0, axis=1).astype(float)
 
 
 def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
              edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
-             behind_penalty: float = np.inf, return_details: bool = False):
+             behind_penalty: float = np.inf, return_details: bool = False, with_outline: bool = True):
     """Our selection cost: a negative log-likelihood over all the evidence, per candidate (lower is better).
 
     ``cost = 0.5 sum_k (e_k / sigma)^2 + 0.5 sum_{i,end} (d_{i,end} / edge_sigma)^2 + 0.5 sum_k (o_k / outline_sigma)^2
@@ -221,16 +227,17 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
         edge_sigma_m, outline_sigma_m: scales (metres) of the endpoint and outline terms; they absorb the
             range noise and the beam spacing at the board edges (0.25 deg at 5 m is 22 mm).
         behind_penalty: cost per board behind the camera (inf: such a candidate is never chosen).
+        with_outline: False leaves the outline term out (the dearest): a lower bound of the cost, for pruning.
     Returns:
         (M,) cost; with ``return_details`` also a dict of the four terms, each (M,).
     """
     candidates = np.asarray(candidates, float).reshape(-1, 4, 4)
     if len(candidates) > candidate_chunk(obs):  # bounded memory: score the candidates in chunks
         opts = {"range_sigma_m": range_sigma_m, "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m,
-                "behind_penalty": behind_penalty}
+                "behind_penalty": behind_penalty, "with_outline": with_outline}
         out = in_chunks(lambda C: lidarcam(obs, C, **opts, return_details=True), obs, candidates)
         return out if return_details else out[0]
-    rng, edge, out, behind = _evidence(obs, candidates, range_sigma_m, edge_sigma_m, outline_sigma_m)
+    rng, edge, out, behind = _evidence(obs, candidates, range_sigma_m, edge_sigma_m, outline_sigma_m, with_outline)
     rng_term = 0.5 * np.sum(rng**2, axis=1)
     edge_term = 0.5 * np.sum(edge**2, axis=1)
     out_term = 0.5 * np.sum(out**2, axis=1)

@@ -9,6 +9,7 @@ observations. Lidar frame, metres, radians.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -70,11 +71,11 @@ class Search:
     outline_sigma_m: float
     rejected: list = field(default_factory=list)
 
-    @property
+    @cached_property
     def obs_good(self) -> Observations:
         return self.obs.subset(self.good)
 
-    @property
+    @cached_property
     def obs_used(self) -> Observations:
         return self.obs.subset(self.good[self.used])
 
