@@ -83,6 +83,13 @@ def _images(rs) -> dict:
     return {}
 
 
+def _local_note(rs) -> str:
+    """For a set without a licence: its images stay out of the repository, so a picture drawn on one is written
+    by ``make real-data`` for local reading and not committed (.gitignore)."""
+    return (" (drawn on this set's own image; the set states no licence, so the picture is written locally by "
+            "`make real-data` and not committed)") if rs.name in ps.UNLICENSED else ""
+
+
 def _overlays(rs, obs, T, method, out: Path, names, images: dict, full_scans: dict) -> list[str]:
     md = []
     poses = list(obs.meta.get("poses", []))
@@ -100,7 +107,7 @@ def _overlays(rs, obs, T, method, out: Path, names, images: dict, full_scans: di
         p = out / f"overlay_{SHORT[rs.name]}_{name}.png"
         save_overlay(p, gray, rs.camera, invert_T(T), b.T_cam_board, b.outline, full_scans.get(name), b.scan,
                      f"{rs.name} pose {name}: {method}")
-        md.append(f"![pose {name}]({p.name}){note}")
+        md.append(f"![pose {name}]({p.name}){note}{_local_note(rs)}")
     return md
 
 
@@ -178,7 +185,7 @@ def _fig8(rs, obs, df, out: Path, images: dict) -> list[str]:
                      f"{rs.name} pose {poses[i]}: boards {s} (4), laser points through peng2022 (red) and lidarcam "
                      "(cyan)")
             return ["Fig. 8: the laser points of one pose through two methods calibrated on 4 boards:", "",
-                    f"![Fig. 8]({p.name})", ""]
+                    f"![Fig. 8]({p.name}){_local_note(rs)}", ""]
     return []
 
 

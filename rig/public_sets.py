@@ -40,6 +40,8 @@ from .importing import (
 
 EDENSHIN, KAZMIERCZAK, ACFR = "rplidar-a1-tx2-edenshin", "hokuyo-usbcam-kazmierczak", "turtlebot3-acfr-wall-examples"
 NOWICKI, YONGKGU = "hokuyo-utm30lx-lifecam-nowicki", "rplidar-realsense-d415-yongkgu"
+# the sets whose SOURCE.md states no licence: read in place, and nothing drawn from their images is committed
+UNLICENSED = frozenset({EDENSHIN, KAZMIERCZAK, YONGKGU})
 
 # EdenShin/2D-Lidar_Camera_Calibration calibration/transform_test.py (RADLOCC convention, DELTA in mm)
 EDENSHIN_PHI = [[0.9995, 0.0165, -0.0268], [0.0154, -0.9990, -0.0421], [-0.0275, 0.0417, -0.9988]]
