@@ -41,7 +41,18 @@ def cmd_bag(args) -> int:
     if not conv.poses:
         print("no still frame passed: see the reasons in picking.json")
         return 1
+    print(f"capture plan: {_capture_verdict(conv.out, eo)}")
     return 0
+
+
+def _capture_verdict(folder, eo) -> str:
+    """The capture planner's verdict on the poses written to ``folder``, extracted as ``lidarcam extract`` would."""
+    from rig.dataset import load_dataset
+    from rig.extract import extract
+    from rig.report import capture_verdict
+
+    obs, _ = extract(load_dataset(folder), eo)
+    return capture_verdict(obs) if obs.n_boards else "no plan: no pose of the folder gives a board"
 
 
 def add_parsers(subparsers) -> None:

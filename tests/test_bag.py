@@ -248,3 +248,9 @@ def test_scan_segment_shift_sees_a_moved_board_and_not_noise():
     assert n == len(b) and db == 0 and dm < stills.median_shift_tolerance(0.02, n)
     dm, db, n = stills.scan_segment_shift(step, (b, noisy[0]), (b + 3 * step, noisy[1] + 0.05))
     assert np.isclose(db, 3) and dm > stills.median_shift_tolerance(0.02, n)
+
+
+def test_the_bag_verb_ends_with_the_capture_planners_verdict(recording):
+    last = recording.printed.strip().splitlines()[-1]
+    assert last.startswith("capture plan: "), recording.printed
+    assert "1-sigma" in last or "not determined" in last, last  # the planner's words, not a failure to plan
