@@ -34,6 +34,7 @@ from calib_core.refine.plan_views import PlanRig, Workspace, board_poses_lidar, 
 from simulate import SimOptions, observe_poses
 from simulate.camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners
 
+from .fingerprint import package_hash
 from .plan_report import write_plan_report
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -86,12 +87,32 @@ def run_cell(task: dict) -> dict:
         rot.append(e[0])
         trans.append(e[1])
     return {**{k: task[k] for k in ("key", "part", "mode", "boards", "set")}, "rot_err": rot, "trans_err": trans,
-            "failed": failed}
+            "failed": failed, "code": _code()}
+
+
+def _code() -> str:
+    """The fingerprint of the code a cell's numbers come from: the library and the simulator."""
+    return f"{package_hash('calib_core')}+{package_hash('simulate')}"
 
 
 def _key(task: dict) -> str:
-    blob = json.dumps({k: v for k, v in task.items() if k != "key"}, sort_keys=True)
+    """A cell's file name: its settings and the code that computes it, so a cell of other code is never read."""
+    blob = json.dumps({**{k: v for k, v in task.items() if k != "key"}, "code": _code()}, sort_keys=True)
     return hashlib.sha1(blob.encode()).hexdigest()[:12]
+
+
+def _drop_stale(cells: Path) -> int:
+    """Remove the stored cells computed by other code (or stored without a fingerprint); their count."""
+    def code_of(f: Path) -> str | None:
+        try:
+            return json.loads(f.read_text()).get("code")
+        except (ValueError, AttributeError):  # a damaged cell: computed again
+            return None
+
+    stale = [f for f in cells.glob("*.json") if code_of(f) != _code()]
+    for f in stale:
+        f.unlink()
+    return len(stale)
 
 
 def tasks(conf) -> tuple[list[dict], dict]:
@@ -149,7 +170,10 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     todo, pred = tasks(conf)
     print(f"plan-check: {len(todo)} cells, planning took {time.perf_counter() - t0:.1f} s", flush=True)
+    stale = _drop_stale(cells)
     missing = [t for t in todo if not (cells / f"{t['key']}.json").exists()]
+    print(f"plan-check: {len(todo) - len(missing)} cells reused, {len(missing)} to compute"
+          + (f" ({stale} stored cells of other code removed)" if stale else ""), flush=True)
     from joblib import Parallel, delayed
 
     done = len(todo) - len(missing)

@@ -233,3 +233,23 @@ def test_the_calibration_report_ends_with_the_planners_verdict(tmp_path):
     md = write_report(None, obs, calibrate(obs), tmp_path).markdown.read_text()
     tail = md[md.index("## Capture plan"):]
     assert "5 boards give 1-sigma" in tail and "the weakest is" in tail and "add 2 boards" in tail
+
+
+def test_plan_check_removes_cells_of_other_code_and_keys_on_the_code(tmp_path, monkeypatch):
+    import json
+
+    from experiments import plan_check
+
+    cells = tmp_path / "cells"
+    cells.mkdir()
+    (cells / "old.json").write_text(json.dumps({"key": "old", "rot_err": [1.0]}) + "\n")  # before fingerprints
+    (cells / "other.json").write_text(json.dumps({"key": "other", "code": "x+y"}) + "\n")
+    (cells / "torn.json").write_text('{"key": "to')
+    (cells / "same.json").write_text(json.dumps({"key": "same", "code": plan_check._code()}) + "\n")
+    assert plan_check._drop_stale(cells) == 3
+    assert [f.name for f in cells.iterdir()] == ["same.json"]
+    task = {"part": "prediction", "mode": "planned", "boards": 4, "set": 0}
+    key = plan_check._key(task)
+    assert key != plan_check._key({**task, "boards": 8})
+    monkeypatch.setattr(plan_check, "_code", lambda: "edited+code")
+    assert plan_check._key(task) != key  # the same settings under other code: another cell
