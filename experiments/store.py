@@ -69,8 +69,10 @@ def _read_chunk(path: Path) -> pd.DataFrame:
         raise damaged("a row without a method")
     methods = list(dict.fromkeys(df["method"]))
     tag = methods_tag(methods)
-    for col in ("ok", "valid"):
-        if not df[col].map(lambda v: str(v) in ("True", "False")).all():
+    # a real observation file without a reference has no valid rate: its rows leave 'valid' empty
+    no_ref = df["has_reference"].map(lambda v: str(v) == "False") if "has_reference" in df else False
+    for col, may_be_empty in (("ok", False), ("valid", no_ref)):
+        if not (df[col].map(lambda v: str(v) in ("True", "False")) | (may_be_empty & df[col].isna())).all():
             raise damaged(f"a row whose {col!r} is not True/False")
     want = {(t, mm) for t in range(first, last + 1) for mm in methods}
     got = list(zip(trial.astype(int), df["method"], strict=True))

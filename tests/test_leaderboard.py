@@ -1,5 +1,6 @@
 """The leaderboard: its statistics on known rows, suites skipped when absent, real files found and run."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -74,10 +75,12 @@ def test_suite_file_is_versioned_and_names_the_paper_sweeps():
     assert names["boards"].crlb and names["boards"].trials < names["boards"].full_trials
 
 
-def _obs_files(folder, n):
+def _obs_files(folder, n, reference=True):
     folder.mkdir(parents=True)
     for k in range(n):
-        save_observations(generate(SimOptions(n_boards=6, noise_mm=10), seed=3, trial=k), folder / f"pose{k}.json")
+        obs = generate(SimOptions(n_boards=6, noise_mm=10), seed=3, trial=k)
+        obs = obs if reference else dataclasses.replace(obs, T_lidar_cam_true=None)  # a real rig: no ground truth
+        save_observations(obs, folder / f"pose{k}.json")
     (folder / "result.json").write_text(json.dumps({"schema": "lidarcam.result/1"}))  # not observations: ignored
 
 
@@ -109,3 +112,13 @@ def test_real_suite_runs_end_to_end_and_resumes(tmp_path):
     assert "Suite ghost: skipped" in text and "## Real data" in text
     assert "| `peng2022` | 2/2 |" in text and "| `zhang_pless` | 2/2 |" in text
     assert run_leaderboard(suite, **kw)["rows_computed"] == 0          # read back from the store
+
+
+def test_real_files_without_a_reference_are_stored_and_read_back(tmp_path):
+    _obs_files(tmp_path / "real", 2, reference=False)
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(f"version: test\nsuites:\n  real:\n    path: {tmp_path / 'real'}\n")
+    kw = {"overrides": ["methods.names=[peng2022]"], "results_dir": str(tmp_path / "res"), "n_jobs": 1,
+          "progress": False}
+    assert run_leaderboard(suite, **kw)["rows_computed"] == 2       # no valid rate: the rows are not "damaged"
+    assert run_leaderboard(suite, **kw)["rows_computed"] == 0
