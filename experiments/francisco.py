@@ -25,6 +25,7 @@ from .aggregate import load_summary, load_trials, write_tables
 from .catalog import method_label
 from .claim_stats import claim_values, sweep_arrays
 from .claims import FRANCISCO, FRANCISCO_CODE, READINGS, claim_value_text, claim_verdict, francisco_twins
+from .fingerprint import write_stamped
 from .report_tables import method_table, valid_cell
 from .reproduce import experiment_cells
 from .runner import run_cells
@@ -45,9 +46,9 @@ def run(trials: int = 500, more_trials: int = 100, results_dir: str = "results",
     run_cells(cells, n_jobs=n_jobs, label="francisco")
     out = Path(results_dir) / "francisco"
     write_tables(pd.concat([load_cell(c) for c in cells], ignore_index=True), "boards", out)
-    path = out / "REPORT.md"
-    path.write_text("\n".join(report_lines(out, trials, more_trials, time.perf_counter() - t0)) + "\n")
-    return path
+    return write_stamped(out / "REPORT.md", "\n".join(report_lines(out, trials, more_trials,
+                                                                 time.perf_counter() - t0)) + "\n",
+                         sorted({m for c in cells for m in c.methods}))
 
 
 def claim_one_rows(trials: pd.DataFrame) -> list[str]:
