@@ -10,7 +10,7 @@ export MKL_NUM_THREADS ?= 1
 .DEFAULT_GOAL := help
 .PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard verify-results search-paper robustness plan-check clean clean-results
 
-help: ## List the targets (durations: wall time on this 2-core machine, as measured)
+help: ## List the targets (durations: wall time on 2 idle cores from an empty store, as measured)
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
 
 $(STAMP): pyproject.toml
@@ -22,7 +22,7 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP) ## Create .venv and install lidarcam with its dev tools (~1.5 min, fresh)
 
-test: $(STAMP) ## Run the fast test suite (7-9 min wall on 2 cores shared with other work, 2.2 min CPU; SHUFFLE=seed: random order)
+test: $(STAMP) ## Run the fast test suite (~1.5 min; SHUFFLE=seed: random order)
 	$(PY) -m pytest -n 2 $(if $(SHUFFLE),--shuffle $(SHUFFLE))
 
 test-slow: $(STAMP) ## Run only the slow, opt-in tests (not measured as a whole; 100-board peng2022 ~2 min)
@@ -31,12 +31,12 @@ test-slow: $(STAMP) ## Run only the slow, opt-in tests (not measured as a whole;
 lint: $(STAMP) ## ruff check (~5 s)
 	$(VENV)/bin/ruff check .
 
-bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughput (not measured end to end)
+bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughput (~1 min)
 	$(PY) -m experiments.bench
 
 PRESET ?=
 TRIALS ?= 500
-reproduce-paper: $(STAMP) ## Paper's sweeps -> results/paper/ (172 s idle); PRESET=paper-matched [TRIALS=500]: -> results/paper-matched/ (7.5 min)
+reproduce-paper: $(STAMP) ## Paper's sweeps -> results/paper/ (~1 min); PRESET=paper-matched [TRIALS=500]: -> results/paper-matched/ (~3 min)
 ifeq ($(strip $(PRESET)),)
 	$(PY) -m experiments.reproduce
 else
@@ -46,17 +46,17 @@ endif
 search-paper: $(STAMP) ## Search the paper's unstated settings (conf/search/paper.yaml), write results/search/ and the preset (~41 min)
 	$(PY) -m experiments.search --write-preset
 
-explain-paper: $(STAMP) ## Ablations of peng2022 + unstated-setting sweeps, write results/explain/ (< 10 min)
+explain-paper: $(STAMP) ## Ablations of peng2022 + unstated-setting sweeps, write results/explain/ (~3.5 min)
 	$(PY) -m experiments.explain
 
-corner-noise: $(STAMP) ## Camera-noise sweeps (joint model over corners and ranges), write results/corner_noise/ (not measured)
+corner-noise: $(STAMP) ## Camera-noise sweeps (joint model over corners and ranges), write results/corner_noise/ (~1 min)
 	$(PY) -m experiments.corner_noise --trials 25 --boards-trials 25
 
 REAL_DATA ?= ../shared/real-data
-real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; 2-9 min)
+real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; ~1.5 min)
 	$(PY) -m experiments.real_data --data $(REAL_DATA)
 
-leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v1.yaml -> results/leaderboard/ (~7 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
+leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v1.yaml -> results/leaderboard/ (~3 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
 	$(PY) -m experiments.leaderboard $(if $(FULL),--full) $(ARGS)
 
 verify-results: $(STAMP) ## Check every stored trial chunk under results/ parses in full; list reports stale against the code (~3 s)
@@ -65,10 +65,10 @@ verify-results: $(STAMP) ## Check every stored trial chunk under results/ parses
 clean-results: ## Empty the trial stores under results/ (results/*/trials: every row is recomputed on the next run; < 1 s)
 	rm -rf results/*/trials
 
-robustness: $(STAMP) ## Wrong boards, outlier points, mixed pixels (experiment=outliers), write results/outliers/ (not measured)
+robustness: $(STAMP) ## Wrong boards, outlier points, mixed pixels (experiment=outliers), write results/outliers/ (~40 s)
 	$(PY) -m experiments.outliers
 
-plan-check: $(STAMP) ## The capture planner against the simulator (conf/plan/check.yaml), write results/plan/ (~14.5 min)
+plan-check: $(STAMP) ## The capture planner against the simulator (conf/plan/check.yaml), write results/plan/ (~1 min)
 	$(PY) -m experiments.plan_check
 
 clean: ## Remove the virtual environment and caches (< 1 s)
