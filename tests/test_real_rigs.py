@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calib_core import calibrate
 from calib_core.data.io import load_observations
 from lidarcam_cli import main as cli
 
@@ -108,6 +109,9 @@ def test_documented_commands_calibrate_and_report_with_make_real_data_boards(nam
         assert all(0 < v < 1 for v in res["mounting_sigma"].values())
     if name == "rplidar-a1-tx2-edenshin":              # corners and camera from the Bouguet file: the joint model
         assert obs.has_corners and res["covariance_model"] == "joint"
+        # every point is hand-segmented on its board: at most 3% may be read as outliers
+        left = calibrate(obs).info["points_trimmed"]
+        assert left["total"] + left["in_fit"] <= 0.03 * sum(len(b.scan) for b in obs.boards)
     if name == "hokuyo-utm30lx-lifecam-nowicki":      # every pose used, each segment the width of the plate
         assert obs.n_boards == 14
         widths = [np.linalg.norm(b.scan[-1] - b.scan[0]) for b in obs.boards]

@@ -4,6 +4,7 @@ simulator's contamination options and the extraction's straightness test. Seeded
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,7 +14,8 @@ from calib_core.data.result import load_result
 from calib_core.geometry.metrics import pose_errors
 from calib_core.robust.consensus import board_statistics
 from calib_core.robust.hypotheses import needed_samples
-from calib_core.robust.inliers import trim_points
+from calib_core.robust.inliers import clipped_sigma, trim_points
+from calib_core.robust.search import _point_test
 from simulate import SimOptions, generate
 
 
@@ -32,6 +34,38 @@ def test_trim_finds_planted_gross_outliers_and_spares_clean_points():
         # planted returns within 4 sigma of the line (a few cm) are harmless and may stay
         assert planted - 3 <= rep.n_trimmed <= planted + 1
         assert rep.summary()["total"] == rep.n_trimmed
+
+
+def _with_ranges(scan: np.ndarray, delta_m: np.ndarray) -> np.ndarray:
+    """``scan`` (K,2) with each point moved ``delta_m`` (K,) along its beam."""
+    r = np.linalg.norm(scan, axis=1)
+    return scan * ((r + delta_m) / r)[:, None]
+
+
+def test_clipped_sigma_is_the_gaussian_std_under_gross_outliers_and_widens_for_heavy_tails():
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        e = rng.normal(0.0, 0.01, 20000)
+        assert clipped_sigma(np.r_[e, rng.uniform(-5.0, 5.0, 2000)]) == pytest.approx(0.01, rel=0.03)
+        # heavy-tailed noise (Student t, 3 degrees of freedom): the MAD's 4-std test cuts into the tail
+        heavy = 0.01 * rng.standard_t(3, 20000)
+        mad = 1.4826 * np.median(np.abs(heavy))
+        assert clipped_sigma(heavy) > 1.1 * mad
+        assert np.mean(np.abs(heavy) > 4 * clipped_sigma(heavy)) < 0.015 < np.mean(np.abs(heavy) > 4 * mad)
+    assert clipped_sigma(np.zeros(10)) > 0
+
+
+def test_final_point_test_leaves_a_board_offset_to_the_board_test_and_finds_a_stray_point():
+    obs = generate(SimOptions(n_boards=6, noise_mm=10.0), seed=7, trial=0)
+    sigma = 0.02
+    boards = list(obs.boards)
+    boards[1] = replace(boards[1], scan=_with_ranges(boards[1].scan, np.full(len(boards[1].scan), 3.5 * sigma)))
+    stray = np.zeros(len(boards[3].scan))
+    stray[len(stray) // 2] = 10 * sigma
+    boards[3] = replace(boards[3], scan=_with_ranges(boards[3].scan, stray))
+    kept, n = _point_test(replace(obs, boards=tuple(boards)), obs.T_lidar_cam_true, sigma)
+    assert n == 1
+    assert len(kept.boards[1].scan) == len(boards[1].scan) and len(kept.boards[3].scan) == len(stray) - 1
 
 
 @pytest.mark.parametrize("kind", [{"gross_outlier_frac": 0.1}, {"mixed_pixel_frac": 0.1}])

@@ -43,8 +43,8 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
        distinct ones are refined by maximum likelihood on the range residuals, polished on the whole cost when the
        outlines disagree; the best is kept.
     4. Final tests (``robust.search.final_tests``): a per-board test at the refined pose and a point test (range
-       residuals beyond ``inliers.TRIM_SIGMAS`` stds); when they change the boards or points, step 3 again from
-       the answer on what is left.
+       residuals beyond ``inliers.TRIM_SIGMAS`` stds of their board's median one); when they change the boards or
+       points, step 3 again from the answer on what is left.
     5. Degeneracy (``methods.finish.refuse_undetermined``): directions the board geometry leaves free (e.g. roll,
        pitch and height z when every board is vertical) are not presented as estimated: ``ok=False``, the reason
        names them and how to calibrate the rest. Directions weak only for lack of data are warned about.

@@ -186,20 +186,23 @@ class FinalTests:
 
 
 def _point_test(obs: Observations, T: np.ndarray, sigma_m: float) -> tuple[Observations, int]:
-    """Boards of ``obs`` without the scan points whose range residual at ``T`` exceeds ``TRIM_SIGMAS`` stds
-    (a board keeps at least ``FINAL_MIN_POINTS`` points); and how many were left out."""
+    """Boards of ``obs`` without the scan points whose range residual at ``T``, less their board's median residual,
+    exceeds ``TRIM_SIGMAS`` stds (a board keeps at least ``FINAL_MIN_POINTS`` points); and how many were left out.
+
+    A point is tested against the rest of its board: an offset common to the whole board (its plane from the
+    camera a few mm off, a range bias) is the per-board test's evidence, not a reason to drop its points."""
     e = range_residuals(T, obs.scan_data)
-    bad = np.abs(e) > TRIM_SIGMAS * sigma_m
-    if not bad.any():
-        return obs, 0
     boards, n = [], 0
     for i, b in enumerate(obs.boards):
-        keep = ~bad[obs.scan_data.board == i]
+        ei = e[obs.scan_data.board == i]
+        keep = np.abs(ei - np.median(ei)) <= TRIM_SIGMAS * sigma_m
         if keep.all() or keep.sum() < FINAL_MIN_POINTS:
             boards.append(b)
             continue
         n += int((~keep).sum())
         boards.append(replace(b, scan=b.scan[keep]))
+    if n == 0:
+        return obs, 0
     return replace(obs, boards=tuple(boards), meta=dict(obs.meta)), n
 
 
