@@ -6,6 +6,12 @@ its board plane as the camera sees it, through that extrinsic. Units: the distan
 std ``sigma |m . b|`` (``m`` the plane normal, ``b`` the beam, both in the lidar frame), i.e. the range residual
 over ``sigma``. A perfect extrinsic gives 1 in those units; held-out residuals also carry the extrinsic's own
 error, so a good calibration lands a little above 1 and a wrong one far above.
+
+Where the method reports a covariance, the held-out residuals are also scored in units of their predicted spread
+(``held_out.held_out_spread``: range noise, the fold's extrinsic covariance and the board pose's from its corners);
+where the boards carry image corners, the joint held-out residual (``held_out.held_out_joint``: the held-out
+board's pose re-estimated from its corners and its scan given the fold's extrinsic), in units of the data's noise
+(range: ``range_sigma_m``; corners: ``held_out.corner_noise_px``, from the boards' own pose fits).
 """
 
 from __future__ import annotations
@@ -19,6 +25,8 @@ from .data.lines import scan_noise_estimate
 from .data.observations import Observations
 from .data.residuals import plane_residuals
 from .entry import calibrate
+from .errors import JointError, UncertaintyError
+from .held_out import HeldOutSpread, corner_noise_px, held_out_joint, held_out_spread, spread_summary
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,6 +45,13 @@ class CrossValidation:
         seconds: wall time of all folds.
         T_lidar_cam: (N,4,4) each fold's extrinsic (NaN where the fold failed): their spread is the leave-one-out
             (jackknife) estimate of the answer's uncertainty.
+        spread: the held-out residuals in units of their predicted spread, pooled (None where the method reports no
+            covariance); spread_scan_noise: the same with the range noise ``range_sigma_m`` (the scatter about the
+            scan lines) in place of the fold's own estimate.
+        joint_rms_sigmas: (N,) RMS of the joint held-out residuals (corners and ranges, each over its noise std;
+            NaN without corners or where the fold failed); joint_scan_rms_mm: (N,) their range part (mm);
+            corner_sigma_px: the corner noise unit (None without corners); joint_n_rows: (N,) residuals per pose in
+            the joint score (2 per corner plus the scan points).
     """
 
     method: str
@@ -51,6 +66,12 @@ class CrossValidation:
     seconds: float
     options: dict = field(default_factory=dict)
     T_lidar_cam: np.ndarray | None = None
+    spread: HeldOutSpread | None = None
+    spread_scan_noise: HeldOutSpread | None = None
+    joint_rms_sigmas: np.ndarray | None = None
+    joint_scan_rms_mm: np.ndarray | None = None
+    corner_sigma_px: float | None = None
+    joint_n_rows: np.ndarray | None = None
 
     @property
     def n_ok(self) -> int:
@@ -66,6 +87,21 @@ class CrossValidation:
         """The same in units of the range noise (1 = the noise; NaN if no fold succeeded)."""
         return _pooled(self.rms_sigmas, self.n_points, self.ok)
 
+    @property
+    def overall_joint_rms_sigmas(self) -> float:
+        """RMS of every joint held-out residual (corners and ranges in units of their noise; NaN without)."""
+        if self.joint_rms_sigmas is None:
+            return float("nan")
+        ok = self.ok & np.isfinite(self.joint_rms_sigmas)
+        return _pooled(self.joint_rms_sigmas, self.joint_n_rows, ok)
+
+    @property
+    def overall_joint_scan_rms_mm(self) -> float:
+        """RMS of the joint held-out range residuals (mm; NaN without corners)."""
+        if self.joint_scan_rms_mm is None:
+            return float("nan")
+        return _pooled(self.joint_scan_rms_mm, self.n_points, self.ok & np.isfinite(self.joint_scan_rms_mm))
+
     def to_dict(self) -> dict:
         """JSON-able form: overall figures, then one row per pose."""
         def num(v):
@@ -73,6 +109,10 @@ class CrossValidation:
 
         return {"method": self.method, "n_poses": len(self.names), "n_ok": self.n_ok,
                 "overall_rms_mm": num(self.overall_rms_mm), "overall_rms_sigmas": num(self.overall_rms_sigmas),
+                "joint_rms_sigmas": num(self.overall_joint_rms_sigmas),
+                "joint_scan_rms_mm": num(self.overall_joint_scan_rms_mm),
+                "spread": None if self.spread is None else self.spread.to_dict(),
+                "spread_scan_noise": None if self.spread_scan_noise is None else self.spread_scan_noise.to_dict(),
                 "range_sigma_mm": 1000 * self.range_sigma_m, "seconds": self.seconds,
                 "poses": [{"name": n, "ok": bool(o), "reason": r, "rms_mm": num(a), "rms_sigmas": num(b),
                            "mean_mm": num(c), "n_points": int(k)}
@@ -113,8 +153,12 @@ def leave_one_out(obs: Observations, method: str = "lidarcam", *, range_sigma_m:
     ok = np.zeros(N, bool)
     reasons: list[str | None] = [None] * N
     rms, rms_s, mean = np.full(N, np.nan), np.full(N, np.nan), np.full(N, np.nan)
+    joint_s, joint_mm = np.full(N, np.nan), np.full(N, np.nan)
     n_points = np.array([len(b.scan) for b in obs.boards])
+    n_rows = n_points + np.array([2 * len(b.corners_px) if b.corners_px is not None else 0 for b in obs.boards])
+    sigma_c = corner_noise_px(obs) if obs.has_corners else None
     folds = np.full((N, 4, 4), np.nan)
+    parts, parts_lines = [], []
     t0 = time.perf_counter()
     for i in range(N):
         res = calibrate(obs.subset([j for j in range(N) if j != i]), method, **options)
@@ -127,8 +171,29 @@ def leave_one_out(obs: Observations, method: str = "lidarcam", *, range_sigma_m:
         rms[i] = 1000 * np.sqrt(np.mean(e**2))
         rms_s[i] = np.sqrt(np.mean((e / (sigma * np.maximum(f, 1e-6))) ** 2))
         mean[i] = 1000 * np.mean(e)
+        if res.covariance is not None:
+            info = res.info or {}
+            s_c = info.get("corner_sigma_px", sigma_c) if sigma_c is not None else None
+            for sr, out in ((info.get("range_sigma_m", sigma), parts), (sigma, parts_lines)):
+                out.append(held_out_spread(obs, i, res.T_lidar_cam, res.covariance, sr, s_c))
+        if sigma_c is not None:
+            joint_s[i], joint_mm[i] = _joint_score(obs, i, res.T_lidar_cam, sigma_c, sigma)
     return CrossValidation(method, names, ok, reasons, rms, rms_s, mean, n_points, sigma,
-                           time.perf_counter() - t0, dict(options), folds)
+                           time.perf_counter() - t0, dict(options), folds, spread_summary(parts),
+                           spread_summary(parts_lines),
+                           joint_s if sigma_c is not None else None, joint_mm if sigma_c is not None else None,
+                           sigma_c, n_rows)
+
+
+def _joint_score(obs: Observations, i: int, T: np.ndarray, sigma_c: float, sigma_r: float) -> tuple[float, float]:
+    """(RMS of board ``i``'s joint held-out residuals in noise units, RMS of their range part in mm); NaN where the
+    board's pose cannot be re-estimated."""
+    try:
+        ec, er = held_out_joint(obs, i, T, sigma_c, sigma_r)
+    except (JointError, UncertaintyError):
+        return float("nan"), float("nan")
+    z = np.r_[ec.ravel() / sigma_c, er / sigma_r]
+    return float(np.sqrt(np.mean(z**2))), 1000 * float(np.sqrt(np.mean(er**2)))
 
 
 def jackknife_covariance(T_full: np.ndarray, folds: np.ndarray) -> np.ndarray | None:
