@@ -250,10 +250,12 @@ class BoardObservation:
         """Plane offset ``d = n . Delta`` (metres): the plane is ``{p_C : n . p_C = d}``."""
         return float(self.normal_cam @ self.T_cam_board[:3, 3])
 
-    @property
+    @cached_property
     def scan_3d(self) -> np.ndarray:
-        """(K,3) scan points in the lidar frame with z = 0."""
-        return np.column_stack([self.scan, np.zeros(len(self.scan))])
+        """(K,3) scan points in the lidar frame with z = 0 (built once, read-only)."""
+        p = np.column_stack([self.scan, np.zeros(len(self.scan))])
+        p.setflags(write=False)
+        return p
 
 
 @dataclass(frozen=True, eq=False)
@@ -270,6 +272,16 @@ class ScanData:
     board: np.ndarray
     normals: np.ndarray
     offsets: np.ndarray
+
+    @cached_property
+    def ranges(self) -> np.ndarray:
+        """(K,) measured range ``|p|`` of every point (metres)."""
+        return np.linalg.norm(self.points, axis=1)
+
+    @cached_property
+    def beams(self) -> np.ndarray:
+        """(K,3) unit beam direction ``p / |p|`` of every point."""
+        return self.points / self.ranges[:, None]
 
     @classmethod
     def from_observations(cls, obs: Observations) -> ScanData:

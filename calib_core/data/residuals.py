@@ -89,19 +89,24 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     only), also (K,6) de/d(w, dt).
     """
     mk, num = _planes_lidar(T, data)
-    r = np.linalg.norm(data.points, axis=1)
-    b = data.points / r[:, None]
+    r, b = data.ranges, data.beams
     mb = np.einsum("...kj,kj->...k", mk, b)
     mb = np.where(np.abs(mb) < MIN_BEAM_INCIDENCE, np.copysign(MIN_BEAM_INCIDENCE, mb), mb)
     e = r - num / mb
     if not jacobian:
         return e
-    t = T[:3, 3]
     J = np.empty((len(e), 6))
-    # d(num)/dw = m x t, d(mb)/dw = m x b  (from dm = w x m)
-    J[:, :3] = -(np.cross(mk, t) * mb[:, None] - np.cross(mk, b) * num[:, None]) / (mb**2)[:, None]
+    # d(num)/dw = m x t, d(mb)/dw = m x b  (from dm = w x m); m x t is one vector per board
+    m_cross_t = np.cross(T[:3, :3] @ data.normals.T, T[:3, 3], axis=0).T[data.board]
+    J[:, :3] = -(m_cross_t * mb[:, None] - _cross(mk, b) * num[:, None]) / (mb**2)[:, None]
     J[:, 3:] = -mk / mb[:, None]
     return e, J
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (K,3) arrays (``np.cross`` without its axis handling, on the hot path)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
 
 
 class Residual(StrEnum):
@@ -119,15 +124,22 @@ def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
 
     ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (docs/METHOD.md eq. 7), metres.
     """
-    ends = np.array([[b.scan_3d[0], b.scan_3d[-1]] for b in obs.boards])   # (N,2,3) lidar frame
-    T_cb = np.array([b.T_cam_board for b in obs.boards])                    # (N,4,4)
+    ends, T_cb = obs.derived("residuals.endpoints", _endpoints)              # (N,2,3) lidar frame, (N,4,4)
     R, t = candidates[:, :3, :3], candidates[:, :3, 3]
     p_C = np.einsum("mba,mnkb->mnka", R, ends[None] - t[:, None, None, :])  # R^T (p - t)
     return np.einsum("nba,mnkb->mnka", T_cb[:, :3, :3], p_C - T_cb[None, :, None, :3, 3])
 
 
-def point_line_errors(obs: Observations, candidates: np.ndarray) -> np.ndarray:
-    """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (docs/METHOD.md eq. 8-12).
+def _endpoints(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+    """(N,2,3) first and last scan point of every board (lidar frame) and (N,4,4) the boards' poses."""
+    return (np.array([[b.scan_3d[0], b.scan_3d[-1]] for b in obs.boards]),
+            np.array([b.T_cam_board for b in obs.boards]))
+
+
+def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool = False):
+    """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (docs/METHOD.md eq. 8-12);
+    with ``gradient`` also (M,N,2,3) their gradients in the endpoints' board-frame coordinates (the pairing of
+    endpoints with edges held fixed: it is piecewise constant).
 
     Each endpoint is paired with the board edge nearest to it (point-to-line distance), the two endpoints
     with different edges (the pair of distinct edges with the least summed distance). The error of an
@@ -138,7 +150,7 @@ def point_line_errors(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     """
     P = endpoints_in_board(obs, candidates)                                 # (M,N,2,3)
     M, N = P.shape[:2]
-    out = np.zeros((M, N, 2))
+    out, grad = np.zeros((M, N, 2)), np.zeros((M, N, 2, 3))
     counts = np.array([0 if b.outline is None else len(b.outline) for b in obs.boards])
     for V in np.unique(counts[counts > 0]):
         idx = np.flatnonzero(counts == V)
@@ -162,7 +174,13 @@ def point_line_errors(obs: Observations, candidates: np.ndarray) -> np.ndarray:
         mm, nn = np.meshgrid(np.arange(M), np.arange(len(idx)), indexing="ij")
         out[:, idx, 0] = err[mm, nn, 0, k0]
         out[:, idx, 1] = err[mm, nn, 1, k1]
-    return out
+        if gradient:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, summed over the edge's two vertices
+            a3 = np.concatenate([a, np.zeros(a.shape[:2] + (1,))], axis=-1)     # (n,V,3)
+            u = (Pi[:, :, :, None, :] - a3[None, :, None]) / np.maximum(da, 1e-300)[..., None]  # (M,n,2,V,3)
+            u = u + np.roll(u, -1, axis=3)
+            grad[:, idx, 0] = u[mm, nn, 0, k0]
+            grad[:, idx, 1] = u[mm, nn, 1, k1]
+    return (out, grad) if gradient else out
 
 
 def points_in_boards(obs: Observations, candidates: np.ndarray) -> list[np.ndarray]:
@@ -196,14 +214,18 @@ def scan_points_in_boards(obs: Observations, candidates: np.ndarray) -> np.ndarr
     return np.einsum("kba,mkb->mka", T_cb[:, :3, :3], p_C - T_cb[None, :, :3, 3])
 
 
-def outside_outlines(obs: Observations, candidates: np.ndarray) -> np.ndarray:
+def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool = False):
     """(M,K) distance (metres) of every scan point outside its board's exact outline under every candidate (0
-    inside, and on boards without an exact outline; ``outside_outline`` per group of boards sharing one)."""
+    inside, and on boards without an exact outline; ``outside_outline`` per group of boards sharing one); with
+    ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y)."""
     P = scan_points_in_boards(obs, candidates)[..., :2]
-    out = np.zeros(P.shape[:2])
+    out, grad = np.zeros(P.shape[:2]), np.zeros(P.shape)
     for sel, outline in obs.derived("residuals.outline_point_groups", _outline_point_groups):
-        out[:, sel] = outside_outline(P[:, sel], outline)
-    return out
+        if gradient:
+            out[:, sel], grad[:, sel] = outside_outline(P[:, sel], outline, gradient=True)
+        else:
+            out[:, sel] = outside_outline(P[:, sel], outline)
+    return (out, grad) if gradient else out
 
 
 def _outline_point_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -211,18 +233,34 @@ def _outline_point_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarra
     return [(np.isin(obs.scan_data.board, idx), outline) for idx, outline in outline_groups(obs)]
 
 
-def outside_outline(xy: np.ndarray, outline: np.ndarray) -> np.ndarray:
-    """Distance (metres) of 2D points ``xy`` (...,2) outside the simple polygon ``outline`` (V,2); 0 inside."""
+def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool = False):
+    """Distance (metres) of 2D points ``xy`` (...,2) outside the simple polygon ``outline`` (V,2); 0 inside. With
+    ``gradient`` also (...,2) its gradient in ``xy``: the unit vector from the nearest point of the outline."""
     a, b = outline, np.roll(outline, -1, axis=0)                                # edges a_k -> b_k
     ab = b - a
     w = xy[..., None, :] - a                                                    # (...,V,2)
     s = np.clip(np.einsum("...vc,vc->...v", w, ab) / np.sum(ab**2, axis=1), 0.0, 1.0)
-    dist = np.linalg.norm(w - s[..., None] * ab, axis=-1).min(axis=-1)
+    off = w - s[..., None] * ab                                                 # from the nearest point of each edge
+    d_edge = np.linalg.norm(off, axis=-1)
+    dist = d_edge.min(axis=-1)
     x, y = xy[..., 0, None], xy[..., 1, None]                                   # even-odd rule
     crosses = (a[:, 1] > y) != (b[:, 1] > y)
     with np.errstate(divide="ignore", invalid="ignore"):
         x_at = a[:, 0] + (y - a[:, 1]) * ab[:, 0] / ab[:, 1]
     inside = np.sum(crosses & (x < x_at), axis=-1) % 2 == 1
-    return np.where(inside, 0.0, dist)
+    if not gradient:
+        return np.where(inside, 0.0, dist)
+    nearest = np.take_along_axis(off, np.argmin(d_edge, axis=-1)[..., None, None], axis=-2)[..., 0, :]
+    g = np.where((inside | (dist == 0))[..., None], 0.0, nearest / np.where(dist > 0, dist, 1.0)[..., None])
+    return np.where(inside, 0.0, dist), g
+
+
+def board_frame_jacobian(T: np.ndarray, points: np.ndarray, T_cam_board: np.ndarray) -> np.ndarray:
+    """(K,3,6) derivative of the board-frame coordinates ``p_W = Phi^T (R^T (p_L - t) - Delta)`` of lidar points
+    ``points`` (K,3) under one ``T_lidar_cam`` ``T``, each in its board's frame ``T_cam_board`` (K,4,4), with
+    respect to ``x = (w, dt)`` (the module's left perturbation): ``Phi^T R^T [[p_L - t]_x, -I]``."""
+    M = np.einsum("kba,cb->kac", T_cam_board[:, :3, :3], T[:3, :3])             # Phi^T R^T, (K,3,3)
+    q = points - T[:3, 3]
+    return np.concatenate([np.cross(M, q[:, None, :]), -M], axis=2)
 
 

@@ -11,10 +11,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..data.observations import Observations
-from ..data.residuals import perturb
+from ..data.residuals import perturb, range_residuals
 from ..errors import SolveFailure
-from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine
-from .scorers import ScoreOptions, lidarcam_residuals
+from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine, so3_left_jacobian
+from .scorers import ScoreOptions, lidarcam_linearised
 from .scorers import lidarcam as lidarcam_score
 
 DISTINCT_ROT_DEG = 1.0
@@ -24,8 +24,10 @@ DISTINCT_TRANS_M = 0.05
 POLISH_THRESHOLD = 10.0
 """The refined pose is polished on the whole cost when its endpoint and outline terms exceed this (in the
 cost's units, half a squared number of scale-lengths): the range optimum disagrees with the board outlines."""
-POLISH_DIFF_STEP = 1e-7
-"""Relative finite-difference step of ``polish`` (parameters in radians and metres)."""
+POLISH_STARTS = 1
+"""How many of the refined starts (the best by the all-evidence score) are polished."""
+POLISH_METHOD = "trf"
+"""The ``least_squares`` method of ``polish``."""
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,7 @@ class RefineOptions:
     max_nfev: int = 100
     polish: bool = True
     polish_threshold: float = POLISH_THRESHOLD
+    polish_starts: int = POLISH_STARTS
     distinct_rot_deg: float = DISTINCT_ROT_DEG
     distinct_trans_m: float = DISTINCT_TRANS_M
 
@@ -72,36 +75,31 @@ def distinct_order(T: np.ndarray, cost: np.ndarray, n: int, rot_deg: float = DIS
     return out
 
 
-def forward_difference_step(x: np.ndarray, rel_step: float) -> np.ndarray:
-    """The forward-difference steps ``scipy.optimize.least_squares`` takes for ``diff_step=rel_step``: ``rel_step
-    |x|`` signed as ``x`` (``+`` at 0), and ``sqrt(eps) max(1, |x|)`` where that step vanishes."""
-    sign = np.where(x >= 0, 1.0, -1.0)
-    h = rel_step * sign * np.abs(x)
-    return np.where((x + h) - x == 0, np.sqrt(np.finfo(float).eps) * sign * np.maximum(1.0, np.abs(x)), h)
-
-
 def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions, range_sigma_m: float) -> np.ndarray:
-    """Minimise the whole ``lidarcam`` selection cost from ``T0``; its Jacobian by forward differences with the
-    steps of ``forward_difference_step``, the six perturbed extrinsics evaluated as one batch."""
+    """Minimise the whole ``lidarcam`` selection cost from ``T0`` (``least_squares``, ``POLISH_METHOD``) with its
+    analytic Jacobian (``scorers.lidarcam_linearised``, times the left Jacobian of SO(3) at the rotation step);
+    residuals and Jacobian are computed together and the Jacobian kept for the call at the same step."""
+    kw = {"range_sigma_m": range_sigma_m, **score.kwargs()}
     last: dict = {}
 
     def fun(x):
         last["x"] = x.copy()
-        last["f"] = lidarcam_residuals(obs, perturb(T0, x), range_sigma_m=range_sigma_m, **score.kwargs())
+        last["f"], last["J"] = lidarcam_linearised(obs, perturb(T0, x), **kw)
         return last["f"]
 
     def jac(x):
-        f0 = last["f"] if np.array_equal(last.get("x"), x) else fun(x)
-        h = forward_difference_step(x, POLISH_DIFF_STEP)
-        X = x + np.diag(h)
-        F = lidarcam_residuals(obs, np.array([perturb(T0, xi) for xi in X]), range_sigma_m=range_sigma_m,
-                               **score.kwargs())
-        return ((F - f0) / (np.diag(X) - x)[:, None]).T
+        if not np.array_equal(last.get("x"), x):
+            fun(x)
+        J = last["J"].copy()
+        J[:, :3] = J[:, :3] @ so3_left_jacobian(x[:3])
+        return J
 
-    sol = least_squares(fun, np.zeros(6), jac=jac, method="trf", max_nfev=max_nfev)
+    sol = least_squares(fun, np.zeros(6), jac=jac, method=POLISH_METHOD, max_nfev=max_nfev)
     return perturb(T0, sol.x)
 
 
+SAME_BASIN = (0.05, 0.005)
+"""(degrees, metres): a start whose Gauss-Newton step lands this close to a refined start is not refined again."""
 PRUNE_FIRST = 8
 """``best_starts`` scores the outline term of this many candidates (at least ``2 n``) first, doubling as needed."""
 
@@ -139,29 +137,68 @@ class Choice:
 
 
 def refine_start(obs: Observations, T0: np.ndarray, sigma_m: float, score: ScoreOptions,
-                 opts: RefineOptions) -> Choice:
-    """Refine one start on the range likelihood, and polish on all evidence when the outlines disagree."""
+                 opts: RefineOptions) -> tuple[Choice, bool]:
+    """Refine one start on the range likelihood: its ``Choice`` (unpolished) and whether the refined pose
+    disagrees with the board outlines (endpoint and outline terms above ``opts.polish_threshold``)."""
     r = refine(obs.scan_data, T0, residual="range", loss=opts.loss, f_scale_m=opts.scale_m(sigma_m),
                max_nfev=opts.max_nfev)
     T1 = r.T_lidar_cam
     final, parts = lidarcam_score(obs, T1[None], range_sigma_m=sigma_m, **score.kwargs(), return_details=True)
-    final = float(final[0])
-    if opts.polish and parts["edge"][0] + parts["outline"][0] > opts.polish_threshold:
-        # the range optimum disagrees with the board outlines: minimise the whole evidence from there
-        T2 = polish(obs, T1, opts.max_nfev, score, sigma_m)
-        f2 = float(lidarcam_score(obs, T2[None], range_sigma_m=sigma_m, **score.kwargs())[0])
-        if f2 < final:
-            return Choice(f2, r, T2, True, T0)
-    return Choice(final, r, T1, False, T0)
+    return Choice(float(final[0]), r, T1, False, T0), bool(parts["edge"][0] + parts["outline"][0] >
+                                                          opts.polish_threshold)
+
+
+def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOptions, opts: RefineOptions) -> Choice:
+    """``c`` polished on the whole evidence (``polish``) when that lowers its cost, else ``c``."""
+    T2 = polish(obs, c.T, opts.max_nfev, score, sigma_m)
+    f2 = float(lidarcam_score(obs, T2[None], range_sigma_m=sigma_m, **score.kwargs())[0])
+    return Choice(f2, c.refined, T2, True, c.start) if f2 < c.cost else c
 
 
 def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
                       n_refine: int | None = None) -> Choice:
     """Score candidates ``C`` with ``scorers.lidarcam`` on ``obs`` at range noise ``sigma_m``, refine the
-    ``n_refine`` (default ``opts.n_refine``) best distinct ones (``refine_start``) and return the best."""
+    ``n_refine`` (default ``opts.n_refine``) best distinct ones on the range likelihood (``refine_start``),
+    polish the ``opts.polish_starts`` best of them whose pose disagrees with the outlines (``polish_choice``)
+    and return the best.
+
+    With three boards every minimal solution fits the three scan lines exactly, so the range likelihood cannot
+    rank the starts and the outlines place the answer: the best start by the all-evidence score is refined and
+    always polished."""
     C = np.asarray(C, float).reshape(-1, 4, 4)
-    n = opts.n_refine if n_refine is None else n_refine
+    exact_fit = obs.n_boards == 3
+    n = 1 if exact_fit else opts.n_refine if n_refine is None else n_refine
     starts = best_starts(obs, C, sigma_m, score, n, opts.distinct_rot_deg, opts.distinct_trans_m)
     if not starts:
         raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
-    return min((refine_start(obs, C[j], sigma_m, score, opts) for j in starts), key=lambda c: c.cost)
+    refined = sorted(_refine_starts(obs, C[starts], sigma_m, score, opts), key=lambda cp: cp[0].cost)
+    out = [polish_choice(obs, c, sigma_m, score, opts) if opts.polish and (off or exact_fit) and
+           k < opts.polish_starts else c for k, (c, off) in enumerate(refined)]
+    return min(out, key=lambda c: c.cost)
+
+
+def gauss_newton_step(data, T0: np.ndarray) -> np.ndarray:
+    """The extrinsic one Gauss-Newton step on the range residuals takes ``T0`` to (where refining it heads)."""
+    e, J = range_residuals(T0, data, jacobian=True)
+    return perturb(T0, -np.linalg.lstsq(J, e, rcond=None)[0])
+
+
+def same_pose(A: np.ndarray, B: np.ndarray, rot_deg: float, trans_m: float) -> bool:
+    """Whether two extrinsics differ by less than ``rot_deg`` of rotation and ``trans_m`` of translation."""
+    cos = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1.0) / 2.0
+    return bool(cos > np.cos(np.radians(rot_deg)) and np.linalg.norm(A[:3, 3] - B[:3, 3]) < trans_m)
+
+
+def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score: ScoreOptions,
+                   opts: RefineOptions) -> list[tuple[Choice, bool]]:
+    """``refine_start`` of each start (best first), except a start whose Gauss-Newton step lands within
+    ``SAME_BASIN`` of a start already refined: it is in that start's basin and would refine to the same pose."""
+    out: list[tuple[Choice, bool]] = []
+    for T0 in starts:
+        if out:
+            T1 = gauss_newton_step(obs.scan_data, T0)
+            if any(same_pose(T1, c.T, *SAME_BASIN) for c, _ in out):
+                continue
+        out.append(refine_start(obs, T0, sigma_m, score, opts))
+    return out
+

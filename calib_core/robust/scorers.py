@@ -16,6 +16,7 @@ from scipy.special import logsumexp
 
 from ..data.observations import Observations
 from ..data.residuals import (
+    board_frame_jacobian,
     candidate_chunk,
     in_chunks,
     outside_outlines,
@@ -261,6 +262,38 @@ def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigm
     rng, edge, out, _ = _evidence(obs, C, range_sigma_m, edge_sigma_m, outline_sigma_m)
     res = np.concatenate([rng, edge, out], axis=1)
     return res[0] if T.ndim == 2 else res
+
+
+def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
+                        edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
+                        behind_penalty: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+    """``lidarcam_residuals`` (n,) at one (4,4) ``T_lidar_cam`` and their analytic Jacobian (n,6) with respect to
+    ``x = (w, dt)``, the left perturbation of ``calib_core.data.residuals`` (radians, metres): range rows from
+    ``range_residuals``; endpoint and outline rows by the chain rule through the board-frame coordinates of the
+    scan points (``board_frame_jacobian``), each endpoint's edge pairing and each point's nearest outline edge
+    held fixed (both are piecewise constant). ``behind_penalty`` is not a residual; it is accepted for the
+    scorer's keywords."""
+    T = np.asarray(T_lidar_cam, float)
+    data = obs.scan_data
+    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    ends, T_ends, T_pts = obs.derived("scorers.jacobian_constants", _jacobian_constants)
+    rng, J_rng = range_residuals(T, data, jacobian=True)
+    edge, g_edge = point_line_errors(obs, T[None], gradient=True)
+    out, g_out = outside_outlines(obs, T[None], gradient=True)
+    J_edge = np.einsum("kc,kcx->kx", g_edge[0][exact].reshape(-1, 3), board_frame_jacobian(T, ends, T_ends))
+    J_out = np.einsum("kc,kcx->kx", g_out[0][on_exact], board_frame_jacobian(T, data.points[on_exact], T_pts)[:, :2])
+    res = np.concatenate([rng / range_sigma_m, edge[0][exact].ravel() / edge_sigma_m,
+                          out[0][on_exact] / outline_sigma_m])
+    return res, np.concatenate([J_rng / range_sigma_m, J_edge / edge_sigma_m, J_out / outline_sigma_m], axis=0)
+
+
+def _jacobian_constants(obs: Observations):
+    """For ``lidarcam_linearised``: the two scan endpoints of every exact-outline board (2 n_exact, 3) and their
+    boards' poses (2 n_exact, 4, 4), and the board pose of every scan point on such a board (K_exact, 4, 4)."""
+    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    ends = np.array([[obs.boards[i].scan_3d[0], obs.boards[i].scan_3d[-1]] for i in exact]).reshape(-1, 3)
+    poses = np.array([b.T_cam_board for b in obs.boards]).reshape(-1, 4, 4)
+    return ends, np.repeat(poses[exact], 2, axis=0), poses[obs.scan_data.board[on_exact]]
 
 
 PENG2022_OPTIONS = ("delta_m", "normalise_candidates", "beta_norm", "beta_eps", "error", "weighting")

@@ -18,7 +18,7 @@ from ..data.observations import Observations
 from ..data.residuals import range_residuals
 from ..errors import SolveFailure
 from ..refine.refine import F_SCALE_SIGMAS, Loss, refine
-from .choose import distinct_order
+from .choose import SAME_BASIN, distinct_order, gauss_newton_step, same_pose
 from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
 from .inliers import TRIM_SIGMAS, TrimReport
@@ -146,9 +146,11 @@ def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m
     starts += [(j, True) for j in distinct_order(H.T, np.sum(H.q, axis=1), LO_STARTS_ALL)]
     done: dict = {}  # a start's result by (hypothesis, initial board set): the same start is optimised once
     for j, a in starts:
-        key = (j, (np.isfinite(H.q[j]) if a else H.q[j] < SCORE_TAU).tobytes())
-        if key not in done:
-            done[key] = local_optimise(obs_g, H.T[j], H.q[j], sigma, outline_sigma_m, a)
+        first = np.isfinite(H.q[j]) if a else H.q[j] < SCORE_TAU
+        key = (j, first.tobytes())
+        if key in done or _in_basin(obs_g, H.T[j], first, done):
+            continue
+        done[key] = local_optimise(obs_g, H.T[j], H.q[j], sigma, outline_sigma_m, a)
     results = list(done.values())
     if not results:
         raise SolveFailure("lidarcam: no hypothesis puts the boards in front of the camera", H.T)
@@ -163,6 +165,17 @@ def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m
         raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(good)} boards agree on one extrinsic "
                            f"(at least 3 are needed); the others fail the per-board test", H.T)
     return used, [res[0] for res in results], rejected
+
+
+def _in_basin(obs: Observations, T0: np.ndarray, first: np.ndarray, done: dict) -> bool:
+    """Whether a start ``T0`` on the initial board set ``first`` is in the basin of a local optimisation already
+    run from the same set: its Gauss-Newton step on those boards lands within ``SAME_BASIN`` of that result (it
+    would be optimised to the same extrinsic and consensus)."""
+    near = [res[0] for (_, f), res in done.items() if f == first.tobytes()]
+    if not near or first.sum() < 3:
+        return False
+    T1 = gauss_newton_step(obs.subset(np.flatnonzero(first)).scan_data, T0)
+    return any(same_pose(T1, T, *SAME_BASIN) for T in near)
 
 
 def board_reason(q: float, threshold: float) -> str:
