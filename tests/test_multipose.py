@@ -17,6 +17,7 @@ from rig.multipose import duplicate_groups, static_masks
 ROOT = Path(__file__).resolve().parents[1]
 REAL = Path(os.environ.get("REAL_DATA", ROOT.parent / "shared" / "real-data"))
 ACFR_FIXTURE = Path(__file__).parent / "fixtures" / "acfr"
+NOWICKI_FIXTURE = Path(__file__).parent / "fixtures" / "nowicki"
 
 
 def _T(rotvec, t):
@@ -138,6 +139,26 @@ def test_acfr_fixture_every_segment_is_the_board():
         assert -30 < lo < hi < 30, (d.name, d.bearing_deg)
         assert 0.6 < d.range_m < 1.2
         assert d.n_background > 0  # the static object was recognised as background
+
+
+def test_nowicki_fixture_gives_all_14_poses_each_segment_on_the_board():
+    """The vendored Nowicki rig (MIT): every pose detected and paired, each segment the plate's width, and every
+    board's points on its plane from the camera through the calibrated extrinsic."""
+    import calib_core
+    from calib_core.geometry.transforms import invert_T
+    from rig.public_sets import load_nowicki
+    from rig.report import board_plane_distances
+
+    rs = load_nowicki(NOWICKI_FIXTURE)
+    obs, diags = extract(rs.dataset, rs.options)
+    assert obs.n_boards == 14 and all(d.used for d in diags), [d.reason for d in diags]
+    widths = [np.linalg.norm(b.scan[-1] - b.scan[0]) for b in obs.boards]
+    assert min(widths) > 0.95 and max(widths) < 1.25
+    res = calib_core.calibrate(obs)
+    assert res.ok, res.reason
+    Ti = invert_T(res.T_lidar_cam)
+    rms = [np.sqrt(np.mean(board_plane_distances(Ti, b.T_cam_board, b.scan) ** 2)) for b in obs.boards]
+    assert max(rms) < 0.012, rms
 
 
 def test_acfr_without_the_learnt_background_is_worse():
