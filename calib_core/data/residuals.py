@@ -61,9 +61,9 @@ def _planes_lidar(T: np.ndarray, data: ScanData):
     """Per point, the board normal ``m = R n`` (...,K,3) and plane offset ``d + m . t`` (...,K) in the lidar frame;
     ``T`` is one (4,4) or a batch (M,4,4) of ``T_lidar_cam``."""
     R, t = T[..., :3, :3], T[..., :3, 3]
-    m = np.einsum("...ab,nb->...na", R, data.normals)                        # (...,N,3)
-    c = data.offsets + np.einsum("...na,...a->...n", m, t)                    # (...,N)
-    return m[..., data.board, :], c[..., data.board]
+    m = data.normals @ np.swapaxes(R, -1, -2)                                 # (...,N,3) rows R n
+    c = data.offsets + (m @ t[..., None])[..., 0]                             # (...,N)
+    return np.take(m, data.board, axis=-2), np.take(c, data.board, axis=-1)
 
 
 def plane_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
@@ -97,7 +97,7 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
         return e
     J = np.empty((len(e), 6))
     # d(num)/dw = m x t, d(mb)/dw = m x b  (from dm = w x m); m x t is one vector per board
-    m_cross_t = np.cross(T[:3, :3] @ data.normals.T, T[:3, 3], axis=0).T[data.board]
+    m_cross_t = _cross(data.normals @ T[:3, :3].T, np.broadcast_to(T[:3, 3], data.normals.shape))[data.board]
     J[:, :3] = -(m_cross_t * mb[:, None] - _cross(mk, b) * num[:, None]) / (mb**2)[:, None]
     J[:, 3:] = -mk / mb[:, None]
     return e, J
@@ -136,6 +136,22 @@ def _endpoints(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
             np.array([b.T_cam_board for b in obs.boards]))
 
 
+def _edge_groups(obs: Observations) -> list[tuple]:
+    """Per vertex count V of the boards' outlines: the boards (n,), their vertices ``q_k`` (n,V,2), edge lengths
+    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V))."""
+    counts = np.array([0 if b.outline is None else len(b.outline) for b in obs.boards])
+    groups = []
+    for V in np.unique(counts[counts > 0]):
+        idx = np.flatnonzero(counts == V)
+        a = np.array([obs.boards[i].outline for i in idx], float)           # (n,V,2) vertices q_k, z = 0
+        edge = np.roll(a, -1, axis=1) - a                                    # q_{k+1} - q_k
+        L = np.linalg.norm(edge, axis=-1)
+        nrm = np.stack([-edge[..., 1], edge[..., 0]], axis=-1) / L[..., None]
+        groups.append((idx, a, L[None, :, None], nrm, np.sum(a * nrm, axis=-1)[None, :, None],
+                       np.sum(a**2, axis=-1)[None, :, None]))
+    return groups
+
+
 def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool = False):
     """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (docs/METHOD.md eq. 8-12);
     with ``gradient`` also (M,N,2,3) their gradients in the endpoints' board-frame coordinates (the pairing of
@@ -151,27 +167,19 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
     P = endpoints_in_board(obs, candidates)                                 # (M,N,2,3)
     M, N = P.shape[:2]
     out, grad = np.zeros((M, N, 2)), np.zeros((M, N, 2, 3))
-    counts = np.array([0 if b.outline is None else len(b.outline) for b in obs.boards])
-    for V in np.unique(counts[counts > 0]):
-        idx = np.flatnonzero(counts == V)
-        a = np.array([obs.boards[i].outline for i in idx])                  # (n,V,2) vertices q_k, z = 0
-        edge = np.roll(a, -1, axis=1) - a                                    # q_{k+1} - q_k
-        L = np.linalg.norm(edge, axis=-1)                                    # (n,V)
-        nrm = np.stack([-edge[..., 1], edge[..., 0]], axis=-1) / L[..., None]  # in-plane edge normals
+    for idx, a, L, nrm, a_nrm, a2 in obs.derived("residuals.edge_groups", _edge_groups):
+        V = a.shape[1]
         Pi = P[:, idx]
         xy, z2 = Pi[..., :2], Pi[..., 2:3] ** 2                               # (M,n,2,2), (M,n,2,1)
         # |p - q_k| from the expansion |xy|^2 - 2 xy.q_k + |q_k|^2 + z^2; |p - q_{k+1}| is its roll
-        d2 = (np.sum(xy**2, axis=-1)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a)
-              + np.sum(a**2, axis=-1)[None, :, None, :] + z2)
+        d2 = np.sum(xy**2, axis=-1)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a) + a2 + z2
         da = np.sqrt(np.maximum(d2, 0.0))                                    # (M,n,2,V)
-        err = da + np.roll(da, -1, axis=-1) - L[None, :, None, :]
-        perp = np.einsum("mnkc,nvc->mnkv", xy, nrm) - np.sum(a * nrm, axis=-1)[None, :, None, :]
-        dist = np.sqrt(perp**2 + z2)                                         # point-to-line distances
+        err = da + np.roll(da, -1, axis=-1) - L
+        dist = np.sqrt((np.einsum("mnkc,nvc->mnkv", xy, nrm) - a_nrm) ** 2 + z2)  # point-to-line distances
         pair = dist[:, :, 0, :, None] + dist[:, :, 1, None, :]              # (M,n,V,V)
         pair[..., np.arange(V), np.arange(V)] = np.inf                       # the two edges differ
-        best = np.argmin(pair.reshape(M, len(idx), V * V), axis=-1)
-        k0, k1 = np.divmod(best, V)
-        mm, nn = np.meshgrid(np.arange(M), np.arange(len(idx)), indexing="ij")
+        k0, k1 = np.divmod(np.argmin(pair.reshape(M, len(idx), V * V), axis=-1), V)
+        mm, nn = np.ogrid[:M, :len(idx)]
         out[:, idx, 0] = err[mm, nn, 0, k0]
         out[:, idx, 1] = err[mm, nn, 1, k1]
         if gradient:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, summed over the edge's two vertices

@@ -98,8 +98,10 @@ def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions
     return perturb(T0, sol.x)
 
 
-SAME_BASIN = (0.05, 0.005)
-"""(degrees, metres): a start whose Gauss-Newton step lands this close to a refined start is not refined again."""
+BASIN_STEPS = 2
+"""Gauss-Newton steps that tell where a start heads (``gauss_newton_steps``): a start that lands within the
+distinct-start rule (``DISTINCT_ROT_DEG``, ``DISTINCT_TRANS_M``) of an optimum already found is in its basin and is
+not optimised again."""
 PRUNE_FIRST = 8
 """``best_starts`` scores the outline term of this many candidates (at least ``2 n``) first, doubling as needed."""
 
@@ -177,10 +179,13 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
     return min(out, key=lambda c: c.cost)
 
 
-def gauss_newton_step(data, T0: np.ndarray) -> np.ndarray:
-    """The extrinsic one Gauss-Newton step on the range residuals takes ``T0`` to (where refining it heads)."""
-    e, J = range_residuals(T0, data, jacobian=True)
-    return perturb(T0, -np.linalg.lstsq(J, e, rcond=None)[0])
+def gauss_newton_steps(data, T0: np.ndarray, n: int = BASIN_STEPS) -> np.ndarray:
+    """The extrinsic ``n`` Gauss-Newton steps on the range residuals take ``T0`` to (where refining it heads)."""
+    T = T0
+    for _ in range(n):
+        e, J = range_residuals(T, data, jacobian=True)
+        T = perturb(T, -np.linalg.lstsq(J, e, rcond=None)[0])
+    return T
 
 
 def same_pose(A: np.ndarray, B: np.ndarray, rot_deg: float, trans_m: float) -> bool:
@@ -191,13 +196,13 @@ def same_pose(A: np.ndarray, B: np.ndarray, rot_deg: float, trans_m: float) -> b
 
 def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score: ScoreOptions,
                    opts: RefineOptions) -> list[tuple[Choice, bool]]:
-    """``refine_start`` of each start (best first), except a start whose Gauss-Newton step lands within
-    ``SAME_BASIN`` of a start already refined: it is in that start's basin and would refine to the same pose."""
+    """``refine_start`` of each start (best first), except a start whose Gauss-Newton steps land within
+    the distinct-start rule of a start already refined: it is in that start's basin (``BASIN_STEPS``)."""
     out: list[tuple[Choice, bool]] = []
     for T0 in starts:
         if out:
-            T1 = gauss_newton_step(obs.scan_data, T0)
-            if any(same_pose(T1, c.T, *SAME_BASIN) for c, _ in out):
+            T1 = gauss_newton_steps(obs.scan_data, T0)
+            if any(same_pose(T1, c.T, opts.distinct_rot_deg, opts.distinct_trans_m) for c, _ in out):
                 continue
         out.append(refine_start(obs, T0, sigma_m, score, opts))
     return out

@@ -18,7 +18,7 @@ from ..data.observations import Observations
 from ..data.residuals import range_residuals
 from ..errors import SolveFailure
 from ..refine.refine import F_SCALE_SIGMAS, Loss, refine
-from .choose import SAME_BASIN, distinct_order, gauss_newton_step, same_pose
+from .choose import DISTINCT_ROT_DEG, DISTINCT_TRANS_M, distinct_order, gauss_newton_steps, same_pose
 from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
 from .inliers import TRIM_SIGMAS, TrimReport
@@ -169,13 +169,14 @@ def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m
 
 def _in_basin(obs: Observations, T0: np.ndarray, first: np.ndarray, done: dict) -> bool:
     """Whether a start ``T0`` on the initial board set ``first`` is in the basin of a local optimisation already
-    run from the same set: its Gauss-Newton step on those boards lands within ``SAME_BASIN`` of that result (it
-    would be optimised to the same extrinsic and consensus)."""
-    near = [res[0] for (_, f), res in done.items() if f == first.tobytes()]
+    run: its Gauss-Newton steps on those boards land within the distinct-start rule of a result whose consensus
+    holds every board of ``first`` (``choose.BASIN_STEPS``: it would be optimised to the same extrinsic and
+    consensus)."""
+    near = [res[0] for res in done.values() if np.all(res[1][first])]
     if not near or first.sum() < 3:
         return False
-    T1 = gauss_newton_step(obs.subset(np.flatnonzero(first)).scan_data, T0)
-    return any(same_pose(T1, T, *SAME_BASIN) for T in near)
+    T1 = gauss_newton_steps(obs.subset(np.flatnonzero(first)).scan_data, T0)
+    return any(same_pose(T1, T, DISTINCT_ROT_DEG, DISTINCT_TRANS_M) for T in near)
 
 
 def board_reason(q: float, threshold: float) -> str:
