@@ -29,8 +29,8 @@ from calib_core import calibrate
 from calib_core.data.camera import Camera
 from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.mounting import T_from_params
-from calib_core.refine.plan import plan_capture
-from calib_core.refine.plan_views import PlanRig, Workspace, board_poses_lidar, feasibility
+from calib_core.planning.capture import plan_capture
+from calib_core.planning.views import PlanRig, Workspace, board_poses_lidar, feasibility
 from simulate import SimOptions, observe_poses
 from simulate.camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners
 
@@ -52,7 +52,8 @@ def rig_of(o: SimOptions, T_lidar_cam: np.ndarray, workspace: Workspace | None =
 
 
 def random_feasible(rig: PlanRig, k: int, rng: np.random.Generator, batch: int = 256) -> np.ndarray:
-    """(k,6) poses drawn uniformly from the workspace's ranges, each feasible (``plan_views.feasibility``)."""
+    """(k,6) poses drawn uniformly from the workspace's ranges, each feasible
+    (``calib_core.planning.views.feasibility``)."""
     ws, out = rig.workspace, []
     ranges = np.array([ws.distance_m, ws.bearing_deg, ws.height_m, ws.turn_deg, ws.lean_deg, ws.roll_deg])
     while len(out) < k:

@@ -1,5 +1,5 @@
 """``lidarcam plan RIG.yaml`` / ``lidarcam plan --from OBS.json``: which board poses to take next, how many, and
-what they will give (``calib_core.refine.plan``); a table, an operator's checklist, a figure and ``--json``.
+what they will give (``calib_core.planning.capture``); a table, an operator's checklist, a figure and ``--json``.
 
 Bad input raises a LidarcamError, which ``lidarcam_cli.main`` prints as one line and exits 2.
 """
@@ -33,8 +33,8 @@ def _current(args):
     from calib_core.data.io import load_observations
     from calib_core.data.lines import scan_noise_estimate
     from calib_core.errors import CalibrationError
-    from calib_core.refine.plan import set_informations
-    from calib_core.refine.plan_views import rig_from_observations
+    from calib_core.planning.capture import set_informations
+    from calib_core.planning.views import rig_from_observations
     from rig.plan_rig import load_plan_rig
 
     base = load_plan_rig(args.rig) if args.rig else None
@@ -70,8 +70,8 @@ def print_plan(rig, plan) -> None:
     """The plan as text: the current prediction, the table of proposed poses, the operator's checklist."""
     import numpy as np
 
-    from calib_core.refine.plan import SIGMA_NAMES, describe_pose, verdict
-    from calib_core.refine.plan_views import feasibility
+    from calib_core.planning.capture import SIGMA_NAMES, describe_pose, verdict
+    from calib_core.planning.views import feasibility
 
     cur = plan.current
     print(f"current: {plan.current_n} boards; range noise {1000 * rig.range_sigma_m:.1f} mm, corner noise "
@@ -113,7 +113,7 @@ def cmd_plan(args) -> int:
     from pathlib import Path
 
     from calib_core.errors import CalibrationError
-    from calib_core.refine.plan import plan_capture, plan_to_dict
+    from calib_core.planning.capture import plan_capture, plan_to_dict
 
     if args.next < 1:
         raise CalibrationError(f"--next must be at least 1, got {args.next}")
@@ -134,7 +134,7 @@ def cmd_plan(args) -> int:
 
 def add_parsers(subparsers) -> None:
     """Register the ``plan`` verb on an argparse subparsers object."""
-    from calib_core.refine.plan import CRITERIA
+    from calib_core.planning.capture import CRITERIA
 
     p = subparsers.add_parser("plan", help="which board poses to capture next, and what they will give",
                               description="Predict the 1-sigma of each mounting axis from the joint Cramer-Rao "

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from calib_core.data.observations import Observations
-from calib_core.refine.plan import SIGMA_NAMES, Plan
-from calib_core.refine.plan_views import PlanRig
+from calib_core.planning.capture import SIGMA_NAMES, Plan
+from calib_core.planning.views import PlanRig
 
 FRUSTUM_M = 7.0
 """Length (metres) of the camera's frustum edges in the top view."""

@@ -1,4 +1,4 @@
-"""The capture planner's rig description: a YAML file read into ``calib_core.refine.plan_views.PlanRig``.
+"""The capture planner's rig description: a YAML file read into ``calib_core.planning.views.PlanRig``.
 
 Sections (units in the key names; docs/planning.md shows a whole file):
 
@@ -23,7 +23,7 @@ import numpy as np
 from calib_core.data.camera import Camera
 from calib_core.errors import ObservationError
 from calib_core.geometry.mounting import UNIT_NAMES, T_from_params
-from calib_core.refine.plan_views import POSE_FIELDS, PlanRig, Workspace
+from calib_core.planning.views import POSE_FIELDS, PlanRig, Workspace
 
 from .dataset import DatasetError, board_from_dict, camera_from_dict, read_yaml
 

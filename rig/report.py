@@ -114,13 +114,13 @@ DEFAULT_CORNER_SIGMA_PX = 0.5
 
 
 def capture_verdict(observations: Observations, T_lidar_cam: np.ndarray | None = None) -> str:
-    """The capture planner's verdict on the boards captured (``calib_core.refine.plan.verdict``) at ``T_lidar_cam``
+    """The capture planner's verdict on the boards captured (``calib_core.planning.capture.verdict``) at ``T_lidar_cam``
     (None: the ``lidarcam`` calibration of the boards), with the noise it assumed: range noise from the scan
     lines, corner noise the extraction's median reprojection RMS (else ``DEFAULT_CORNER_SIGMA_PX``)."""
     from calib_core import calibrate
     from calib_core.data.lines import scan_noise_estimate
-    from calib_core.refine.plan import plan_capture, set_informations, verdict
-    from calib_core.refine.plan_views import rig_from_observations
+    from calib_core.planning.capture import plan_capture, set_informations, verdict
+    from calib_core.planning.views import rig_from_observations
 
     try:
         if T_lidar_cam is None:

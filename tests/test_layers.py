@@ -89,20 +89,16 @@ def test_library_loads_no_io_or_plotting_stack():
 
 
 CORE_FLOORS = (("errors",), ("geometry",), ("data",), ("solvers",), ("refine",), ("robust",), ("checks", "held_out"),
-               ("registry",), ("methods",), ("entry", "plugins"), ("crossval",), ("__init__",))
+               ("planning",), ("registry",), ("methods",), ("entry", "plugins"), ("crossval",), ("__init__",))
 """The stages of ``calib_core`` in import order, lowest first: a module imports only from its own stage or from a
 lower floor (the flow: data -> scan lines -> candidates -> refinement and robust choice -> checks -> methods ->
-the one entry). ``registry`` sits below the methods that register themselves in it."""
-
-
-PLACED_ABOVE_ITS_FOLDER = {"calib_core.refine.plan": "checks"}
-"""Modules that sit on a higher floor than their folder: the capture planner reads the degeneracy analysis (it
-belongs with the checks; it lives beside the information it sums)."""
+the one entry; the capture planner reads the degeneracy analysis). ``registry`` sits below the methods that
+register themselves in it."""
 
 
 def _stage(name: str) -> str:
     parts = name.split(".")
-    return "__init__" if len(parts) == 1 else PLACED_ABOVE_ITS_FOLDER.get(name, parts[1])
+    return "__init__" if len(parts) == 1 else parts[1]
 
 
 def test_calib_core_stage_order():

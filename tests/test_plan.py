@@ -1,4 +1,4 @@
-"""The capture planner (calib_core.refine.plan, plan_views; rig.plan_rig; lidarcam plan): per-board information
+"""The capture planner (calib_core.planning.capture and views; rig.plan_rig; lidarcam plan): per-board information
 against the dense joint information, noise-free views against the simulator, the prediction's handling of
 singular sets, the greedy design against random designs, the vertical-boards verdict, the rig YAML and the CLI."""
 
@@ -17,9 +17,9 @@ from calib_core.data.residuals import range_residuals
 from calib_core.geometry.beams import points_in_polygon
 from calib_core.geometry.mounting import T_from_params
 from calib_core.geometry.transforms import invert_T
+from calib_core.planning.capture import PlanError, greedy, plan_capture, plan_to_dict, pool, predict, verdict
+from calib_core.planning.views import PlanRig, Workspace, board_poses_lidar, feasibility, noise_free_views
 from calib_core.refine.joint import _weighted, board_informations, joint_crlb
-from calib_core.refine.plan import PlanError, greedy, plan_capture, plan_to_dict, pool, predict, verdict
-from calib_core.refine.plan_views import PlanRig, Workspace, board_poses_lidar, feasibility, noise_free_views
 from calib_core.refine.uncertainty import fisher_information
 from experiments.plan_check import rig_of
 from rig.dataset import DatasetError

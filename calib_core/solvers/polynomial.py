@@ -80,3 +80,12 @@ def newton_roots(A: np.ndarray, x: np.ndarray, iters: int) -> np.ndarray:
         ok = np.abs(dp) > 0
         x = x - np.where(ok, p / np.where(ok, dp, 1.0), 0.0)
     return x
+
+
+def keep_better(x: np.ndarray, f: np.ndarray, fn: np.ndarray, x_new: np.ndarray, resid) -> tuple:
+    """One guarded Newton update over a batch: ``x_new`` (K,n) replaces ``x`` where its residual ``resid(x_new)``
+    (K,n) has a finite squared norm below ``fn`` (K,); returns the updated (x, f, fn)."""
+    f_new = resid(x_new)
+    fn_new = np.einsum("ki,ki->k", f_new, f_new)
+    better = np.isfinite(fn_new) & (fn_new < fn)
+    return (np.where(better[:, None], x_new, x), np.where(better[:, None], f_new, f), np.where(better, fn_new, fn))

@@ -45,8 +45,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import LidarcamError
+from ..geometry.transforms import make_T
 from .orientation import abs_orientation_3pt, cross, cross2, dot, unit
-from .polynomial import newton_roots, quartic_roots_closed, quartic_roots_eig
+from .polynomial import keep_better, newton_roots, quartic_roots_closed, quartic_roots_eig
 
 # Reasons (the ``reasons`` entries; ``None`` means solved).
 REASON_NONFINITE = "non-finite input"
@@ -91,6 +92,20 @@ class MinimalSolutions:
     def of_triple(self, b: int) -> np.ndarray:
         """The candidates (K,4,4) of input triple ``b``."""
         return self.T_lidar_cam[self.triple == b]
+
+    @classmethod
+    def pack(cls, R: np.ndarray, t_m: np.ndarray, triple: np.ndarray, solved: np.ndarray, reasons: np.ndarray,
+             near_real: np.ndarray) -> MinimalSolutions:
+        """The solutions of a solver: rotations (M,3,3) and translations (M,3) metres of ``T_lidar_cam``, the input
+        triple of each; ``solved`` the indices of the B triples that reached the solver, whose ``reasons``
+        (B,) become ``REASON_NO_REAL`` where no solution came out (others are kept)."""
+        n = len(reasons)
+        has = np.zeros(n, dtype=bool)
+        has[triple] = True
+        reached = np.zeros(n, dtype=bool)
+        reached[solved] = True
+        reasons[reached & ~has & (reasons == None)] = REASON_NO_REAL  # noqa: E711 -- elementwise on objects
+        return cls(T_lidar_cam=make_T(R, t_m), triple=triple, near_real=near_real, reasons=reasons)
 
 
 def board_triples(n_boards: int) -> np.ndarray:
@@ -165,12 +180,7 @@ def _polish_lambdas(s, aa, bb, cc, ca, cb, cg, iters: int) -> np.ndarray:
         ok = np.abs(det) > 1e-300
         step = -np.einsum("kij,kj->ki", adj, f) / np.where(ok, det, 1.0)[:, None]
         s_new = s + np.where(ok[:, None], step, 0.0)
-        f_new = resid(s_new)
-        fn_new = np.einsum("ki,ki->k", f_new, f_new)
-        better = np.isfinite(fn_new) & (fn_new < fn)
-        s = np.where(better[:, None], s_new, s)
-        f = np.where(better[:, None], f_new, f)
-        fn = np.where(better, fn_new, fn)
+        s, f, fn = keep_better(s, f, fn, s_new, resid)
     return s
 
 
@@ -354,18 +364,7 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
 
     # 5. Absolute orientation: lidar = R camera + t.
     R, t = abs_orientation_3pt(P, Qg[k_tr2])
-    T = np.zeros((R.shape[0], 4, 4))
-    T[:, :3, :3] = R
-    T[:, :3, 3] = t
-    T[:, 3, 3] = 1.0
-
-    triple = idx[k_tr2]
-    solved = np.zeros(B, dtype=bool)
-    solved[idx] = True
-    has = np.zeros(B, dtype=bool)
-    has[triple] = True
-    reasons[solved & ~has] = REASON_NO_REAL
-    return MinimalSolutions(T_lidar_cam=T, triple=triple, near_real=np.repeat(near_k, 2), reasons=reasons)
+    return MinimalSolutions.pack(R, t, idx[k_tr2], idx, reasons, np.repeat(near_k, 2))
 
 
 def solve_triple(n3: np.ndarray, d3: np.ndarray, p3: np.ndarray, u3: np.ndarray, **options) -> list[np.ndarray]:

@@ -31,7 +31,6 @@ import numpy as np
 from .orientation import cross, dot, kabsch
 from .polynomial import newton_roots, quartic_roots_closed, quartic_roots_eig
 from .vasconcelos import (
-    REASON_NO_REAL,
     REASON_PLANES,
     REASON_SCAN_LINES,
     MinimalSolutions,
@@ -133,14 +132,4 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     Rh, _ = kabsch(P[kt], s[:, :, None] * k[kt])                             # maps P onto s k
     R = np.swapaxes(Rh, 1, 2)
     t = _translation_mm(R, a[kt], u3[kt], m[kt])
-    T = np.zeros((len(kt), 4, 4))
-    T[:, :3, :3] = R
-    T[:, :3, 3] = t / 1e3
-    T[:, 3, 3] = 1.0
-    triple = idx[kt]
-    solved = np.zeros(B, dtype=bool)
-    solved[idx] = True
-    has = np.zeros(B, dtype=bool)
-    has[triple] = True
-    reasons[solved & ~has] = REASON_NO_REAL
-    return MinimalSolutions(T_lidar_cam=T, triple=triple, near_real=near_k, reasons=reasons)
+    return MinimalSolutions.pack(R, t / 1e3, idx[kt], idx, reasons, near_k)

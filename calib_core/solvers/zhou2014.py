@@ -36,9 +36,8 @@ from __future__ import annotations
 import numpy as np
 
 from .orientation import cross
-from .polynomial import newton_roots, quartic_roots_closed, quartic_roots_eig
+from .polynomial import keep_better, newton_roots, quartic_roots_closed, quartic_roots_eig
 from .vasconcelos import (
-    REASON_NO_REAL,
     REASON_PLANES,
     MinimalSolutions,
     _checked,
@@ -91,12 +90,7 @@ def _polish_alpha(alpha: np.ndarray, C1: np.ndarray, C2: np.ndarray, iters: int)
         Js = np.where(ok[:, None, None], J, np.eye(3))
         step = np.where(ok[:, None], np.linalg.solve(Js, f[..., None])[..., 0], 0.0)
         a_new = alpha - step
-        f_new = resid(a_new)
-        fn_new = np.einsum("ki,ki->k", f_new, f_new)
-        better = np.isfinite(fn_new) & (fn_new < fn)
-        alpha = np.where(better[:, None], a_new, alpha)
-        f = np.where(better[:, None], f_new, f)
-        fn = np.where(better, fn_new, fn)
+        alpha, f, fn = keep_better(alpha, f, fn, a_new, resid)
     return alpha
 
 
@@ -190,15 +184,5 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     Qp = q1[:, None, :] * p[k][:, :, :1] + q2[:, None, :] * p[k][:, :, 1:]  # (R,3,3): Q p_i per board
     rhs = d[k] - np.einsum("kij,kij->ki", n[k], Qp)
     s = np.linalg.solve(n[k], rhs[..., None])[..., 0]                       # lidar origin in the camera frame
-    T = np.zeros((len(k), 4, 4))
-    T[:, :3, :3] = R
-    T[:, :3, 3] = -np.einsum("kij,kj->ki", R, s)
-    T[:, 3, 3] = 1.0
-
-    triple = idx[k]
-    has = np.zeros(B, dtype=bool)
-    has[triple] = True
-    solved = np.zeros(B, dtype=bool)
-    solved[idx] = True
-    reasons[solved & ~has & (reasons == None)] = REASON_NO_REAL  # noqa: E711 -- elementwise on an object array
-    return MinimalSolutions(T_lidar_cam=T, triple=triple, near_real=np.zeros(len(k), dtype=bool), reasons=reasons)
+    return MinimalSolutions.pack(R, -np.einsum("kij,kj->ki", R, s), idx[k], idx, reasons,
+                                 np.zeros(len(k), dtype=bool))

@@ -19,9 +19,9 @@ import numpy as np
 from ..checks.degeneracy import AXES, NULL_CONDITIONING, undetermined_directions
 from ..data.observations import MAX_BOARDS, Observations
 from ..errors import LidarcamError, UncertaintyError
-from .joint import board_informations
-from .plan_views import POSE_FIELDS, REJECTIONS, PlanRig, board_poses_lidar, feasibility, noise_free_views
-from .uncertainty import _inverse_information
+from ..refine.joint import board_informations
+from ..refine.uncertainty import _inverse_information
+from .views import POSE_FIELDS, REJECTIONS, PlanRig, board_poses_lidar, feasibility, noise_free_views
 
 SIGMA_NAMES = ("roll_deg", "pitch_deg", "yaw_deg", "x_mm", "y_mm", "z_mm")
 """The per-axis 1-sigma as reported (module docstring)."""
