@@ -74,7 +74,7 @@ FLAT_KEYWORDS: dict[str, tuple[str | None, str]] = {
     "n_refine": ("refine", "n_refine"), "loss": ("refine", "loss"), "f_scale": ("refine", "f_scale_m"),
     "f_scale_m": ("refine", "f_scale_m"), "f_scale_sigmas": ("refine", "f_scale_sigmas"),
     "max_nfev": ("refine", "max_nfev"), "polish": ("refine", "polish"),
-    "polish_threshold": ("refine", "polish_threshold"), "polish_starts": ("refine", "polish_starts"),
+    "polish_threshold": ("refine", "polish_threshold"),
     "distinct_rot_deg": ("refine", "distinct_rot_deg"), "distinct_trans_m": ("refine", "distinct_trans_m"),
     "min_conditioning": ("degeneracy", "min_conditioning"), "max_scaled_sigma": ("degeneracy", "max_scaled_sigma"),
     "use_corners": ("joint", "use_corners"), "corner_sigma_px": ("joint", "corner_sigma_px"),

@@ -24,8 +24,6 @@ DISTINCT_TRANS_M = 0.05
 POLISH_THRESHOLD = 10.0
 """The refined pose is polished on the whole cost when its endpoint and outline terms exceed this (in the
 cost's units, half a squared number of scale-lengths): the range optimum disagrees with the board outlines."""
-POLISH_STARTS = 1
-"""How many of the refined starts (the best by the all-evidence score) are polished."""
 POLISH_METHOD = "trf"
 """The ``least_squares`` method of ``polish``."""
 
@@ -44,7 +42,6 @@ class RefineOptions:
     max_nfev: int = 100
     polish: bool = True
     polish_threshold: float = POLISH_THRESHOLD
-    polish_starts: int = POLISH_STARTS
     distinct_rot_deg: float = DISTINCT_ROT_DEG
     distinct_trans_m: float = DISTINCT_TRANS_M
 
@@ -160,23 +157,17 @@ def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOpti
 def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
                       n_refine: int | None = None) -> Choice:
     """Score candidates ``C`` with ``scorers.lidarcam`` on ``obs`` at range noise ``sigma_m``, refine the
-    ``n_refine`` (default ``opts.n_refine``) best distinct ones on the range likelihood (``refine_start``),
-    polish the ``opts.polish_starts`` best of them whose pose disagrees with the outlines (``polish_choice``)
-    and return the best.
-
-    With three boards every minimal solution fits the three scan lines exactly, so the range likelihood cannot
-    rank the starts and the outlines place the answer: the best start by the all-evidence score is refined and
-    always polished."""
+    ``n_refine`` (default ``opts.n_refine``) best distinct ones on the range likelihood (``refine_start``; a start
+    in the basin of one already refined is not refined again), polish those whose pose disagrees with the
+    outlines (``polish_choice``) and return the best."""
     C = np.asarray(C, float).reshape(-1, 4, 4)
-    exact_fit = obs.n_boards == 3
-    n = 1 if exact_fit else opts.n_refine if n_refine is None else n_refine
+    n = opts.n_refine if n_refine is None else n_refine
     starts = best_starts(obs, C, sigma_m, score, n, opts.distinct_rot_deg, opts.distinct_trans_m)
     if not starts:
         raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
-    refined = sorted(_refine_starts(obs, C[starts], sigma_m, score, opts), key=lambda cp: cp[0].cost)
-    out = [polish_choice(obs, c, sigma_m, score, opts) if opts.polish and (off or exact_fit) and
-           k < opts.polish_starts else c for k, (c, off) in enumerate(refined)]
-    return min(out, key=lambda c: c.cost)
+    refined = _refine_starts(obs, C[starts], sigma_m, score, opts)
+    return min((polish_choice(obs, c, sigma_m, score, opts) if opts.polish and off else c for c, off in refined),
+               key=lambda c: c.cost)
 
 
 def gauss_newton_steps(data, T0: np.ndarray, n: int = BASIN_STEPS) -> np.ndarray:
