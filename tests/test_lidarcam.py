@@ -83,11 +83,13 @@ def test_lidarcam_stays_at_the_truth_on_noise_free_data(rng, n_boards):
 
 
 def test_lidarcam_final_cost_is_no_more_than_at_its_start(rng):
+    """The answer scores no worse than the start it was refined from, to the refinement's own tolerance (a start that
+    is already a range optimum, from the consensus's local optimisation, moves by its termination tolerance only)."""
     for _ in range(5):
         obs = make_observations(rng, 6, 0.02)
         r = calibrate(obs, "lidarcam")
         assert r.ok
-        assert r.info["cost"] <= r.info["score_start"] + 1e-9
+        assert r.info["cost"] <= r.info["score_start"] * (1 + 1e-6)
         data = obs.scan_data
         # the answer is a stationary point of the range likelihood: no step of the 6 parameters lowers it
         e, J = range_residuals(r.T_lidar_cam, data, jacobian=True)
@@ -212,3 +214,46 @@ def test_pruned_choice_of_starts_is_the_full_scoring_choice(seed):
     n = 1 + seed % 3
     full = distinct_order(C, lidarcam_score(obs, C, range_sigma_m=0.02), n)
     assert best_starts(obs, C, 0.02, ScoreOptions(), n) == full and len(full) == n
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_zhang_pless_on_many_subsets_at_once_equals_each_subset_alone(seed):
+    """``linear_subsets`` (the consensus search's Zhang & Pless hypotheses, all subsets in one batch) gives each
+    subset's ``zhang_pless_linear`` answer, exactly on noise-free data and to 1e-6 deg / 1e-7 m with noise."""
+    from calib_core.data.observations import Observations
+    from calib_core.solvers.zhang_pless import linear_subsets, zhang_pless_linear
+
+    rng = np.random.default_rng(seed)
+    obs = make_observations(rng, 5 + seed % 6, 0.0 if seed % 2 else 0.02)
+    N = obs.n_boards
+    S = np.zeros((6, N), bool)
+    S[0] = True
+    for k in range(1, 6):
+        S[k, rng.choice(N, 5, replace=False)] = True
+    T, full = linear_subsets(obs, S)
+    assert full.all()
+    for k in range(6):
+        e_R, e_t = pose_errors(T[k], zhang_pless_linear(obs.subset(np.flatnonzero(S[k]))))
+        assert e_R < 1e-6 and e_t < 1e-7
+    if seed % 2:
+        e_R, e_t = pose_errors(T[0], obs.T_lidar_cam_true)
+        assert e_R < 1e-6 and e_t < 1e-7
+    parallel = Observations(tuple(obs.boards[0] for _ in range(5)), obs.T_lidar_cam_true)
+    assert not linear_subsets(parallel, np.ones((1, 5), bool))[1][0]      # one plane five times: rank deficient
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_gauss_newton_steps_on_some_boards_are_those_on_their_subset(seed):
+    """The basin test's Gauss-Newton steps on the scan points of some boards equal the steps on the subset of those
+    boards, and from a start near the truth on noise-free data they land on it."""
+    from calib_core.data.residuals import perturb
+    from calib_core.robust.choose import gauss_newton_steps
+
+    rng = np.random.default_rng(seed)
+    obs = make_observations(rng, 5, 0.0)
+    boards = np.array([True, True, False, True, True])
+    T0 = perturb(obs.T_lidar_cam_true, rng.normal(0, [0.01] * 3 + [0.02] * 3))
+    T1 = gauss_newton_steps(obs.scan_data, T0, boards)
+    np.testing.assert_allclose(T1, gauss_newton_steps(obs.subset(np.flatnonzero(boards)).scan_data, T0), atol=1e-12)
+    T5 = gauss_newton_steps(obs.scan_data, T0, boards, n=5)
+    assert max(pose_errors(T5, obs.T_lidar_cam_true)) < 1e-8

@@ -170,12 +170,14 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
                key=lambda c: c.cost)
 
 
-def gauss_newton_steps(data, T0: np.ndarray, n: int = BASIN_STEPS) -> np.ndarray:
-    """The extrinsic ``n`` Gauss-Newton steps on the range residuals take ``T0`` to (where refining it heads)."""
+def gauss_newton_steps(data, T0: np.ndarray, boards: np.ndarray | None = None, n: int = BASIN_STEPS) -> np.ndarray:
+    """The extrinsic ``n`` Gauss-Newton steps on the range residuals (of the scan points of ``boards``, (N,) bool;
+    default all) take ``T0`` to: where refining it heads."""
+    rows = slice(None) if boards is None else boards[data.board]
     T = T0
     for _ in range(n):
         e, J = range_residuals(T, data, jacobian=True)
-        T = perturb(T, -np.linalg.lstsq(J, e, rcond=None)[0])
+        T = perturb(T, -np.linalg.lstsq(J[rows], e[rows], rcond=None)[0])
     return T
 
 

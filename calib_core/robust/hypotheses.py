@@ -14,10 +14,9 @@ import numpy as np
 
 from ..data.lines import triple_inputs
 from ..data.observations import Observations
-from ..errors import SolveFailure
 from ..solvers.vasconcelos import board_triples, solve_triples
 from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
-from ..solvers.zhang_pless import zhang_pless_linear
+from ..solvers.zhang_pless import linear_subsets
 from .consensus import SCORE_TAU, board_statistics
 
 EXHAUSTIVE_TRIPLES = 220
@@ -132,21 +131,15 @@ def zp_hypotheses(obs: Observations, rng: np.random.Generator, n_subsets: int = 
     N = obs.n_boards
     if N < ZP_MIN_BOARDS:
         return np.zeros((0, 4, 4)), np.zeros((0, N), bool), []
-    subsets = [np.arange(N)]
     size = max(ZP_MIN_BOARDS, int(np.ceil(ZP_SUBSET_SHARE * N)))
-    if size < N:
-        subsets += [np.sort(rng.choice(N, size, replace=False)) for _ in range(n_subsets)]
-    Ts, srcs, reasons = [], [], []
-    for idx in subsets:
-        try:
-            Ts.append(zhang_pless_linear(obs.subset(idx)))
-        except SolveFailure as fail:
-            reasons.append(f"zhang_pless_linear on {len(idx)} boards: {fail.reason}")
-            continue
-        s = np.zeros(N, bool)
-        s[idx] = True
-        srcs.append(s)
-    return (np.array(Ts).reshape(-1, 4, 4), np.array(srcs, bool).reshape(-1, N), reasons)
+    subsets = np.ones((1 + (n_subsets if size < N else 0), N), bool)
+    for k in range(1, len(subsets)):
+        subsets[k] = False
+        subsets[k, rng.choice(N, size, replace=False)] = True
+    T, full = linear_subsets(obs, subsets)
+    reasons = [f"zhang_pless_linear on {int(s.sum())} boards: degenerate board set (the linear system is rank "
+               "deficient)" for s in subsets[~full]]
+    return T[full], subsets[full], reasons
 
 
 def hypotheses(obs: Observations, sigma_m: float, outline_sigma_m: float, *, use_zhang_pless: bool = True,

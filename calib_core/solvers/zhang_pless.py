@@ -17,27 +17,57 @@ from ..geometry.transforms import invert_T, make_T, project_to_so3
 MIN_BOARDS = 5
 
 
+def _equations(obs: Observations, weighting: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per board, the rows (K_i,9) and right-hand sides (K_i,) of the equations ``N_i^T H q = |N_i|^2`` (``"paper"``)
+    or ``n_i^T H q = d_i`` (``"unit"``), the coefficient of ``H[j,l]`` being ``N_j q_l``, ``q = (x, y, 1)``."""
+    if weighting not in ("paper", "unit"):
+        raise ValueError(f"weighting must be 'paper' or 'unit', got {weighting!r}")
+    n, d = obs.planes_cam()
+    out = []
+    for i, b in enumerate(obs.boards):
+        q = np.column_stack([b.scan, np.ones(len(b.scan))])           # (K,3) = (x, y, 1)
+        N = d[i] * n[i] if weighting == "paper" else n[i]
+        out.append((np.einsum("j,kl->kjl", N, q).reshape(len(q), 9),
+                    np.full(len(q), N @ N if weighting == "paper" else d[i])))
+    return out
+
+
 def linear_H(obs: Observations, *, weighting: str = "paper") -> tuple[np.ndarray, np.ndarray]:
     """Least-squares ``H`` (3x3) and the singular values of the scaled design matrix.
 
     ``weighting="paper"`` uses the equations ``N_i^T H q = |N_i|^2`` as printed; ``"unit"`` divides each by
     ``|N_i|`` (``n_i^T H q = d_i``: every equation is a point-to-plane distance in metres).
     """
-    n, d = obs.planes_cam()
-    rows, rhs = [], []
-    for i, b in enumerate(obs.boards):
-        q = np.column_stack([b.scan, np.ones(len(b.scan))])           # (K,3) = (x, y, 1)
-        N = d[i] * n[i] if weighting == "paper" else n[i]
-        rows.append(np.einsum("j,kl->kjl", N, q).reshape(len(q), 9))  # coefficient of H[j,l] is N_j q_l
-        rhs.append(np.full(len(q), N @ N if weighting == "paper" else d[i]))
-    if weighting not in ("paper", "unit"):
-        raise ValueError(f"weighting must be 'paper' or 'unit', got {weighting!r}")
-    A, y = np.concatenate(rows), np.concatenate(rhs)
+    eqs = _equations(obs, weighting)
+    A, y = np.concatenate([a for a, _ in eqs]), np.concatenate([r for _, r in eqs])
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     h, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
     sv = np.linalg.svd(A / scale, compute_uv=False)
     return (h / scale).reshape(3, 3), sv
+
+
+def linear_subsets(obs: Observations, subsets: np.ndarray, *, rank_tol: float = 1e-9) -> tuple[np.ndarray,
+                                                                                                np.ndarray]:
+    """The linear Zhang & Pless solution on each of many board subsets at once, ``subsets`` (S,N) bool (each of
+    at least ``MIN_BOARDS`` boards): (S,4,4) ``T_lidar_cam`` and (S,) whether the subset's system has full rank
+    (``rank_tol`` on the singular-value ratio, as ``zhang_pless_linear``). The equations are those of
+    ``zhang_pless_linear`` (paper weighting), solved through their normal equations summed per board (the same
+    least-squares solution; the squared condition number is harmless for starting points)."""
+    eqs = _equations(obs, "paper")
+    G = np.array([a.T @ a for a, _ in eqs])                                 # (N,9,9) per-board Gram matrices
+    g = np.array([a.T @ r for a, r in eqs])                                 # (N,9)
+    GS, gS = np.einsum("sn,nij->sij", subsets, G), subsets.astype(float) @ g
+    scale = np.sqrt(np.einsum("sii->si", GS))
+    scale[scale == 0] = 1.0
+    GS = GS / scale[:, :, None] / scale[:, None, :]
+    ev = np.linalg.eigvalsh(GS)                                             # squared singular values, ascending
+    full = np.sqrt(np.maximum(ev[:, 0], 0.0)) >= rank_tol * np.sqrt(ev[:, -1])
+    h = np.linalg.solve(np.where(full[:, None, None], GS, np.eye(9)), (gS / scale)[..., None])[..., 0] / scale
+    H = h.reshape(-1, 3, 3)
+    phi1, phi2, Delta = H[..., 0], H[..., 1], H[..., 2]
+    Phi = project_to_so3(np.stack([phi1, phi2, np.cross(phi1, phi2)], axis=-1))
+    return invert_T(make_T(Phi, Delta)), full
 
 
 def zhang_pless_linear(obs: Observations, *, weighting: str = "paper", rank_tol: float = 1e-9) -> np.ndarray:
