@@ -257,3 +257,26 @@ def test_gauss_newton_steps_on_some_boards_are_those_on_their_subset(seed):
     np.testing.assert_allclose(T1, gauss_newton_steps(obs.subset(np.flatnonzero(boards)).scan_data, T0), atol=1e-12)
     T5 = gauss_newton_steps(obs.scan_data, T0, boards, n=5)
     assert max(pose_errors(T5, obs.T_lidar_cam_true)) < 1e-8
+
+
+@pytest.mark.parametrize("seed", [0, 1, 4])
+def test_a_hopeless_polish_is_stopped_and_a_hopeful_one_is_not(seed):
+    """``polish`` from a start far off (seeds whose full polish takes more than ``GIVE_UP_ITERATIONS`` iterations):
+    with ``give_up_above`` below any cost it stops early (a higher cost than the full polish, still below the
+    start's); with it above the start's cost it is the full polish."""
+    from calib_core.data.residuals import perturb
+    from calib_core.robust.choose import polish
+    from calib_core.robust.scorers import ScoreOptions, lidarcam_residuals
+
+    rng = np.random.default_rng(200 + seed)
+    obs = make_observations(rng, 3, 0.02)
+    T0 = perturb(obs.T_lidar_cam_true, np.r_[rng.normal(0, 1.0, 3), rng.normal(0, 1.0, 3)])
+
+    def cost(T):
+        return 0.5 * float(np.sum(lidarcam_residuals(obs, T, range_sigma_m=0.02) ** 2))
+
+    full = polish(obs, T0, 200, ScoreOptions(), 0.02)
+    stopped = polish(obs, T0, 200, ScoreOptions(), 0.02, give_up_above=0.0)
+    np.testing.assert_allclose(polish(obs, T0, 200, ScoreOptions(), 0.02, give_up_above=10 * cost(T0)), full,
+                               atol=1e-12)
+    assert cost(full) < cost(stopped) < cost(T0)

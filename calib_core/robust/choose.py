@@ -24,6 +24,12 @@ DISTINCT_TRANS_M = 0.05
 POLISH_THRESHOLD = 10.0
 """The refined pose is polished on the whole cost when its endpoint and outline terms exceed this (in the
 cost's units, half a squared number of scale-lengths): the range optimum disagrees with the board outlines."""
+GIVE_UP_ITERATIONS = 20
+"""A polish from a later start is stopped after this many iterations ..."""
+GIVE_UP_FACTOR = 100.0
+"""... when its cost is still above this times the best cost found so far (a start that far off, after that many
+steps, has not found a better minimum: on the paper's three-board cell, where polishes travel farthest, no stopped
+polish would have won)."""
 POLISH_METHOD = "trf"
 """The ``least_squares`` method of ``polish``."""
 
@@ -72,10 +78,12 @@ def distinct_order(T: np.ndarray, cost: np.ndarray, n: int, rot_deg: float = DIS
     return out
 
 
-def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions, range_sigma_m: float) -> np.ndarray:
+def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions, range_sigma_m: float,
+           give_up_above: float = np.inf) -> np.ndarray:
     """Minimise the whole ``lidarcam`` selection cost from ``T0`` (``least_squares``, ``POLISH_METHOD``) with its
     analytic Jacobian (``scorers.lidarcam_linearised``, times the left Jacobian of SO(3) at the rotation step);
-    residuals and Jacobian are computed together and the Jacobian kept for the call at the same step."""
+    residuals and Jacobian are computed together and the Jacobian kept for the call at the same step. A polish
+    whose cost is still above ``give_up_above`` after ``GIVE_UP_ITERATIONS`` iterations is stopped there."""
     kw = {"range_sigma_m": range_sigma_m, **score.kwargs()}
     last: dict = {}
 
@@ -91,7 +99,12 @@ def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions
         J[:, :3] = J[:, :3] @ so3_left_jacobian(x[:3])
         return J
 
-    sol = least_squares(fun, np.zeros(6), jac=jac, method=POLISH_METHOD, max_nfev=max_nfev)
+    def hopeless(intermediate_result):
+        if intermediate_result.nit >= GIVE_UP_ITERATIONS and intermediate_result.cost > give_up_above:
+            raise StopIteration
+
+    sol = least_squares(fun, np.zeros(6), jac=jac, method=POLISH_METHOD, max_nfev=max_nfev,
+                        callback=hopeless if np.isfinite(give_up_above) else None)
     return perturb(T0, sol.x)
 
 
@@ -147,9 +160,10 @@ def refine_start(obs: Observations, T0: np.ndarray, sigma_m: float, score: Score
                                                           opts.polish_threshold)
 
 
-def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOptions, opts: RefineOptions) -> Choice:
+def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
+                  give_up_above: float = np.inf) -> Choice:
     """``c`` polished on the whole evidence (``polish``) when that lowers its cost, else ``c``."""
-    T2 = polish(obs, c.T, opts.max_nfev, score, sigma_m)
+    T2 = polish(obs, c.T, opts.max_nfev, score, sigma_m, give_up_above)
     f2 = float(lidarcam_score(obs, T2[None], range_sigma_m=sigma_m, **score.kwargs())[0])
     return Choice(f2, c.refined, T2, True, c.start) if f2 < c.cost else c
 
@@ -159,15 +173,18 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
     """Score candidates ``C`` with ``scorers.lidarcam`` on ``obs`` at range noise ``sigma_m``, refine the
     ``n_refine`` (default ``opts.n_refine``) best distinct ones on the range likelihood (``refine_start``; a start
     in the basin of one already refined is not refined again), polish those whose pose disagrees with the
-    outlines (``polish_choice``) and return the best."""
+    outlines (``polish_choice``; a hopeless polish of a later start is stopped: ``GIVE_UP_FACTOR``) and return
+    the best."""
     C = np.asarray(C, float).reshape(-1, 4, 4)
     n = opts.n_refine if n_refine is None else n_refine
     starts = best_starts(obs, C, sigma_m, score, n, opts.distinct_rot_deg, opts.distinct_trans_m)
     if not starts:
         raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
-    refined = _refine_starts(obs, C[starts], sigma_m, score, opts)
-    return min((polish_choice(obs, c, sigma_m, score, opts) if opts.polish and off else c for c, off in refined),
-               key=lambda c: c.cost)
+    out: list[Choice] = []
+    for c, off in _refine_starts(obs, C[starts], sigma_m, score, opts):
+        best = min((o.cost for o in out), default=np.inf)
+        out.append(polish_choice(obs, c, sigma_m, score, opts, GIVE_UP_FACTOR * best) if opts.polish and off else c)
+    return min(out, key=lambda c: c.cost)
 
 
 def gauss_newton_steps(data, T0: np.ndarray, boards: np.ndarray | None = None, n: int = BASIN_STEPS) -> np.ndarray:
