@@ -64,18 +64,22 @@ def distinct_order(T: np.ndarray, cost: np.ndarray, n: int, rot_deg: float = DIS
     """Indices of the ``n`` lowest finite ``cost`` among (M,4,4) ``T`` that differ pairwise by at least
     ``rot_deg`` of rotation or ``trans_m`` of translation, best first."""
     out: list[int] = []
-    cos_min = np.cos(np.radians(rot_deg))
     for j in np.argsort(cost, kind="stable"):
         if not np.isfinite(cost[j]) or len(out) >= n:
             break
-        if out:
-            K = T[out]
-            cos = (np.einsum("ab,kab->k", T[j, :3, :3], K[:, :3, :3]) - 1.0) / 2.0   # cos of the relative angle
-            near = (cos > cos_min) & (np.linalg.norm(K[:, :3, 3] - T[j, :3, 3], axis=1) < trans_m)
-            if near.any():
-                continue
+        if out and near_any(T[j], T[out], rot_deg, trans_m):
+            continue
         out.append(int(j))
     return out
+
+
+def near_any(A: np.ndarray, K: np.ndarray, rot_deg: float = DISTINCT_ROT_DEG,
+             trans_m: float = DISTINCT_TRANS_M) -> bool:
+    """Whether the extrinsic ``A`` (4,4) is within ``rot_deg`` of rotation and ``trans_m`` of translation of one of
+    ``K`` (k,4,4): the distinct-start rule."""
+    cos = (np.einsum("ab,kab->k", A[:3, :3], K[:, :3, :3]) - 1.0) / 2.0         # cos of the relative angle
+    near = (cos > np.cos(np.radians(rot_deg))) & (np.linalg.norm(K[:, :3, 3] - A[:3, 3], axis=1) < trans_m)
+    return bool(near.any())
 
 
 def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions, range_sigma_m: float,
@@ -198,12 +202,6 @@ def gauss_newton_steps(data, T0: np.ndarray, boards: np.ndarray | None = None, n
     return T
 
 
-def same_pose(A: np.ndarray, B: np.ndarray, rot_deg: float, trans_m: float) -> bool:
-    """Whether two extrinsics differ by less than ``rot_deg`` of rotation and ``trans_m`` of translation."""
-    cos = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1.0) / 2.0
-    return bool(cos > np.cos(np.radians(rot_deg)) and np.linalg.norm(A[:3, 3] - B[:3, 3]) < trans_m)
-
-
 def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score: ScoreOptions,
                    opts: RefineOptions) -> list[tuple[Choice, bool]]:
     """``refine_start`` of each start (best first), except a start whose Gauss-Newton steps land within
@@ -212,8 +210,7 @@ def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score:
     for T0 in starts:
         if out:
             T1 = gauss_newton_steps(obs.scan_data, T0)
-            if any(same_pose(T1, c.T, opts.distinct_rot_deg, opts.distinct_trans_m) for c, _ in out):
+            if near_any(T1, np.array([c.T for c, _ in out]), opts.distinct_rot_deg, opts.distinct_trans_m):
                 continue
         out.append(refine_start(obs, T0, sigma_m, score, opts))
     return out
-

@@ -18,7 +18,7 @@ from ..data.observations import Observations
 from ..data.residuals import range_residuals
 from ..errors import SolveFailure
 from ..refine.refine import F_SCALE_SIGMAS, Loss, refine
-from .choose import DISTINCT_ROT_DEG, DISTINCT_TRANS_M, distinct_order, gauss_newton_steps, same_pose
+from .choose import distinct_order, gauss_newton_steps, near_any
 from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
 from .inliers import TRIM_SIGMAS, TrimReport
@@ -178,7 +178,7 @@ def _in_basin(obs: Observations, T0: np.ndarray, first: np.ndarray, done: dict) 
     if not near or first.sum() < 3:
         return False
     T1 = gauss_newton_steps(obs.scan_data, T0, first)
-    return any(same_pose(T1, T, DISTINCT_ROT_DEG, DISTINCT_TRANS_M) for T in near)
+    return near_any(T1, np.array(near))
 
 
 def board_reason(q: float, threshold: float) -> str:
