@@ -273,6 +273,17 @@ class ScanData:
     normals: np.ndarray
     offsets: np.ndarray
 
+    def of_boards(self, boards: np.ndarray) -> ScanData:
+        """The points of the boards where ``boards`` (N,) bool is True, renumbered in order: the ``scan_data`` of
+        ``Observations.subset(np.flatnonzero(boards))``, taken from this one (ranges and beams carried over)."""
+        keep = boards[self.board]
+        renumber = np.cumsum(boards) - 1
+        out = ScanData(self.points[keep], renumber[self.board[keep]], self.normals[boards], self.offsets[boards])
+        for name in ("ranges", "beams"):
+            if name in self.__dict__:
+                out.__dict__[name] = self.__dict__[name][keep]
+        return out
+
     @cached_property
     def ranges(self) -> np.ndarray:
         """(K,) measured range ``|p|`` of every point (metres)."""
@@ -339,8 +350,12 @@ class Observations:
         """The same problem with only the boards at ``indices`` (in that order). Derived values that are per
         board (those with a ``subset_boards`` method, e.g. the scan lines) are carried over, not recomputed."""
         indices = [int(i) for i in indices]
-        out = Observations(tuple(self.boards[i] for i in indices), self.T_lidar_cam_true, dict(self.meta),
-                           self.camera)
+        # every part was validated when ``self`` was built: the subset is assembled, not validated again
+        out = object.__new__(Observations)
+        for name, value in (("boards", tuple(self.boards[i] for i in indices)),
+                            ("T_lidar_cam_true", self.T_lidar_cam_true), ("meta", dict(self.meta)),
+                            ("camera", self.camera)):
+            object.__setattr__(out, name, value)
         per_board = {k: v.subset_boards(indices) for k, v in self.__dict__.get("_derived", {}).items()
                      if hasattr(v, "subset_boards")}
         if per_board:

@@ -122,18 +122,38 @@ RESIDUALS = {Residual.PLANE: plane_residuals, Residual.RANGE: range_residuals}
 def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     """(M,N,2,3) first and last scan point of each board in that board's frame, per candidate.
 
-    ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (docs/METHOD.md eq. 7), metres.
+    ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (docs/METHOD.md eq. 7), metres (``board_frames``).
     """
-    ends, T_cb = obs.derived("residuals.endpoints", _endpoints)              # (N,2,3) lidar frame, (N,4,4)
+    A, c = board_frames(obs, candidates)
+    return obs.derived("residuals.endpoints", _endpoints)[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]
+
+
+def _endpoints(obs: Observations) -> np.ndarray:
+    """(N,2,3) first and last scan point of every board (lidar frame)."""
+    return np.array([[b.scan_3d[0], b.scan_3d[-1]] for b in obs.boards]).reshape(-1, 2, 3)
+
+
+def _board_poses(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+    """(N,3,3) ``Phi_i^T`` and (N,3) ``Phi_i^T Delta_i`` of every board (``T_cam_board = (Phi_i, Delta_i)``)."""
+    T = np.array([b.T_cam_board for b in obs.boards]).reshape(-1, 4, 4)
+    Pt = np.swapaxes(T[:, :3, :3], -1, -2)
+    return Pt, (Pt @ T[:, :3, 3, None])[..., 0]
+
+
+def board_frames(obs: Observations, candidates: np.ndarray, rows: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """The affine map of lidar points into each board's frame under every candidate ``T_lidar_cam`` (M,4,4):
+    (M,N,rows,3) ``A`` and (M,N,rows) ``c`` with ``p_W = A p_L + c = Phi_i^T (R^T (p_L - t) - Delta_i)`` (its
+    first ``rows`` coordinates), so ``A = Phi_i^T R^T`` and ``c = -A t - Phi_i^T Delta_i``."""
+    Pt, PtD = obs.derived("residuals.board_poses", _board_poses)
     R, t = candidates[:, :3, :3], candidates[:, :3, 3]
-    p_C = np.einsum("mba,mnkb->mnka", R, ends[None] - t[:, None, None, :])  # R^T (p - t)
-    return np.einsum("nba,mnkb->mnka", T_cb[:, :3, :3], p_C - T_cb[None, :, None, :3, 3])
+    A = Pt[None, :, :rows] @ np.swapaxes(R, -1, -2)[:, None]                  # (M,N,rows,3)
+    return A, -(A @ t[:, None, :, None])[..., 0] - PtD[None, :, :rows]
 
 
-def _endpoints(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
-    """(N,2,3) first and last scan point of every board (lidar frame) and (N,4,4) the boards' poses."""
-    return (np.array([[b.scan_3d[0], b.scan_3d[-1]] for b in obs.boards]),
-            np.array([b.T_cam_board for b in obs.boards]))
+def _board_slices(obs: Observations) -> list[slice]:
+    """Each board's rows of ``obs.scan_data`` (the scans are concatenated in board order)."""
+    ends = np.cumsum([len(b.scan) for b in obs.boards])
+    return [slice(int(e - len(b.scan)), int(e)) for e, b in zip(ends, obs.boards, strict=True)]
 
 
 def _edge_groups(obs: Observations) -> list[tuple]:
@@ -193,12 +213,8 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
 
 def points_in_boards(obs: Observations, candidates: np.ndarray) -> list[np.ndarray]:
     """Per board, (M,K_i,3) its scan points in the board frame under every candidate (as ``endpoints_in_board``)."""
-    R, t = candidates[:, :3, :3], candidates[:, :3, 3]
-    out = []
-    for b in obs.boards:
-        p_C = np.einsum("mba,mkb->mka", R, b.scan_3d[None] - t[:, None, :])
-        out.append(np.einsum("ba,mkb->mka", b.T_cam_board[:3, :3], p_C - b.T_cam_board[:3, 3]))
-    return out
+    A, c = board_frames(obs, candidates)
+    return [b.scan_3d @ np.swapaxes(A[:, i], -1, -2) + c[:, i, None] for i, b in enumerate(obs.boards)]
 
 
 def outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -211,22 +227,22 @@ def outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(np.array(idx), obs.boards[idx[0]].outline) for idx in groups.values()]
 
 
-def scan_points_in_boards(obs: Observations, candidates: np.ndarray) -> np.ndarray:
-    """(M,K,3) every scan point (in ``obs.scan_data`` order) in its own board's frame under every candidate:
-    ``p_W = Phi_i^T (R^T (p_L - t) - Delta_i)`` (metres)."""
-    data = obs.scan_data
-    R, t = candidates[:, :3, :3], candidates[:, :3, 3]
-    T_cb = obs.derived("residuals.point_board_poses", lambda o: np.array([b.T_cam_board for b in o.boards])[
-        o.scan_data.board])                                                          # (K,4,4), once per obs
-    p_C = np.einsum("mba,mkb->mka", R, data.points[None] - t[:, None, :])
-    return np.einsum("kba,mkb->mka", T_cb[:, :3, :3], p_C - T_cb[None, :, :3, 3])
+def scan_points_in_boards(obs: Observations, candidates: np.ndarray, rows: int = 3) -> np.ndarray:
+    """(M,K,rows) every scan point (in ``obs.scan_data`` order) in its own board's frame under every candidate:
+    ``p_W = Phi_i^T (R^T (p_L - t) - Delta_i)`` (metres; its first ``rows`` coordinates, ``board_frames``)."""
+    A, c = board_frames(obs, candidates, rows)
+    points = obs.scan_data.points
+    out = np.empty((len(candidates), len(points), rows))
+    for i, sl in enumerate(obs.derived("residuals.board_slices", _board_slices)):
+        out[:, sl] = points[sl] @ np.swapaxes(A[:, i], -1, -2) + c[:, i, None]
+    return out
 
 
 def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool = False):
     """(M,K) distance (metres) of every scan point outside its board's exact outline under every candidate (0
     inside, and on boards without an exact outline; ``outside_outline`` per group of boards sharing one); with
     ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y)."""
-    P = scan_points_in_boards(obs, candidates)[..., :2]
+    P = scan_points_in_boards(obs, candidates, rows=2)
     out, grad = np.zeros(P.shape[:2]), np.zeros(P.shape)
     for sel, outline in obs.derived("residuals.outline_point_groups", _outline_point_groups):
         if gradient:
@@ -244,31 +260,33 @@ def _outline_point_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarra
 def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool = False):
     """Distance (metres) of 2D points ``xy`` (...,2) outside the simple polygon ``outline`` (V,2); 0 inside. With
     ``gradient`` also (...,2) its gradient in ``xy``: the unit vector from the nearest point of the outline."""
-    a, b = outline, np.roll(outline, -1, axis=0)                                # edges a_k -> b_k
-    ab = b - a
-    w = xy[..., None, :] - a                                                    # (...,V,2)
-    s = np.clip(np.einsum("...vc,vc->...v", w, ab) / np.sum(ab**2, axis=1), 0.0, 1.0)
-    off = w - s[..., None] * ab                                                 # from the nearest point of each edge
-    d_edge = np.linalg.norm(off, axis=-1)
-    dist = d_edge.min(axis=-1)
-    x, y = xy[..., 0, None], xy[..., 1, None]                                   # even-odd rule
-    crosses = (a[:, 1] > y) != (b[:, 1] > y)
+    (ax, ay), (bx, by) = outline.T, np.roll(outline, -1, axis=0).T               # edges a_k -> b_k
+    abx, aby = bx - ax, by - ay
+    x, y = xy[..., 0, None], xy[..., 1, None]
+    wx, wy = x - ax, y - ay                                                     # (...,V)
+    s = np.clip((wx * abx + wy * aby) / (abx**2 + aby**2), 0.0, 1.0)
+    ox, oy = wx - s * abx, wy - s * aby                                         # from the nearest point of each edge
+    d2 = ox**2 + oy**2
+    dist = np.sqrt(d2.min(axis=-1))
+    crosses = (ay > y) != (by > y)                                              # even-odd rule
     with np.errstate(divide="ignore", invalid="ignore"):
-        x_at = a[:, 0] + (y - a[:, 1]) * ab[:, 0] / ab[:, 1]
+        x_at = ax + (y - ay) * abx / aby
     inside = np.sum(crosses & (x < x_at), axis=-1) % 2 == 1
+    out = np.where(inside, 0.0, dist)
     if not gradient:
-        return np.where(inside, 0.0, dist)
-    nearest = np.take_along_axis(off, np.argmin(d_edge, axis=-1)[..., None, None], axis=-2)[..., 0, :]
+        return out
+    k = np.argmin(d2, axis=-1)[..., None]
+    nearest = np.stack([np.take_along_axis(ox, k, -1)[..., 0], np.take_along_axis(oy, k, -1)[..., 0]], axis=-1)
     g = np.where((inside | (dist == 0))[..., None], 0.0, nearest / np.where(dist > 0, dist, 1.0)[..., None])
-    return np.where(inside, 0.0, dist), g
+    return out, g
 
 
-def board_frame_jacobian(T: np.ndarray, points: np.ndarray, T_cam_board: np.ndarray) -> np.ndarray:
-    """(K,3,6) derivative of the board-frame coordinates ``p_W = Phi^T (R^T (p_L - t) - Delta)`` of lidar points
-    ``points`` (K,3) under one ``T_lidar_cam`` ``T``, each in its board's frame ``T_cam_board`` (K,4,4), with
-    respect to ``x = (w, dt)`` (the module's left perturbation): ``Phi^T R^T [[p_L - t]_x, -I]``."""
-    M = np.einsum("kba,cb->kac", T_cam_board[:, :3, :3], T[:3, :3])             # Phi^T R^T, (K,3,3)
-    q = points - T[:3, 3]
-    return np.concatenate([np.cross(M, q[:, None, :]), -M], axis=2)
-
-
+def board_frame_rows(obs: Observations, T: np.ndarray, points: np.ndarray, board: np.ndarray,
+                     g: np.ndarray) -> np.ndarray:
+    """(K,6) rows ``g_k . d p_W,k / d x`` of the chain rule through the board frame: lidar points ``points`` (K,3)
+    of boards ``board`` (K,) under one ``T_lidar_cam`` ``T``, ``g`` (K,r) the gradients in the first r board-frame
+    coordinates, ``x = (w, dt)`` the module's left perturbation. With ``A = Phi^T R^T`` (``board_frames``),
+    ``d p_W / d x = A [[p_L - t]_x, -I]``, so the row is ``(v x (p_L - t), -v)`` with ``v = A^T g``."""
+    A = board_frames(obs, T[None], g.shape[1])[0][0][board]                    # (K,r,3)
+    v = np.sum(g[..., None] * A, axis=1)
+    return np.concatenate([_cross(v, points - T[:3, 3]), -v], axis=1)

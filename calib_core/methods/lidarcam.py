@@ -85,7 +85,7 @@ def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
     search = consensus_search(obs_t, trim_report, range_sigma_m=opts.range_sigma_m,
                               outline_sigma_m=score.outline_sigma_m, options=opts.consensus)
     sigma = search.sigma_m
-    best = choose_and_refine(search.obs_used, search.pool, sigma, score, opts.refine)
+    best = choose_and_refine(search.obs_used, search.pool, sigma, score, opts.refine, refined=search.refined)
     start = float(lidarcam_score(search.obs_used, best.start[None], range_sigma_m=sigma, **score.kwargs())[0])
     tests = final_tests(search, best.T, reject=opts.consensus.reject_boards)
     if tests.changed:  # boards or points left out (or taken back) at the refined pose: refine on what is left

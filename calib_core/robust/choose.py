@@ -153,11 +153,12 @@ class Choice:
 
 
 def refine_start(obs: Observations, T0: np.ndarray, sigma_m: float, score: ScoreOptions,
-                 opts: RefineOptions) -> tuple[Choice, bool]:
-    """Refine one start on the range likelihood: its ``Choice`` (unpolished) and whether the refined pose
-    disagrees with the board outlines (endpoint and outline terms above ``opts.polish_threshold``)."""
-    r = refine(obs.scan_data, T0, residual="range", loss=opts.loss, f_scale_m=opts.scale_m(sigma_m),
-               max_nfev=opts.max_nfev)
+                 opts: RefineOptions, refined: RefineResult | None = None) -> tuple[Choice, bool]:
+    """Refine one start on the range likelihood (``refined``: its refinement, already run on ``obs``): its
+    ``Choice`` (unpolished) and whether the refined pose disagrees with the board outlines (endpoint and outline
+    terms above ``opts.polish_threshold``)."""
+    r = refined if refined is not None else refine(obs.scan_data, T0, residual="range", loss=opts.loss,
+                                                   f_scale_m=opts.scale_m(sigma_m), max_nfev=opts.max_nfev)
     T1 = r.T_lidar_cam
     final, parts = lidarcam_score(obs, T1[None], range_sigma_m=sigma_m, **score.kwargs(), return_details=True)
     return Choice(float(final[0]), r, T1, False, T0), bool(parts["edge"][0] + parts["outline"][0] >
@@ -173,19 +174,21 @@ def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOpti
 
 
 def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
-                      n_refine: int | None = None) -> Choice:
+                      n_refine: int | None = None, refined: tuple = ()) -> Choice:
     """Score candidates ``C`` with ``scorers.lidarcam`` on ``obs`` at range noise ``sigma_m``, refine the
     ``n_refine`` (default ``opts.n_refine``) best distinct ones on the range likelihood (``refine_start``; a start
-    in the basin of one already refined is not refined again), polish those whose pose disagrees with the
-    outlines (``polish_choice``; a hopeless polish of a later start is stopped: ``GIVE_UP_FACTOR``) and return
-    the best."""
+    in the basin of one already refined is not refined again, nor a start that is the optimum of one of
+    ``refined``, plain least-squares refinements already run on ``obs``), polish those whose pose disagrees with
+    the outlines (``polish_choice``; a hopeless polish of a later start is stopped: ``GIVE_UP_FACTOR``) and
+    return the best."""
     C = np.asarray(C, float).reshape(-1, 4, 4)
     n = opts.n_refine if n_refine is None else n_refine
     starts = best_starts(obs, C, sigma_m, score, n, opts.distinct_rot_deg, opts.distinct_trans_m)
     if not starts:
         raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
+    known = refined if opts.loss == Loss.LINEAR else ()
     out: list[Choice] = []
-    for c, off in _refine_starts(obs, C[starts], sigma_m, score, opts):
+    for c, off in _refine_starts(obs, C[starts], sigma_m, score, opts, known):
         best = min((o.cost for o in out), default=np.inf)
         out.append(polish_choice(obs, c, sigma_m, score, opts, GIVE_UP_FACTOR * best) if opts.polish and off else c)
     return min(out, key=lambda c: c.cost)
@@ -193,24 +196,28 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
 
 def gauss_newton_steps(data, T0: np.ndarray, boards: np.ndarray | None = None, n: int = BASIN_STEPS) -> np.ndarray:
     """The extrinsic ``n`` Gauss-Newton steps on the range residuals (of the scan points of ``boards``, (N,) bool;
-    default all) take ``T0`` to: where refining it heads."""
-    rows = slice(None) if boards is None else boards[data.board]
+    default all) take ``T0`` to: where refining it heads (each step the least-squares solution of the 6x6 normal
+    equations: a test of where a start heads, not an estimate)."""
+    w = np.ones(len(data.points)) if boards is None else boards[data.board].astype(float)
     T = T0
     for _ in range(n):
         e, J = range_residuals(T, data, jacobian=True)
-        T = perturb(T, -np.linalg.lstsq(J[rows], e[rows], rcond=None)[0])
+        Jw = J * w[:, None]
+        T = perturb(T, -np.linalg.lstsq(Jw.T @ J, Jw.T @ e, rcond=None)[0])
     return T
 
 
 def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score: ScoreOptions,
-                   opts: RefineOptions) -> list[tuple[Choice, bool]]:
+                   opts: RefineOptions, known: tuple = ()) -> list[tuple[Choice, bool]]:
     """``refine_start`` of each start (best first), except a start whose Gauss-Newton steps land within
-    the distinct-start rule of a start already refined: it is in that start's basin (``BASIN_STEPS``)."""
+    the distinct-start rule of a start already refined: it is in that start's basin (``BASIN_STEPS``). A start
+    that is the optimum of a ``known`` refinement keeps it."""
     out: list[tuple[Choice, bool]] = []
     for T0 in starts:
         if out:
             T1 = gauss_newton_steps(obs.scan_data, T0)
             if near_any(T1, np.array([c.T for c, _ in out]), opts.distinct_rot_deg, opts.distinct_trans_m):
                 continue
-        out.append(refine_start(obs, T0, sigma_m, score, opts))
+        r = next((r for r in known if np.array_equal(r.T_lidar_cam, T0)), None)
+        out.append(refine_start(obs, T0, sigma_m, score, opts, r))
     return out

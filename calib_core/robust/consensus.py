@@ -28,7 +28,7 @@ from scipy.stats import chi2
 
 from ..data.lines import ScanLines, scan_lines
 from ..data.observations import Observations
-from ..data.residuals import outline_groups, outside_outline
+from ..data.residuals import board_frames, outline_groups, outside_outline
 
 SCORE_TAU = 400.0
 """MSAC truncation of the per-board statistic while scoring hypotheses (minimal hypotheses are noisy: a good board
@@ -74,13 +74,12 @@ def _statistics(obs: Observations, L: ScanLines, var: tuple, T: np.ndarray, outl
         off = np.einsum("mnc,nc->mn", nu, L.centroid) - c / s
         sin = nu[..., 0] * L.normal[None, :, 1] - nu[..., 1] * L.normal[None, :, 0]
         q = off**2 / var[0] + sin**2 / var[1]
-    # scan ends in each board's frame: p_W = Phi^T (R^T (p_L - t) - Delta)
-    p_C = np.einsum("mba,mnkb->mnka", R, L.ends[None] - t[:, None, None, :])
-    depth = p_C[..., 2].mean(axis=-1)                                         # scan centre's depth in {C}
-    T_cb = np.array([b.T_cam_board for b in obs.boards])
-    p_W = np.einsum("mnkb,nba->mnka", p_C - T_cb[None, :, None, :3, 3], T_cb[:, :3, :3])
-    for idx, outline in outline_groups(obs):          # boards sharing one outline at once
-        q[:, idx] += np.sum((outside_outline(p_W[:, idx, :, :2], outline) / outline_sigma_m) ** 2, axis=-1)
+    # scan centre's depth in {C} (z of R^T (p_L - t)) and the scan ends in each board's frame (``board_frames``)
+    depth = np.einsum("mna,ma->mn", L.ends.mean(axis=1)[None] - t[:, None], R[:, :, 2])
+    A, c = board_frames(obs, T, rows=2)
+    p_W = L.ends[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]             # (M,N,2,2)
+    for idx, outline in obs.derived("consensus.outline_groups", outline_groups):  # boards sharing one outline
+        q[:, idx] += np.sum((outside_outline(p_W[:, idx], outline) / outline_sigma_m) ** 2, axis=-1)
     q = np.where((depth > 0) & np.isfinite(q), q, np.inf)
     return q
 

@@ -16,7 +16,7 @@ from scipy.special import logsumexp
 
 from ..data.observations import Observations
 from ..data.residuals import (
-    board_frame_jacobian,
+    board_frame_rows,
     candidate_chunk,
     in_chunks,
     outside_outlines,
@@ -270,18 +270,18 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
     """``lidarcam_residuals`` (n,) at one (4,4) ``T_lidar_cam`` and their analytic Jacobian (n,6) with respect to
     ``x = (w, dt)``, the left perturbation of ``calib_core.data.residuals`` (radians, metres): range rows from
     ``range_residuals``; endpoint and outline rows by the chain rule through the board-frame coordinates of the
-    scan points (``board_frame_jacobian``), each endpoint's edge pairing and each point's nearest outline edge
+    scan points (``board_frame_rows``), each endpoint's edge pairing and each point's nearest outline edge
     held fixed (both are piecewise constant). ``behind_penalty`` is not a residual; it is accepted for the
     scorer's keywords."""
     T = np.asarray(T_lidar_cam, float)
     data = obs.scan_data
     exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
-    ends, T_ends, T_pts = obs.derived("scorers.jacobian_constants", _jacobian_constants)
+    ends, end_boards = obs.derived("scorers.jacobian_constants", _jacobian_constants)
     rng, J_rng = range_residuals(T, data, jacobian=True)
     edge, g_edge = point_line_errors(obs, T[None], gradient=True)
     out, g_out = outside_outlines(obs, T[None], gradient=True)
-    J_edge = np.einsum("kc,kcx->kx", g_edge[0][exact].reshape(-1, 3), board_frame_jacobian(T, ends, T_ends))
-    J_out = np.einsum("kc,kcx->kx", g_out[0][on_exact], board_frame_jacobian(T, data.points[on_exact], T_pts)[:, :2])
+    J_edge = board_frame_rows(obs, T, ends, end_boards, g_edge[0][exact].reshape(-1, 3))
+    J_out = board_frame_rows(obs, T, data.points[on_exact], data.board[on_exact], g_out[0][on_exact])
     res = np.concatenate([rng / range_sigma_m, edge[0][exact].ravel() / edge_sigma_m,
                           out[0][on_exact] / outline_sigma_m])
     return res, np.concatenate([J_rng / range_sigma_m, J_edge / edge_sigma_m, J_out / outline_sigma_m], axis=0)
@@ -289,11 +289,10 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
 
 def _jacobian_constants(obs: Observations):
     """For ``lidarcam_linearised``: the two scan endpoints of every exact-outline board (2 n_exact, 3) and their
-    boards' poses (2 n_exact, 4, 4), and the board pose of every scan point on such a board (K_exact, 4, 4)."""
-    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    boards (2 n_exact,)."""
+    exact, _, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
     ends = np.array([[obs.boards[i].scan_3d[0], obs.boards[i].scan_3d[-1]] for i in exact]).reshape(-1, 3)
-    poses = np.array([b.T_cam_board for b in obs.boards]).reshape(-1, 4, 4)
-    return ends, np.repeat(poses[exact], 2, axis=0), poses[obs.scan_data.board[on_exact]]
+    return ends, np.repeat(exact, 2)
 
 
 PENG2022_OPTIONS = ("delta_m", "normalise_candidates", "beta_norm", "beta_eps", "error", "weighting")

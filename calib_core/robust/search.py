@@ -17,7 +17,7 @@ from ..data.lines import scan_lines
 from ..data.observations import Observations
 from ..data.residuals import range_residuals
 from ..errors import SolveFailure
-from ..refine.refine import F_SCALE_SIGMAS, Loss, refine
+from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine
 from .choose import distinct_order, gauss_newton_steps, near_any
 from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
@@ -61,7 +61,9 @@ class ConsensusOptions:
 @dataclass(frozen=True, eq=False)
 class Search:
     """Outcome of the consensus search (see the module doc); ``good`` are the caller's indices of the boards with a
-    line-like scan, ``used`` (len(good),) bool the consensus among them."""
+    line-like scan, ``used`` (len(good),) bool the consensus among them; ``refined`` the range refinements
+    (``RefineResult``) of the local optimisations that ran on exactly the boards of ``used``: extrinsics of
+    ``pool`` already refined on ``obs_used``."""
 
     obs: Observations
     trim: TrimReport | None
@@ -72,6 +74,7 @@ class Search:
     sigma_m: float
     outline_sigma_m: float
     rejected: list = field(default_factory=list)
+    refined: tuple = ()
 
     @cached_property
     def obs_good(self) -> Observations:
@@ -90,25 +93,40 @@ def _rejection(index: int, reason: str, statistic: float | None = None) -> dict:
     return {"index": int(index), "reason": reason, "statistic": None if statistic is None else float(statistic)}
 
 
+@dataclass(frozen=True, eq=False)
+class LocalOptimum:
+    """One local optimisation (``local_optimise``): the extrinsic ``T``, its consensus set ``used`` (N,) bool, the
+    per-board statistics ``q`` (N,), their ``inflation``, the MSAC ``cost`` at the final threshold plus
+    ``N log(inflation)``, and ``refined``: the range refinement that gave ``T`` when it ran on exactly the boards
+    of ``used`` (else None)."""
+
+    T: np.ndarray
+    used: np.ndarray
+    q: np.ndarray
+    inflation: float
+    cost: float
+    refined: RefineResult | None
+
+
 def local_optimise(obs: Observations, T0: np.ndarray, q0: np.ndarray, sigma_m: float, outline_sigma_m: float,
-                   start_all: bool = False):
+                   start_all: bool = False) -> LocalOptimum:
     """Refine ``T0`` on the boards it explains (``q0 < SCORE_TAU``; every board in front of the camera with
-    ``start_all``), re-test every board, repeat until the consensus set is stable: (T, used (N,) bool, q (N,),
-    inflation, MSAC cost at the final threshold plus ``N log(inflation)``)."""
+    ``start_all``), re-test every board, repeat until the consensus set is stable."""
     used, T, q = (np.isfinite(q0) if start_all else q0 < SCORE_TAU), T0, q0
-    s2 = 1.0
+    s2, r = 1.0, None
     for _ in range(LO_ROUNDS):
         if used.sum() < 3:
             break
-        T = refine(obs.subset(np.flatnonzero(used)).scan_data, T, residual="range", loss=LO_LOSS,
-                   f_scale_m=F_SCALE_SIGMAS * sigma_m).T_lidar_cam
+        r = refine(obs.scan_data.of_boards(used), T, residual="range", loss=LO_LOSS,
+                   f_scale_m=F_SCALE_SIGMAS * sigma_m)
+        T = r.T_lidar_cam
         q = board_statistics(obs, T, sigma_m, outline_sigma_m)[0]
         s2 = inflation(q[used])
         new = q <= TEST_CHI2 * s2
         if np.array_equal(new, used):
             break
-        used = new
-    return T, used, q, s2, float(msac_cost(q[None], TEST_CHI2 * s2)[0]) + np.log(s2) * len(q)
+        used, r = new, None
+    return LocalOptimum(T, used, q, s2, float(msac_cost(q[None], TEST_CHI2 * s2)[0]) + np.log(s2) * len(q), r)
 
 
 def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_m: float | None,
@@ -128,20 +146,21 @@ def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_
     if len(H.T) == 0:
         raise SolveFailure("no candidate: " + "; ".join(H.reasons))
     used = np.ones(len(good), bool)
-    lo_T: list[np.ndarray] = []
+    optima: list[LocalOptimum] = []
     if options.reject_boards and len(good) >= MIN_TESTABLE:
-        used, lo_T, rejected = _consensus(obs_g, H, sigma, outline_sigma_m, good, rejected)
+        used, optima, rejected = _consensus(obs_g, H, sigma, outline_sigma_m, good, rejected)
     within = np.flatnonzero(H.within(used))
     cap = POOL_MAX if H.exhaustive else POOL_MAX_SAMPLED
     within = within[np.argsort(msac_cost(H.q[within][:, used]), kind="stable")[:cap]]
-    pool = np.concatenate([H.T[within]] + ([np.array(lo_T)] if lo_T else []))
-    return Search(obs, trim, good, H, used, pool, sigma, outline_sigma_m, rejected)
+    pool = np.concatenate([H.T[within]] + ([np.array([o.T for o in optima])] if optima else []))
+    refined = tuple(o.refined for o in optima if o.refined is not None and np.array_equal(o.used, used))
+    return Search(obs, trim, good, H, used, pool, sigma, outline_sigma_m, rejected, refined)
 
 
 def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m: float, good: np.ndarray,
                rejected: list):
-    """Local optimisation of the best starts and the consensus set of the best: (used (N,) bool, the optimised
-    extrinsics, the rejections so far plus the boards left out)."""
+    """Local optimisation of the best starts and the consensus set of the best: (used (N,) bool, the local optima
+    (``LocalOptimum``), the rejections so far plus the boards left out)."""
     cost = msac_cost(H.q)
     # starts: the best MSAC hypotheses, and the best by the untruncated sum (all boards, no rejection)
     starts = [(j, False) for j in distinct_order(H.T, cost, LO_STARTS)]
@@ -158,15 +177,15 @@ def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m
         raise SolveFailure("lidarcam: no hypothesis puts the boards in front of the camera", H.T)
     # compare them at one truncation (the largest inflation among them): a solution must not win by
     # leaving out boards that inflate its own noise estimate
-    tau = TEST_CHI2 * max(res[3] for res in results)
-    best = min(results, key=lambda res: float(msac_cost(res[2][None], tau)[0]))
-    used = best[1]
-    rejected = rejected + [_rejection(good[k], board_reason(best[2][k], TEST_CHI2 * best[3]), best[2][k])
+    tau = TEST_CHI2 * max(res.inflation for res in results)
+    best = min(results, key=lambda res: float(msac_cost(res.q[None], tau)[0]))
+    used = best.used
+    rejected = rejected + [_rejection(good[k], board_reason(best.q[k], TEST_CHI2 * best.inflation), best.q[k])
                            for k in np.flatnonzero(~used)]
     if used.sum() < 3:
         raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(good)} boards agree on one extrinsic "
                            f"(at least 3 are needed); the others fail the per-board test", H.T)
-    return used, [res[0] for res in results], rejected
+    return used, results, rejected
 
 
 def _in_basin(obs: Observations, T0: np.ndarray, first: np.ndarray, done: dict) -> bool:
@@ -174,7 +193,7 @@ def _in_basin(obs: Observations, T0: np.ndarray, first: np.ndarray, done: dict) 
     run: its Gauss-Newton steps on those boards land within the distinct-start rule of a result whose consensus
     holds every board of ``first`` (``choose.BASIN_STEPS``: it would be optimised to the same extrinsic and
     consensus)."""
-    near = [res[0] for res in done.values() if np.all(res[1][first])]
+    near = [res.T for res in done.values() if np.all(res.used[first])]
     if not near or first.sum() < 3:
         return False
     T1 = gauss_newton_steps(obs.scan_data, T0, first)
