@@ -13,7 +13,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from ..geometry.transforms import rotvec_to_matrix
+from ..geometry.transforms import rotvec_to_matrix, skew
 from .observations import Observations, ScanData
 
 
@@ -96,9 +96,10 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     if not jacobian:
         return e
     J = np.empty((len(e), 6))
-    # d(num)/dw = m x t, d(mb)/dw = m x b  (from dm = w x m); m x t is one vector per board
-    m_cross_t = _cross(data.normals @ T[:3, :3].T, np.broadcast_to(T[:3, 3], data.normals.shape))[data.board]
-    J[:, :3] = -(m_cross_t * mb[:, None] - _cross(mk, b) * num[:, None]) / (mb**2)[:, None]
+    # d(num)/dw = m x t = m^T [t]_x (one vector per board), d(mb)/dw = m x b = -[b]_x m (from dm = w x m)
+    m_cross_t = (data.normals @ T[:3, :3].T @ skew(T[:3, 3]))[data.board]
+    m_cross_b = -(data.beam_skews @ mk[:, :, None])[..., 0]
+    J[:, :3] = -(m_cross_t * mb[:, None] - m_cross_b * num[:, None]) / (mb**2)[:, None]
     J[:, 3:] = -mk / mb[:, None]
     return e, J
 
@@ -202,12 +203,12 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
         mm, nn = np.ogrid[:M, :len(idx)]
         out[:, idx, 0] = err[mm, nn, 0, k0]
         out[:, idx, 1] = err[mm, nn, 1, k1]
-        if gradient:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, summed over the edge's two vertices
+        if gradient:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, summed over the paired edge's two vertices
             a3 = np.concatenate([a, np.zeros(a.shape[:2] + (1,))], axis=-1)     # (n,V,3)
-            u = (Pi[:, :, :, None, :] - a3[None, :, None]) / np.maximum(da, 1e-300)[..., None]  # (M,n,2,V,3)
-            u = u + np.roll(u, -1, axis=3)
-            grad[:, idx, 0] = u[mm, nn, 0, k0]
-            grad[:, idx, 1] = u[mm, nn, 1, k1]
+            for end, k in ((0, k0), (1, k1)):
+                p = Pi[:, :, end]                                                # (M,n,3)
+                for v in (k, (k + 1) % V):
+                    grad[:, idx, end] += (p - a3[nn, v]) / np.maximum(da[mm, nn, end, v], 1e-300)[..., None]
     return (out, grad) if gradient else out
 
 

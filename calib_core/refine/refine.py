@@ -76,20 +76,21 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
     except KeyError:
         raise CalibrationError(f"unknown residual {residual!r}; choose from {sorted(RESIDUALS)}") from None
     T0 = np.asarray(T0, float)
-    last: dict = {}  # the pose of the latest residual call: the Jacobian at the same step reuses it
+    last: dict = {}  # the latest step: its pose, residuals and Jacobian (both computed in one pass)
 
-    def pose(x):
+    def at(x):
         if not np.array_equal(last.get("x"), x):
-            last["x"], last["T"] = x.copy(), perturb(T0, x)
-        return last["T"]
+            T = perturb(T0, x)
+            last.update(x=x.copy(), T=T, eJ=fn(T, data, jacobian=True))
+        return last
 
     def fun(x):
-        return fn(pose(x), data)
+        return at(x)["eJ"][0]
 
     def jac(x):
         # d/dx of f(exp(w) R0): the left-perturbation Jacobian at the current pose times the left
         # Jacobian of SO(3) at w (exp(w + dw) = exp(J_l(w) dw) exp(w) to first order).
-        J = fn(pose(x), data, jacobian=True)[1]
+        J = at(x)["eJ"][1].copy()
         J[:, :3] = J[:, :3] @ so3_left_jacobian(x[:3])
         return J
 
@@ -99,8 +100,8 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
     method = "lm" if loss == Loss.LINEAR and len(e0) >= 6 else "trf"
     sol = least_squares(fun, np.zeros(6), jac=jac, method=method, loss=loss, f_scale=f_scale,
                         max_nfev=max_nfev, x_scale=x_scale if x_scale is not None else "jac")
-    T = pose(sol.x)
-    e, J = fn(T, data, jacobian=True)
+    step = at(sol.x)
+    T, (e, J) = step["T"], step["eJ"]
     return RefineResult(T, float(sol.cost), robust_cost(e0, loss, f_scale), e, J, bool(sol.success),
                         str(sol.message), int(sol.nfev))
 

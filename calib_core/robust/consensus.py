@@ -23,6 +23,8 @@ Lidar frame ``{L}``, camera ``{C}``, board ``{W}_i`` as in ``calib_core.data.obs
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy.stats import chi2
 
@@ -94,9 +96,15 @@ MAX_INFLATION = 25.0
 the boards do not agree on one extrinsic and the tests reject them rather than widen."""
 
 
+@functools.lru_cache(maxsize=16)
+def chi2_median(dof: int) -> float:
+    """The median of the chi-square distribution with ``dof`` degrees of freedom (kept per ``dof``)."""
+    return float(chi2.median(dof))
+
+
 def inflation(q_used: np.ndarray, dof: int = 2) -> float:
     """Variance inflation (1 .. ``MAX_INFLATION``) of the per-board statistics of the boards in use: their median
     over the chi-square median, so that unmodelled noise (e.g. camera-pose errors) does not reject good boards."""
     if len(q_used) == 0:
         return 1.0
-    return min(MAX_INFLATION, max(1.0, float(np.median(q_used)) / float(chi2.median(dof))))
+    return min(MAX_INFLATION, max(1.0, float(np.median(q_used)) / chi2_median(dof)))

@@ -11,6 +11,7 @@ real lidar's heavy-tailed noise is not read as outliers). Lidar frame, metres.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -81,15 +82,19 @@ def line_range_residuals(points: np.ndarray, normal: np.ndarray, offset) -> np.n
     return r[None] - np.asarray(offset, float).reshape(-1, 1) / nb
 
 
+@functools.lru_cache(maxsize=1024)
 def _pairs(K: int) -> tuple[np.ndarray, np.ndarray]:
-    """Deterministic point pairs spread along a scan of K points (gaps K/2 and K/3)."""
+    """Deterministic point pairs spread along a scan of K points (gaps K/2 and K/3); read-only, kept per K."""
     ii, jj = [], []
     for g in _PAIR_GAPS:
         gap = max(1, K // g)
         starts = np.unique(np.linspace(0, K - 1 - gap, min(_MAX_PAIRS // len(_PAIR_GAPS), K - gap)).astype(int))
         ii.append(starts)
         jj.append(starts + gap)
-    return np.concatenate(ii), np.concatenate(jj)
+    out = np.concatenate(ii), np.concatenate(jj)
+    for a in out:
+        a.setflags(write=False)
+    return out
 
 
 def robust_line_residuals(points: np.ndarray) -> np.ndarray | None:
