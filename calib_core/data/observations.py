@@ -276,8 +276,7 @@ class ScanData:
     def of_boards(self, boards: np.ndarray) -> ScanData:
         """The points of the boards where ``boards`` (N,) bool is True, renumbered in order: the ``scan_data`` of
         ``Observations.subset(np.flatnonzero(boards))``, taken from this one (ranges and beams carried over)."""
-        keep = boards[self.board]
-        renumber = np.cumsum(boards) - 1
+        keep, renumber = boards[self.board], np.cumsum(boards) - 1
         out = ScanData(self.points[keep], renumber[self.board[keep]], self.normals[boards], self.offsets[boards])
         for name in ("ranges", "beams", "beam_skews"):
             if name in self.__dict__:
@@ -357,10 +356,8 @@ class Observations:
         indices = [int(i) for i in indices]
         # every part was validated when ``self`` was built: the subset is assembled, not validated again
         out = object.__new__(Observations)
-        for name, value in (("boards", tuple(self.boards[i] for i in indices)),
-                            ("T_lidar_cam_true", self.T_lidar_cam_true), ("meta", dict(self.meta)),
-                            ("camera", self.camera)):
-            object.__setattr__(out, name, value)
+        out.__dict__.update(boards=tuple(self.boards[i] for i in indices), T_lidar_cam_true=self.T_lidar_cam_true,
+                            meta=dict(self.meta), camera=self.camera)
         per_board = {k: v.subset_boards(indices) for k, v in self.__dict__.get("_derived", {}).items()
                      if hasattr(v, "subset_boards")}
         if per_board:
@@ -378,10 +375,9 @@ class Observations:
         return np.array([b.outline_exact for b in self.boards], dtype=bool)
 
     def planes_cam(self) -> tuple[np.ndarray, np.ndarray]:
-        """Board planes in the camera frame: normals (N,3) and offsets (N,), plane ``n . p_C = d``."""
-        n = np.array([b.normal_cam for b in self.boards]).reshape(-1, 3)
-        d = np.array([b.offset_cam for b in self.boards])
-        return n, d
+        """Board planes in the camera frame: normals (N,3) and offsets (N,), plane ``n . p_C = d`` (built once,
+        read-only)."""
+        return self.derived("observations.planes_cam", _planes_cam)
 
     def derived(self, key: str, fn):
         """``fn(self)``, computed once per ``Observations`` and kept under ``key`` (data derived from the boards
@@ -395,3 +391,10 @@ class Observations:
     def scan_data(self) -> ScanData:
         """All scan points flattened with their boards' planes (built once)."""
         return ScanData.from_observations(self)
+
+
+def _planes_cam(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+    n = np.array([b.normal_cam for b in obs.boards], float).reshape(-1, 3)
+    d = np.array([b.offset_cam for b in obs.boards], float)
+    n.setflags(write=False), d.setflags(write=False)
+    return n, d

@@ -68,16 +68,16 @@ def board_statistics(obs: Observations, T: np.ndarray, sigma_m: float, outline_s
 def _statistics(obs: Observations, L: ScanLines, var: tuple, T: np.ndarray, outline_sigma_m: float) -> np.ndarray:
     n, d = obs.planes_cam()
     R, t = T[:, :3, :3], T[:, :3, 3]
-    m = np.einsum("mab,nb->mna", R, n)                                       # board normals in {L}
-    c = d[None] + np.einsum("mna,ma->mn", m, t)
-    s = np.linalg.norm(m[..., :2], axis=-1)
+    m = n @ np.swapaxes(R, -1, -2)                                            # (M,N,3) board normals in {L}
+    c = d[None] + (m @ t[..., None])[..., 0]
+    s = np.sqrt(m[..., 0] ** 2 + m[..., 1] ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         nu = m[..., :2] / s[..., None]
-        off = np.einsum("mnc,nc->mn", nu, L.centroid) - c / s
+        off = nu[..., 0] * L.centroid[:, 0] + nu[..., 1] * L.centroid[:, 1] - c / s
         sin = nu[..., 0] * L.normal[None, :, 1] - nu[..., 1] * L.normal[None, :, 0]
         q = off**2 / var[0] + sin**2 / var[1]
     # scan centre's depth in {C} (z of R^T (p_L - t)) and the scan ends in each board's frame (``board_frames``)
-    depth = np.einsum("mna,ma->mn", L.ends.mean(axis=1)[None] - t[:, None], R[:, :, 2])
+    depth = ((L.ends.mean(axis=1)[None] - t[:, None]) @ R[:, :, 2:3])[..., 0]
     A, c = board_frames(obs, T, rows=2)
     p_W = L.ends[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]             # (M,N,2,2)
     for idx, outline in obs.derived("consensus.outline_groups", outline_groups):  # boards sharing one outline
