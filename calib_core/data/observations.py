@@ -294,8 +294,7 @@ class ScanData:
         return self.points / self.ranges[:, None]
 
     @cached_property
-    def beam_skews(self) -> np.ndarray:
-        """(K,3,3) cross-product matrices ``[b]_x`` of the beams (``skew(b) @ v == b x v``)."""
+    def beam_skews(self) -> np.ndarray:  # (K,3,3) cross-product matrices [b]_x of the beams: [b]_x v = b x v
         return skew(self.beams)
 
     @classmethod
@@ -351,9 +350,10 @@ class Observations:
         return len(self.boards)
 
     def subset(self, indices) -> Observations:
-        """The same problem with only the boards at ``indices`` (in that order). Derived values that are per
-        board (those with a ``subset_boards`` method, e.g. the scan lines) are carried over, not recomputed."""
-        indices = [int(i) for i in indices]
+        """The same problem with only the boards at ``indices`` (in that order; ``self`` for all in order). Per-board
+        derived values (with a ``subset_boards`` method, e.g. the scan lines) are carried over, not recomputed."""
+        if (indices := [int(i) for i in indices]) == list(range(self.n_boards)):
+            return self
         # every part was validated when ``self`` was built: the subset is assembled, not validated again
         out = object.__new__(Observations)
         out.__dict__.update(boards=tuple(self.boards[i] for i in indices), T_lidar_cam_true=self.T_lidar_cam_true,
