@@ -337,3 +337,18 @@ def test_a_start_the_consensus_refined_keeps_its_refinement(seed):
     e_R, e_t = pose_errors(kept.T, again.T)  # degrees, metres: a thousandth of the noise's effect or less
     assert e_R < 1e-4 and e_t < 1e-5
     assert abs(kept.cost - again.cost) < 1e-6 * max(1.0, again.cost)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_outline_term_is_the_cost_less_its_lower_bound(seed):
+    """``scorers.outline_term`` is what the ``lidarcam`` cost adds to its ``with_outline=False`` bound."""
+    from calib_core.data.residuals import perturb
+    from calib_core.robust.scorers import lidarcam, outline_term
+
+    rng = np.random.default_rng(400 + seed)
+    obs = make_observations(rng, 5, 0.02)
+    C = np.array([perturb(obs.T_lidar_cam_true, rng.normal(0, 0.1, 6)) for _ in range(12)])
+    full, bound = lidarcam(obs, C, range_sigma_m=0.02), lidarcam(obs, C, range_sigma_m=0.02, with_outline=False)
+    term = outline_term(obs, C)
+    assert np.any(term > 0)
+    np.testing.assert_allclose(bound + term, full, rtol=1e-12)

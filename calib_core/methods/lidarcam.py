@@ -86,7 +86,8 @@ def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
                               outline_sigma_m=score.outline_sigma_m, options=opts.consensus)
     sigma = search.sigma_m
     best = choose_and_refine(search.obs_used, search.pool, sigma, score, opts.refine, refined=search.refined)
-    start = float(lidarcam_score(search.obs_used, best.start[None], range_sigma_m=sigma, **score.kwargs())[0])
+    start = best.cost if np.array_equal(best.start, best.T) else \
+        float(lidarcam_score(search.obs_used, best.start[None], range_sigma_m=sigma, **score.kwargs())[0])
     tests = final_tests(search, best.T, reject=opts.consensus.reject_boards)
     if tests.changed:  # boards or points left out (or taken back) at the refined pose: refine on what is left
         best = choose_and_refine(tests.obs_used, best.T, sigma, score, opts.refine, n_refine=1)

@@ -14,7 +14,7 @@ from ..data.observations import Observations
 from ..data.residuals import perturb, range_residuals
 from ..errors import SolveFailure
 from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine, so3_left_jacobian
-from .scorers import ScoreOptions, lidarcam_linearised
+from .scorers import ScoreOptions, lidarcam_linearised, outline_term
 from .scorers import lidarcam as lidarcam_score
 
 DISTINCT_ROT_DEG = 1.0
@@ -125,7 +125,8 @@ def best_starts(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOp
     """``distinct_order(C, scorers.lidarcam(obs, C), n, ...)``, with the outline term (the dearest) scored only
     where it can matter: the cost without it is a lower bound, so once the ``n`` starts chosen among the candidates
     scored in full all cost less than the bound of every candidate not scored, those are the starts the full
-    scoring would choose (ties broken by index as there)."""
+    scoring would choose (ties broken by index as there). The full cost is the bound plus the outline term
+    (``scorers.outline_term``)."""
     kw = {"range_sigma_m": sigma_m, **score.kwargs()}
     bound = lidarcam_score(obs, C, **kw, with_outline=False)
     bound = np.where(np.isnan(bound), np.inf, bound)
@@ -133,7 +134,8 @@ def best_starts(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOp
     k = min(len(C), max(PRUNE_FIRST, 2 * n))
     while True:
         idx = np.sort(order[:k])
-        full = lidarcam_score(obs, C[idx], **kw)
+        full = bound[idx] + outline_term(obs, C[idx], score.outline_sigma_m)
+        full = np.where(np.isnan(full), np.inf, full)
         picks = distinct_order(C[idx], full, n, rot_deg, trans_m)
         if k == len(C) or (len(picks) == n and full[picks[-1]] < bound[order[k]]):
             return [int(idx[j]) for j in picks]

@@ -251,6 +251,14 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
     return cost
 
 
+def outline_term(obs: Observations, candidates: np.ndarray, outline_sigma_m: float = OUTLINE_SIGMA_M) -> np.ndarray:
+    """(M,) the outline term of the ``lidarcam`` cost alone, ``0.5 sum_k (o_k / outline_sigma)^2``: what the cost
+    adds to its ``with_outline=False`` lower bound."""
+    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    out = in_chunks(lambda C: outside_outlines(obs, C)[:, on_exact], obs, candidates) / outline_sigma_m
+    return 0.5 * np.sum(out**2, axis=1)
+
+
 def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
                        edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
                        behind_penalty: float = np.inf) -> np.ndarray:
