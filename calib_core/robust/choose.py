@@ -216,10 +216,10 @@ def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score:
     that is the optimum of a ``known`` refinement keeps it."""
     out: list[tuple[Choice, bool]] = []
     for T0 in starts:
-        if out:
-            T1 = gauss_newton_steps(obs.scan_data, T0)
+        r = next((r for r in known if np.array_equal(r.T_lidar_cam, T0)), None)
+        if out:  # an optimum already (r): its Gauss-Newton steps stay where it is
+            T1 = T0 if r is not None else gauss_newton_steps(obs.scan_data, T0)
             if near_any(T1, np.array([c.T for c, _ in out]), opts.distinct_rot_deg, opts.distinct_trans_m):
                 continue
-        r = next((r for r in known if np.array_equal(r.T_lidar_cam, T0)), None)
         out.append(refine_start(obs, T0, sigma_m, score, opts, r))
     return out
