@@ -126,12 +126,13 @@ def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (docs/METHOD.md eq. 7), metres (``board_frames``).
     """
     A, c = board_frames(obs, candidates)
-    return obs.derived("residuals.endpoints", _endpoints)[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]
+    return scan_endpoints(obs)[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]
 
 
-def _endpoints(obs: Observations) -> np.ndarray:
-    """(N,2,3) first and last scan point of every board (lidar frame)."""
-    return np.array([[b.scan_3d[0], b.scan_3d[-1]] for b in obs.boards]).reshape(-1, 2, 3)
+def scan_endpoints(obs: Observations) -> np.ndarray:
+    """(N,2,3) first and last scan point of every board (lidar frame, metres); computed once per observation set."""
+    return obs.derived("residuals.endpoints", lambda o: np.array([[b.scan_3d[0], b.scan_3d[-1]]
+                                                                  for b in o.boards]).reshape(-1, 2, 3))
 
 
 def _board_poses(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
@@ -220,7 +221,11 @@ def points_in_boards(obs: Observations, candidates: np.ndarray) -> list[np.ndarr
 
 def outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
     """(board indices, outline) of each distinct exact outline among the boards (``outline_kind`` exact; boards
-    sharing one outline are handled at once)."""
+    sharing one outline are handled at once); computed once per observation set."""
+    return obs.derived("residuals.outline_groups", _outline_groups)
+
+
+def _outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
     groups: dict[bytes, list[int]] = {}
     for i, b in enumerate(obs.boards):
         if b.outline_exact:

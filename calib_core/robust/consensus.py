@@ -80,7 +80,7 @@ def _statistics(obs: Observations, L: ScanLines, var: tuple, T: np.ndarray, outl
     depth = ((L.ends.mean(axis=1)[None] - t[:, None]) @ R[:, :, 2:3])[..., 0]
     A, c = board_frames(obs, T, rows=2)
     p_W = L.ends[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]             # (M,N,2,2)
-    for idx, outline in obs.derived("consensus.outline_groups", outline_groups):  # boards sharing one outline
+    for idx, outline in outline_groups(obs):          # boards sharing one outline at once
         q[:, idx] += np.sum((outside_outline(p_W[:, idx], outline) / outline_sigma_m) ** 2, axis=-1)
     q = np.where((depth > 0) & np.isfinite(q), q, np.inf)
     return q

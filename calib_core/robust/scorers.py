@@ -23,6 +23,7 @@ from ..data.residuals import (
     plane_residuals,
     point_line_errors,
     range_residuals,
+    scan_endpoints,
 )
 from ..errors import CalibrationError, SolveFailure
 
@@ -254,7 +255,7 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
 def outline_term(obs: Observations, candidates: np.ndarray, outline_sigma_m: float = OUTLINE_SIGMA_M) -> np.ndarray:
     """(M,) the outline term of the ``lidarcam`` cost alone, ``0.5 sum_k (o_k / outline_sigma)^2``: what the cost
     adds to its ``with_outline=False`` lower bound."""
-    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    _, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
     out = in_chunks(lambda C: outside_outlines(obs, C)[:, on_exact], obs, candidates) / outline_sigma_m
     return 0.5 * np.sum(out**2, axis=1)
 
@@ -284,23 +285,15 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
     T = np.asarray(T_lidar_cam, float)
     data = obs.scan_data
     exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
-    ends, end_boards = obs.derived("scorers.jacobian_constants", _jacobian_constants)
     rng, J_rng = range_residuals(T, data, jacobian=True)
     edge, g_edge = point_line_errors(obs, T[None], gradient=True)
     out, g_out = outside_outlines(obs, T[None], gradient=True)
-    J_edge = board_frame_rows(obs, T, ends, end_boards, g_edge[0][exact].reshape(-1, 3))
+    J_edge = board_frame_rows(obs, T, scan_endpoints(obs)[exact].reshape(-1, 3), np.repeat(exact, 2),
+                              g_edge[0][exact].reshape(-1, 3))
     J_out = board_frame_rows(obs, T, data.points[on_exact], data.board[on_exact], g_out[0][on_exact])
     res = np.concatenate([rng / range_sigma_m, edge[0][exact].ravel() / edge_sigma_m,
                           out[0][on_exact] / outline_sigma_m])
     return res, np.concatenate([J_rng / range_sigma_m, J_edge / edge_sigma_m, J_out / outline_sigma_m], axis=0)
-
-
-def _jacobian_constants(obs: Observations):
-    """For ``lidarcam_linearised``: the two scan endpoints of every exact-outline board (2 n_exact, 3) and their
-    boards (2 n_exact,)."""
-    exact, _, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
-    ends = np.array([[obs.boards[i].scan_3d[0], obs.boards[i].scan_3d[-1]] for i in exact]).reshape(-1, 3)
-    return ends, np.repeat(exact, 2)
 
 
 PENG2022_OPTIONS = ("delta_m", "normalise_candidates", "beta_norm", "beta_eps", "error", "weighting")
