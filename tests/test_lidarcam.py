@@ -257,6 +257,12 @@ def test_gauss_newton_steps_on_some_boards_are_those_on_their_subset(seed):
     np.testing.assert_allclose(T1, gauss_newton_steps(obs.subset(np.flatnonzero(boards)).scan_data, T0), atol=1e-12)
     T5 = gauss_newton_steps(obs.scan_data, T0, boards, n=5)
     assert max(pose_errors(T5, obs.T_lidar_cam_true)) < 1e-8
+    # many starts at once, each on its own boards, take each start where it alone goes
+    starts = np.array([perturb(obs.T_lidar_cam_true, rng.normal(0, [0.01] * 3 + [0.02] * 3)) for _ in range(3)])
+    masks = np.array([boards, np.ones(5, bool), boards[::-1]])
+    np.testing.assert_allclose(gauss_newton_steps(obs.scan_data, starts, masks),
+                               [gauss_newton_steps(obs.scan_data, T, m) for T, m in zip(starts, masks, strict=True)],
+                               atol=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -46,6 +46,25 @@ def test_residual_jacobian_matches_finite_differences(rng, kind):
         np.testing.assert_allclose(J, J_fd, rtol=1e-6, atol=1e-7)
 
 
+@pytest.mark.parametrize("kind", ["plane", "range"])
+def test_batched_residuals_and_range_jacobian_equal_those_of_each_pose(rng, kind):
+    """A batch (M,4,4) of extrinsics gives each pose's residuals (and, for the range residual, its Jacobian), and a
+    batch of perturbations (M,6) each pose's perturbation."""
+    fn = RESIDUALS[kind]
+    for _ in range(10):
+        T_true, data = random_problem(rng, noise=0.01)
+        x = rng.normal(scale=0.05, size=(4, 6))
+        C = perturb(np.repeat(T_true[None], 4, axis=0), x)
+        np.testing.assert_allclose(C, [perturb(T_true, xi) for xi in x], atol=1e-15)
+        np.testing.assert_allclose(fn(C, data), [fn(T, data) for T in C], rtol=1e-12, atol=1e-12)
+        if kind == "range":
+            e, J = fn(C, data, jacobian=True)
+            for m, T in enumerate(C):
+                e1, J1 = fn(T, data, jacobian=True)
+                np.testing.assert_allclose(e[m], e1, rtol=1e-12, atol=1e-12)
+                np.testing.assert_allclose(J[m], J1, rtol=1e-12, atol=1e-12)
+
+
 def test_so3_left_jacobian_matches_finite_differences(rng):
     for _ in range(20):
         w = rng.normal(size=3)

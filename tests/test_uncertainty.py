@@ -159,6 +159,28 @@ def test_outside_outline_distances():
     np.testing.assert_allclose(outside_outline(xy, OUTLINE), [0, 0.5, np.hypot(0.2, 0.2), 0.1, 0], atol=1e-12)
 
 
+def test_outside_outline_against_a_brute_force_polygon_test(rng):
+    """On a random star-shaped (non-convex) polygon, with a vertex repeated (a zero-length edge): 0 exactly where
+    matplotlib's point-in-polygon test says inside, else the distance to the densely sampled outline; the gradient
+    is the unit vector from the outline's nearest point."""
+    from matplotlib.path import Path
+
+    for _ in range(6):
+        ang = np.sort(rng.uniform(0, 2 * np.pi, 7))
+        poly = np.column_stack([np.cos(ang), np.sin(ang)]) * rng.uniform(0.3, 1.0, (7, 1))
+        poly = np.insert(poly, 3, poly[3], axis=0)
+        xy = rng.uniform(-1.2, 1.2, (400, 2))
+        d, g = outside_outline(xy, poly, gradient=True)
+        np.testing.assert_array_equal(d == 0, Path(poly).contains_points(xy))
+        t = np.linspace(0, 1, 4001)[:, None]
+        dist = np.min([np.min(np.linalg.norm(xy[:, None] - (a + t * (b - a))[None], axis=-1), axis=1)
+                       for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True)], axis=0)
+        out = d > 0
+        np.testing.assert_allclose(d[out], dist[out], atol=1e-3)
+        np.testing.assert_allclose(np.linalg.norm(g[out], axis=1), 1.0, atol=1e-12)
+        np.testing.assert_allclose(outside_outline(xy[out] + 1e-7 * g[out], poly) - d[out], 1e-7, atol=1e-12)
+
+
 def test_lidarcam_scorer_prefers_the_truth_and_is_half_k_there(rng):
     obs = make_observations(rng, 6, 0.02)
     T = obs.T_lidar_cam_true

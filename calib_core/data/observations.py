@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ObservationError
-from ..geometry.transforms import ROTATION_TOL, project_to_so3, rotation_defect, skew
+from ..geometry.transforms import ROTATION_TOL, project_to_so3, rotation_defect
 from .camera import Camera
 
 MIN_SCAN_POINTS = 2
@@ -278,7 +278,7 @@ class ScanData:
         ``Observations.subset(np.flatnonzero(boards))``, taken from this one (ranges and beams carried over)."""
         keep, renumber = boards[self.board], np.cumsum(boards) - 1
         out = ScanData(self.points[keep], renumber[self.board[keep]], self.normals[boards], self.offsets[boards])
-        for name in ("ranges", "beams", "beam_skews"):
+        for name in ("ranges", "beams"):
             if name in self.__dict__:
                 out.__dict__[name] = self.__dict__[name][keep]
         return out
@@ -292,10 +292,6 @@ class ScanData:
     def beams(self) -> np.ndarray:
         """(K,3) unit beam direction ``p / |p|`` of every point."""
         return self.points / self.ranges[:, None]
-
-    @cached_property
-    def beam_skews(self) -> np.ndarray:  # (K,3,3) cross-product matrices [b]_x of the beams: [b]_x v = b x v
-        return skew(self.beams)
 
     @classmethod
     def from_observations(cls, obs: Observations) -> ScanData:

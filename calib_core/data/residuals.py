@@ -9,19 +9,21 @@ frame (``n . p_C = d``); in the lidar frame the plane of board i is ``m . p_L = 
 
 from __future__ import annotations
 
+import functools
 from enum import StrEnum
 
 import numpy as np
 
-from ..geometry.transforms import rotvec_to_matrix, skew
+from ..geometry.transforms import rotvec_to_matrix
 from .observations import Observations, ScanData
 
 
 def perturb(T0: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``T_lidar_cam`` at parameters ``x = (w, dt)`` around ``T0`` (left rotation perturbation)."""
+    """``T_lidar_cam`` at parameters ``x = (w, dt)`` around ``T0`` (left rotation perturbation); one (4,4) and (6,),
+    or a batch (M,4,4) and (M,6)."""
     T = np.array(T0, float)
-    T[:3, :3] = rotvec_to_matrix(x[:3]) @ T0[:3, :3]
-    T[:3, 3] = T0[:3, 3] + x[3:]
+    T[..., :3, :3] = rotvec_to_matrix(x[..., :3]) @ T[..., :3, :3]
+    T[..., :3, 3] += x[..., 3:]
     return T
 
 
@@ -85,29 +87,29 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
 
     The lidar noise is along each beam, so this is the likelihood's residual. Beam ``b = p/|p|``, measured
     range ``r = |p|``, predicted ``r* = (d_i + m_i . t) / (m_i . b)``; ``e = r - r*`` (``m . b`` clamped at
-    ``MIN_BEAM_INCIDENCE``). ``T``: one (4,4) -> (K,), or a batch (M,4,4) -> (M,K). With ``jacobian`` (one ``T``
-    only), also (K,6) de/d(w, dt).
+    ``MIN_BEAM_INCIDENCE``). ``T``: one (4,4) -> (K,), or a batch (M,4,4) -> (M,K). With ``jacobian``, also
+    (K,6) de/d(w, dt), or (M,K,6) for a batch.
     """
     mk, num = _planes_lidar(T, data)
     r, b = data.ranges, data.beams
     mb = np.einsum("...kj,kj->...k", mk, b)
     mb = np.where(np.abs(mb) < MIN_BEAM_INCIDENCE, np.copysign(MIN_BEAM_INCIDENCE, mb), mb)
-    e = r - num / mb
+    r_star = num / mb
+    e = r - r_star
     if not jacobian:
         return e
-    J = np.empty((len(e), 6))
-    # d(num)/dw = m x t = m^T [t]_x (one vector per board), d(mb)/dw = m x b = -[b]_x m (from dm = w x m)
-    m_cross_t = (data.normals @ T[:3, :3].T @ skew(T[:3, 3]))[data.board]
-    m_cross_b = -(data.beam_skews @ mk[:, :, None])[..., 0]
-    J[:, :3] = -(m_cross_t * mb[:, None] - m_cross_b * num[:, None]) / (mb**2)[:, None]
-    J[:, 3:] = -mk / mb[:, None]
+    # with dm = w x m: d(num)/dw = m x t and d(mb)/dw = m x b, so de/dw = (m x b num / mb - m x t) / mb
+    # = m x (p* - t) / mb, with p* = (num / mb) b the point where the beam meets the plane; de/d(dt) = -m / mb
+    p_t = r_star[..., None] * b - T[..., None, :3, 3]                                  # p* - t
+    J = np.concatenate([_cross(mk, p_t), -mk], axis=-1) / mb[..., None]
     return e, J
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (K,3) arrays (``np.cross`` without its axis handling, on the hot path)."""
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+    """Row-wise cross product of (...,3) arrays (``np.cross`` without its axis handling, on the hot path)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 class Residual(StrEnum):
@@ -266,18 +268,15 @@ def _outline_point_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarra
 def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool = False):
     """Distance (metres) of 2D points ``xy`` (...,2) outside the simple polygon ``outline`` (V,2); 0 inside. With
     ``gradient`` also (...,2) its gradient in ``xy``: the unit vector from the nearest point of the outline."""
-    (ax, ay), (bx, by) = outline.T, np.roll(outline, -1, axis=0).T               # edges a_k -> b_k
-    abx, aby = bx - ax, by - ay
+    ax, ay, abx, aby, inv_len2, by, slope = _edges(np.ascontiguousarray(outline, float).tobytes(), len(outline))
     x, y = xy[..., 0, None], xy[..., 1, None]
-    wx, wy = x - ax, y - ay                                                     # (...,V)
-    s = np.clip((wx * abx + wy * aby) / (abx**2 + aby**2), 0.0, 1.0)
+    wx, wy = x - ax, y - ay                                                     # (...,V) from each edge's start
+    s = np.clip((wx * abx + wy * aby) * inv_len2, 0.0, 1.0)
     ox, oy = wx - s * abx, wy - s * aby                                         # from the nearest point of each edge
     d2 = ox**2 + oy**2
     dist = np.sqrt(d2.min(axis=-1))
     crosses = (ay > y) != (by > y)                                              # even-odd rule
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x_at = ax + (y - ay) * abx / aby
-    inside = np.sum(crosses & (x < x_at), axis=-1) % 2 == 1
+    inside = np.logical_xor.reduce(crosses & (x < ax + wy * slope), axis=-1)
     out = np.where(inside, 0.0, dist)
     if not gradient:
         return out
@@ -285,6 +284,23 @@ def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool = False)
     nearest = np.stack([np.take_along_axis(ox, k, -1)[..., 0], np.take_along_axis(oy, k, -1)[..., 0]], axis=-1)
     g = np.where((inside | (dist == 0))[..., None], 0.0, nearest / np.where(dist > 0, dist, 1.0)[..., None])
     return out, g
+
+
+@functools.lru_cache(maxsize=64)
+def _edges(outline: bytes, V: int) -> tuple[np.ndarray, ...]:
+    """The edges ``a_k -> b_k`` of an outline (V,2) given as bytes: ``a_x, a_y``, ``b - a``, ``1 / |b - a|^2`` (0 for a
+    zero-length edge, whose nearest point is then ``a_k``), ``b_y`` and the edge's ``dx/dy`` (0 where it is
+    horizontal: such an edge is never crossed); each (V,), kept per outline."""
+    a = np.frombuffer(outline, float).reshape(V, 2)
+    b = np.roll(a, -1, axis=0)
+    ab = b - a
+    len2 = np.sum(ab**2, axis=1)
+    out = (a[:, 0].copy(), a[:, 1].copy(), ab[:, 0].copy(), ab[:, 1].copy(),
+           np.divide(1.0, len2, out=np.zeros(V), where=len2 > 0), b[:, 1].copy(),
+           np.divide(ab[:, 0], ab[:, 1], out=np.zeros(V), where=ab[:, 1] != 0))
+    for v in out:
+        v.setflags(write=False)
+    return out
 
 
 def board_frame_rows(obs: Observations, T: np.ndarray, points: np.ndarray, board: np.ndarray,

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, leastsq
 
 from ..data.observations import ScanData
 from ..data.residuals import RESIDUALS, perturb
@@ -84,8 +84,8 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
             last.update(x=x.copy(), T=T, eJ=fn(T, data, jacobian=True))
         return last
 
-    def fun(x):
-        return at(x)["eJ"][0]
+    def fun(x):  # a copy: MINPACK keeps the first array it is given as its work space
+        return at(x)["eJ"][0].copy()
 
     def jac(x):
         # d/dx of f(exp(w) R0): the left-perturbation Jacobian at the current pose times the left
@@ -95,15 +95,30 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
         return J
 
     e0 = fun(np.zeros(6))
-    # the plain likelihood by MINPACK's Levenberg-Marquardt (the same optimum, a fraction of trf's overhead per
-    # iteration); robust losses need trf
-    method = "lm" if loss == Loss.LINEAR and len(e0) >= 6 else "trf"
-    sol = least_squares(fun, np.zeros(6), jac=jac, method=method, loss=loss, f_scale=f_scale,
-                        max_nfev=max_nfev, x_scale=x_scale if x_scale is not None else "jac")
-    step = at(sol.x)
+    if loss == Loss.LINEAR and len(e0) >= 6:
+        x, success, message, nfev = _levenberg_marquardt(fun, jac, max_nfev, x_scale)
+        cost = robust_cost(at(x)["eJ"][0])
+    else:  # robust losses need least_squares' trust-region reflective solver
+        sol = least_squares(fun, np.zeros(6), jac=jac, method="trf", loss=loss, f_scale=f_scale,
+                            max_nfev=max_nfev, x_scale=x_scale if x_scale is not None else "jac")
+        x, success, message, nfev, cost = sol.x, bool(sol.success), str(sol.message), int(sol.nfev), float(sol.cost)
+    step = at(x)
     T, (e, J) = step["T"], step["eJ"]
-    return RefineResult(T, float(sol.cost), robust_cost(e0, loss, f_scale), e, J, bool(sol.success),
-                        str(sol.message), int(sol.nfev))
+    return RefineResult(T, cost, robust_cost(e0, loss, f_scale), e, J, success, message, nfev)
+
+
+LM_TOLERANCE = 1e-8
+"""``ftol``, ``xtol`` and ``gtol`` of the Levenberg-Marquardt refinement (those of ``least_squares``)."""
+
+
+def _levenberg_marquardt(fun, jac, max_nfev: int, x_scale: np.ndarray | None) -> tuple[np.ndarray, bool, str, int]:
+    """The plain likelihood from ``x = 0`` by MINPACK's Levenberg-Marquardt (``scipy.optimize.leastsq``: the solver
+    of ``least_squares(method="lm")`` with its tolerances and scaling, the Jacobian's unless ``x_scale``, without
+    its per-call wrappers): (x, success, message, nfev)."""
+    diag = None if x_scale is None else 1.0 / np.asarray(x_scale, float)
+    x, _, info, message, ier = leastsq(fun, np.zeros(6), Dfun=jac, full_output=True, ftol=LM_TOLERANCE,
+                                       xtol=LM_TOLERANCE, gtol=LM_TOLERANCE, maxfev=max_nfev, diag=diag)
+    return x, ier in (1, 2, 3, 4), str(message), int(info["nfev"])
 
 
 _RHO = {"linear": lambda z: z, "huber": lambda z: np.where(z <= 1, z, 2 * np.sqrt(z) - 1),

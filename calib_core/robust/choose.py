@@ -116,6 +116,9 @@ BASIN_STEPS = 2
 """Gauss-Newton steps that tell where a start heads (``gauss_newton_steps``): a start that lands within the
 distinct-start rule (``DISTINCT_ROT_DEG``, ``DISTINCT_TRANS_M``) of an optimum already found is in its basin and is
 not optimised again."""
+BASIN_DAMPING = 1e-12
+"""The basin test's normal equations are damped by this times their mean diagonal: the step stays finite along a
+direction the boards leave free (where it is not a test of anything)."""
 PRUNE_FIRST = 8
 """``best_starts`` scores the outline term of this many candidates (at least ``2 n``) first, doubling as needed."""
 
@@ -197,15 +200,19 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
 
 
 def gauss_newton_steps(data, T0: np.ndarray, boards: np.ndarray | None = None, n: int = BASIN_STEPS) -> np.ndarray:
-    """The extrinsic ``n`` Gauss-Newton steps on the range residuals (of the scan points of ``boards``, (N,) bool;
-    default all) take ``T0`` to: where refining it heads (each step the least-squares solution of the 6x6 normal
-    equations: a test of where a start heads, not an estimate)."""
-    w = np.ones(len(data.points)) if boards is None else boards[data.board].astype(float)
-    T = T0
+    """The extrinsics ``n`` Gauss-Newton steps on the range residuals (of the scan points of ``boards``, (N,) or
+    (M,N) bool; default all) take ``T0`` (4,4) or (M,4,4) to, all starts at once: where refining each heads (each
+    step solves the 6x6 normal equations, damped by ``BASIN_DAMPING``: a test of where a start heads, not an
+    estimate)."""
+    T = np.asarray(T0, float)
+    w = np.ones(len(data.points)) if boards is None else np.asarray(boards)[..., data.board].astype(float)
+    w = np.broadcast_to(w, T.shape[:-2] + w.shape[-1:])
     for _ in range(n):
         e, J = range_residuals(T, data, jacobian=True)
-        Jw = J * w[:, None]
-        T = perturb(T, -np.linalg.lstsq(Jw.T @ J, Jw.T @ e, rcond=None)[0])
+        Jw = np.swapaxes(J * w[..., None], -1, -2)
+        JtJ = Jw @ J
+        damp = BASIN_DAMPING * np.trace(JtJ, axis1=-2, axis2=-1)[..., None, None] / 6 * np.eye(6)
+        T = perturb(T, -np.linalg.solve(JtJ + damp, (Jw @ e[..., None]))[..., 0])
     return T
 
 
@@ -215,11 +222,14 @@ def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score:
     the distinct-start rule of a start already refined: it is in that start's basin (``BASIN_STEPS``). A start
     that is the optimum of a ``known`` refinement keeps it."""
     out: list[tuple[Choice, bool]] = []
-    for T0 in starts:
-        r = next((r for r in known if np.array_equal(r.T_lidar_cam, T0)), None)
-        if out:  # an optimum already (r): its Gauss-Newton steps stay where it is
-            T1 = T0 if r is not None else gauss_newton_steps(obs.scan_data, T0)
-            if near_any(T1, np.array([c.T for c, _ in out]), opts.distinct_rot_deg, opts.distinct_trans_m):
-                continue
+    refs = [next((r for r in known if np.array_equal(r.T_lidar_cam, T0)), None) for T0 in starts]
+    # where every later start heads, all at once; an optimum already (a known refinement) stays where it is
+    heads = np.array(starts)
+    later = [i for i in range(1, len(starts)) if refs[i] is None]
+    if later:
+        heads[later] = gauss_newton_steps(obs.scan_data, heads[later])
+    for T0, r, T1 in zip(starts, refs, heads, strict=True):
+        if out and near_any(T1, np.array([c.T for c, _ in out]), opts.distinct_rot_deg, opts.distinct_trans_m):
+            continue
         out.append(refine_start(obs, T0, sigma_m, score, opts, r))
     return out

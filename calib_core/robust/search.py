@@ -165,11 +165,12 @@ def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m
     # starts: the best MSAC hypotheses, and the best by the untruncated sum (all boards, no rejection)
     starts = [(j, False) for j in distinct_order(H.T, cost, LO_STARTS)]
     starts += [(j, True) for j in distinct_order(H.T, np.sum(H.q, axis=1), LO_STARTS_ALL)]
+    firsts = [np.isfinite(H.q[j]) if a else H.q[j] < SCORE_TAU for j, a in starts]
+    keys = [(j, first.tobytes()) for (j, _), first in zip(starts, firsts, strict=True)]
+    heads = _heads(obs_g, H.T[[j for j, _ in starts]], firsts, keys)
     done: dict = {}  # a start's result by (hypothesis, initial board set): the same start is optimised once
-    for j, a in starts:
-        first = np.isfinite(H.q[j]) if a else H.q[j] < SCORE_TAU
-        key = (j, first.tobytes())
-        if key in done or _in_basin(obs_g, H.T[j], first, done):
+    for (j, a), first, key, T1 in zip(starts, firsts, keys, heads, strict=True):
+        if key in done or _in_basin(T1, first, done):
             continue
         done[key] = local_optimise(obs_g, H.T[j], H.q[j], sigma, outline_sigma_m, a)
     results = list(done.values())
@@ -188,15 +189,25 @@ def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m
     return used, results, rejected
 
 
-def _in_basin(obs: Observations, T0: np.ndarray, first: np.ndarray, done: dict) -> bool:
-    """Whether a start ``T0`` on the initial board set ``first`` is in the basin of a local optimisation already
-    run: its Gauss-Newton steps on those boards land within the distinct-start rule of a result whose consensus
-    holds every board of ``first`` (``choose.BASIN_STEPS``: it would be optimised to the same extrinsic and
-    consensus)."""
+def _heads(obs: Observations, T0: np.ndarray, firsts: list, keys: list) -> list:
+    """Where each start (``T0`` (S,4,4) on its initial board set ``firsts[s]``) heads: its Gauss-Newton steps on those
+    boards (``choose.BASIN_STEPS``), all at once, for the starts a basin test may ask about (not the first, at least
+    3 boards; a repeated start shares its first occurrence's); None for the others."""
+    ask = [s for s in range(1, len(keys)) if keys[s] not in keys[:s] and firsts[s].sum() >= 3]
+    heads = dict.fromkeys(keys)
+    if ask:
+        T1 = gauss_newton_steps(obs.scan_data, T0[ask], np.array([firsts[s] for s in ask]))
+        heads.update({keys[s]: T for s, T in zip(ask, T1, strict=True)})
+    return [None if s == 0 else heads[k] for s, k in enumerate(keys)]
+
+
+def _in_basin(T1: np.ndarray | None, first: np.ndarray, done: dict) -> bool:
+    """Whether a start on the initial board set ``first``, whose Gauss-Newton steps take it to ``T1`` (``_heads``),
+    is in the basin of a local optimisation already run: ``T1`` lies within the distinct-start rule of a result
+    whose consensus holds every board of ``first`` (it would be optimised to the same extrinsic and consensus)."""
     near = [res.T for res in done.values() if np.all(res.used[first])]
-    if not near or first.sum() < 3:
+    if not near or T1 is None:
         return False
-    T1 = gauss_newton_steps(obs.scan_data, T0, first)
     return near_any(T1, np.array(near))
 
 
