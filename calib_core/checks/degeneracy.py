@@ -29,7 +29,7 @@ import numpy as np
 
 from ..data.lines import residual_sigma
 from ..data.observations import Observations
-from ..data.residuals import range_residuals
+from ..data.residuals import range_linearised
 from ..errors import SolveFailure
 from ..geometry.transforms import skew
 from ..refine.partial import vertical_start
@@ -229,7 +229,7 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     sigma under the range model (reported as ``sigmas``).
     """
     T = np.asarray(T_lidar_cam, float)
-    e, J = range_residuals(T, obs.scan_data, jacobian=True)
+    e, J = range_linearised(T, obs.scan_data)
     L = typical_range(obs)
     Js = origin_jacobian(J, T) * np.r_[np.ones(3), np.full(3, L)]
     sigma = residual_sigma(e, 6) if range_sigma_m is None else float(range_sigma_m)
@@ -298,7 +298,7 @@ def degeneracy_warnings(obs: Observations, T_lidar_cam: np.ndarray | None = None
     if T is not None and obs.n_boards:
         c = conditioning(obs, T)
         if c < MIN_CONDITIONING:
-            _, J = range_residuals(np.asarray(T, float), obs.scan_data, jacobian=True)
+            _, J = range_linearised(T, obs.scan_data)
             Js = origin_jacobian(J, T) * np.r_[np.ones(3), np.full(3, typical_range(obs))]
             v = np.linalg.eigh(Js.T @ Js)[1][:, 0]
             out.append(f"poorly conditioned board set (inverse condition number {c:.1e} < {MIN_CONDITIONING:g}): "

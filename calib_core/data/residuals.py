@@ -105,6 +105,20 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     return e, J
 
 
+def range_linearised(T: np.ndarray, data: ScanData) -> tuple[np.ndarray, np.ndarray]:
+    """``range_residuals(T, data, jacobian=True)`` at one (4,4) ``T``, read-only and kept on ``data`` for the last
+    ``T`` asked: the final checks of an answer (covariance, degeneracy, conditioning) all linearise at it."""
+    T = np.ascontiguousarray(T, float)
+    kept = data.__dict__.get("_range_linearised")
+    if kept is not None and kept[0] == T.tobytes():
+        return kept[1], kept[2]
+    e, J = range_residuals(T, data, jacobian=True)
+    e.setflags(write=False)
+    J.setflags(write=False)
+    data.__dict__["_range_linearised"] = (T.tobytes(), e, J)
+    return e, J
+
+
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross product of (...,3) arrays (``np.cross`` without its axis handling, on the hot path)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]

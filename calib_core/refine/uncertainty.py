@@ -16,7 +16,7 @@ import numpy as np
 
 from ..data.lines import residual_sigma
 from ..data.observations import Observations, ScanData
-from ..data.residuals import range_residuals
+from ..data.residuals import range_linearised, range_residuals
 from ..errors import UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 
@@ -120,7 +120,7 @@ def conditioning(obs: Observations, T_lidar_cam: np.ndarray | None = None, *, sc
     6 boards at 3-6 m give about 1e-2; below 1e-3 the extrinsic is poorly determined along one direction.
     """
     T = _extrinsic(obs, T_lidar_cam)
-    _, J = range_residuals(T, obs.scan_data, jacobian=True)
+    _, J = range_linearised(T, obs.scan_data)
     L = typical_range(obs) if scale_m is None else float(scale_m)
     s = np.linalg.svd(J * np.r_[np.ones(3), np.full(3, L)], compute_uv=False)
     return float(s[-1] / s[0]) if s[0] > 0 else 0.0
@@ -151,7 +151,7 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
     then ``K - k`` degrees of freedom); default the six of ``calib_core.data.residuals``.
     """
     T = np.asarray(T_lidar_cam, float)
-    e_r, J_r = range_residuals(T, data, jacobian=True)
+    e_r, J_r = range_linearised(T, data)
     B = np.eye(6) if basis is None else np.asarray(basis, float)
     J_r = J_r @ B
     if residual == "range":

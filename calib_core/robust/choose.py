@@ -119,8 +119,8 @@ not optimised again."""
 BASIN_DAMPING = 1e-12
 """The basin test's normal equations are damped by this times their mean diagonal: the step stays finite along a
 direction the boards leave free (where it is not a test of anything)."""
-PRUNE_FIRST = 8
-"""``best_starts`` scores the outline term of this many candidates (at least ``2 n``) first, doubling as needed."""
+PRUNE_FIRST = 4
+"""``best_starts`` scores the outline term of this many candidates (at least ``n + 1``) first, doubling as needed."""
 
 
 def best_starts(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, n: int,
@@ -134,7 +134,7 @@ def best_starts(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOp
     bound = lidarcam_score(obs, C, **kw, with_outline=False)
     bound = np.where(np.isnan(bound), np.inf, bound)
     order = np.argsort(bound, kind="stable")
-    k = min(len(C), max(PRUNE_FIRST, 2 * n))
+    k = min(len(C), max(PRUNE_FIRST, n + 1))
     while True:
         idx = np.sort(order[:k])
         full = bound[idx] + outline_term(obs, C[idx], score.outline_sigma_m)
