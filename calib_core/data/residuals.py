@@ -136,12 +136,13 @@ class Residual(StrEnum):
 RESIDUALS = {Residual.PLANE: plane_residuals, Residual.RANGE: range_residuals}
 
 
-def endpoints_in_board(obs: Observations, candidates: np.ndarray) -> np.ndarray:
+def endpoints_in_board(obs: Observations, candidates: np.ndarray, frames: tuple | None = None) -> np.ndarray:
     """(M,N,2,3) first and last scan point of each board in that board's frame, per candidate.
 
-    ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (docs/METHOD.md eq. 7), metres (``board_frames``).
+    ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (docs/METHOD.md eq. 7), metres (``board_frames``; ``frames``:
+    theirs, when the caller has them).
     """
-    A, c = board_frames(obs, candidates)
+    A, c = board_frames(obs, candidates) if frames is None else frames
     return scan_endpoints(obs)[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]
 
 
@@ -190,10 +191,10 @@ def _edge_groups(obs: Observations) -> list[tuple]:
     return groups
 
 
-def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool = False):
+def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None):
     """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (docs/METHOD.md eq. 8-12);
     with ``gradient`` also (M,N,2,3) their gradients in the endpoints' board-frame coordinates (the pairing of
-    endpoints with edges held fixed: it is piecewise constant).
+    endpoints with edges held fixed: it is piecewise constant). ``frames``: the candidates' ``board_frames``.
 
     Each endpoint is paired with the board edge nearest to it (point-to-line distance), the two endpoints
     with different edges (the pair of distinct edges with the least summed distance). The error of an
@@ -202,7 +203,7 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
     shape at a time (vectorised over candidates and boards that share a vertex count). Every outline is read
     as given, whatever its ``outline_kind``; a board without one (kind ``none``) gets 0.
     """
-    P = endpoints_in_board(obs, candidates)                                 # (M,N,2,3)
+    P = endpoints_in_board(obs, candidates, frames)                         # (M,N,2,3)
     M, N = P.shape[:2]
     out, grad = np.zeros((M, N, 2)), np.zeros((M, N, 2, 3))
     for idx, a, L, nrm, a_nrm, a2 in obs.derived("residuals.edge_groups", _edge_groups):
@@ -216,16 +217,13 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
         dist = np.sqrt((np.einsum("mnkc,nvc->mnkv", xy, nrm) - a_nrm) ** 2 + z2)  # point-to-line distances
         pair = dist[:, :, 0, :, None] + dist[:, :, 1, None, :]              # (M,n,V,V)
         pair[..., np.arange(V), np.arange(V)] = np.inf                       # the two edges differ
-        k0, k1 = np.divmod(np.argmin(pair.reshape(M, len(idx), V * V), axis=-1), V)
-        mm, nn = np.ogrid[:M, :len(idx)]
-        out[:, idx, 0] = err[mm, nn, 0, k0]
-        out[:, idx, 1] = err[mm, nn, 1, k1]
+        k = np.stack(np.divmod(np.argmin(pair.reshape(M, len(idx), V * V), axis=-1), V), axis=-1)  # (M,n,2)
+        out[:, idx] = np.take_along_axis(err, k[..., None], axis=-1)[..., 0]
         if gradient:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, summed over the paired edge's two vertices
-            a3 = np.concatenate([a, np.zeros(a.shape[:2] + (1,))], axis=-1)     # (n,V,3)
-            for end, k in ((0, k0), (1, k1)):
-                p = Pi[:, :, end]                                                # (M,n,3)
-                for v in (k, (k + 1) % V):
-                    grad[:, idx, end] += (p - a3[nn, v]) / np.maximum(da[mm, nn, end, v], 1e-300)[..., None]
+            v = np.stack([k, (k + 1) % V], axis=-1)                              # (M,n,2,2) the two vertices
+            q = np.concatenate([a, np.zeros(a.shape[:2] + (1,))], axis=-1)[np.arange(len(idx))[:, None, None], v]
+            d = np.maximum(np.take_along_axis(da, v, axis=-1), 1e-300)[..., None]
+            grad[:, idx] = np.sum((Pi[:, :, :, None] - q) / d, axis=3)
     return (out, grad) if gradient else out
 
 
@@ -249,10 +247,12 @@ def _outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(np.array(idx), obs.boards[idx[0]].outline) for idx in groups.values()]
 
 
-def scan_points_in_boards(obs: Observations, candidates: np.ndarray, rows: int = 3) -> np.ndarray:
+def scan_points_in_boards(obs: Observations, candidates: np.ndarray, rows: int = 3,
+                          frames: tuple | None = None) -> np.ndarray:
     """(M,K,rows) every scan point (in ``obs.scan_data`` order) in its own board's frame under every candidate:
-    ``p_W = Phi_i^T (R^T (p_L - t) - Delta_i)`` (metres; its first ``rows`` coordinates, ``board_frames``)."""
-    A, c = board_frames(obs, candidates, rows)
+    ``p_W = Phi_i^T (R^T (p_L - t) - Delta_i)`` (metres; its first ``rows`` coordinates, ``board_frames``;
+    ``frames``: theirs, of at least ``rows`` rows, when the caller has them)."""
+    A, c = board_frames(obs, candidates, rows) if frames is None else (frames[0][:, :, :rows], frames[1][:, :, :rows])
     points = obs.scan_data.points
     out = np.empty((len(candidates), len(points), rows))
     for i, sl in enumerate(obs.derived("residuals.board_slices", _board_slices)):
@@ -260,11 +260,12 @@ def scan_points_in_boards(obs: Observations, candidates: np.ndarray, rows: int =
     return out
 
 
-def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool = False):
+def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None):
     """(M,K) distance (metres) of every scan point outside its board's exact outline under every candidate (0
     inside, and on boards without an exact outline; ``outside_outline`` per group of boards sharing one); with
-    ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y)."""
-    P = scan_points_in_boards(obs, candidates, rows=2)
+    ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y). ``frames``: the candidates'
+    ``board_frames``."""
+    P = scan_points_in_boards(obs, candidates, rows=2, frames=frames)
     out, grad = np.zeros(P.shape[:2]), np.zeros(P.shape)
     for sel, outline in obs.derived("residuals.outline_point_groups", _outline_point_groups):
         if gradient:
@@ -318,11 +319,13 @@ def _edges(outline: bytes, V: int) -> tuple[np.ndarray, ...]:
 
 
 def board_frame_rows(obs: Observations, T: np.ndarray, points: np.ndarray, board: np.ndarray,
-                     g: np.ndarray) -> np.ndarray:
+                     g: np.ndarray, frames: tuple | None = None) -> np.ndarray:
     """(K,6) rows ``g_k . d p_W,k / d x`` of the chain rule through the board frame: lidar points ``points`` (K,3)
     of boards ``board`` (K,) under one ``T_lidar_cam`` ``T``, ``g`` (K,r) the gradients in the first r board-frame
-    coordinates, ``x = (w, dt)`` the module's left perturbation. With ``A = Phi^T R^T`` (``board_frames``),
-    ``d p_W / d x = A [[p_L - t]_x, -I]``, so the row is ``(v x (p_L - t), -v)`` with ``v = A^T g``."""
-    A = board_frames(obs, T[None], g.shape[1])[0][0][board]                    # (K,r,3)
+    coordinates, ``x = (w, dt)`` the module's left perturbation. With ``A = Phi^T R^T`` (``board_frames``; ``frames``:
+    those of ``T[None]``, when the caller has them), ``d p_W / d x = A [[p_L - t]_x, -I]``, so the row is
+    ``(v x (p_L - t), -v)`` with ``v = A^T g``."""
+    r = g.shape[1]
+    A = (board_frames(obs, T[None], r)[0] if frames is None else frames[0][:, :, :r])[0][board]  # (K,r,3)
     v = np.sum(g[..., None] * A, axis=1)
     return np.concatenate([_cross(v, points - T[:3, 3]), -v], axis=1)

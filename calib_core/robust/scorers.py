@@ -17,6 +17,7 @@ from scipy.special import logsumexp
 from ..data.observations import Observations
 from ..data.residuals import (
     board_frame_rows,
+    board_frames,
     candidate_chunk,
     in_chunks,
     outside_outlines,
@@ -286,11 +287,12 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
     data = obs.scan_data
     exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
     rng, J_rng = range_residuals(T, data, jacobian=True)
-    edge, g_edge = point_line_errors(obs, T[None], gradient=True)
-    out, g_out = outside_outlines(obs, T[None], gradient=True)
+    frames = board_frames(obs, T[None])                     # every board-frame map below, computed once
+    edge, g_edge = point_line_errors(obs, T[None], gradient=True, frames=frames)
+    out, g_out = outside_outlines(obs, T[None], gradient=True, frames=frames)
     J_edge = board_frame_rows(obs, T, scan_endpoints(obs)[exact].reshape(-1, 3), np.repeat(exact, 2),
-                              g_edge[0][exact].reshape(-1, 3))
-    J_out = board_frame_rows(obs, T, data.points[on_exact], data.board[on_exact], g_out[0][on_exact])
+                              g_edge[0][exact].reshape(-1, 3), frames)
+    J_out = board_frame_rows(obs, T, data.points[on_exact], data.board[on_exact], g_out[0][on_exact], frames)
     res = np.concatenate([rng / range_sigma_m, edge[0][exact].ravel() / edge_sigma_m,
                           out[0][on_exact] / outline_sigma_m])
     return res, np.concatenate([J_rng / range_sigma_m, J_edge / edge_sigma_m, J_out / outline_sigma_m], axis=0)
