@@ -97,14 +97,15 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
     e0 = fun(np.zeros(6))
     if loss == Loss.LINEAR and len(e0) >= 6:
         x, success, message, nfev = _levenberg_marquardt(fun, jac, max_nfev, x_scale)
-        cost = robust_cost(at(x)["eJ"][0])
+        cost = None
     else:  # robust losses need least_squares' trust-region reflective solver
         sol = least_squares(fun, np.zeros(6), jac=jac, method="trf", loss=loss, f_scale=f_scale,
                             max_nfev=max_nfev, x_scale=x_scale if x_scale is not None else "jac")
         x, success, message, nfev, cost = sol.x, bool(sol.success), str(sol.message), int(sol.nfev), float(sol.cost)
     step = at(x)
     T, (e, J) = step["T"], step["eJ"]
-    return RefineResult(T, cost, robust_cost(e0, loss, f_scale), e, J, success, message, nfev)
+    return RefineResult(T, robust_cost(e) if cost is None else cost, robust_cost(e0, loss, f_scale), e, J, success,
+                        message, nfev)
 
 
 LM_TOLERANCE = 1e-8
