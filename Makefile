@@ -32,44 +32,44 @@ lint: $(STAMP) ## ruff check (~5 s)
 	$(VENV)/bin/ruff check .
 
 bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughput (~1 min)
-	$(PY) -m experiments.bench
+	$(PY) -m experiments bench
 
 PRESET ?=
 TRIALS ?= 500
 reproduce-paper: $(STAMP) ## Paper's sweeps -> results/paper/ (~1 min); PRESET=paper-matched [TRIALS=500]: -> results/paper-matched/ (~3 min)
 ifeq ($(strip $(PRESET)),)
-	$(PY) -m experiments.reproduce
+	$(PY) -m experiments reproduce
 else
-	$(PY) -m experiments.matched --preset $(PRESET) --trials $(TRIALS) --compare-trials $(TRIALS)
+	$(PY) -m experiments matched --preset $(PRESET) --trials $(TRIALS) --compare-trials $(TRIALS)
 endif
 
 search-paper: $(STAMP) ## Search the paper's unstated settings (conf/search/paper.yaml), write results/search/ and the preset (~41 min)
-	$(PY) -m experiments.search --write-preset
+	$(PY) -m experiments search --write-preset
 
 explain-paper: $(STAMP) ## Ablations of peng2022 + unstated-setting sweeps, write results/explain/ (~3.5 min)
-	$(PY) -m experiments.explain
+	$(PY) -m experiments explain
 
 corner-noise: $(STAMP) ## Camera-noise sweeps (joint model over corners and ranges), write results/corner_noise/ (~1 min)
-	$(PY) -m experiments.corner_noise --trials 25 --boards-trials 25
+	$(PY) -m experiments corner-noise --trials 25 --boards-trials 25
 
 REAL_DATA ?= ../shared/real-data
 real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; ~1.5 min)
-	$(PY) -m experiments.real_data --data $(REAL_DATA)
+	$(PY) -m experiments real-data --data $(REAL_DATA)
 
 leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v1.yaml -> results/leaderboard/ (~3 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
-	$(PY) -m experiments.leaderboard $(if $(FULL),--full) $(ARGS)
+	$(PY) -m experiments leaderboard $(if $(FULL),--full) $(ARGS)
 
 verify-results: $(STAMP) ## Check every stored trial chunk under results/ parses in full; list reports stale against the code (~3 s)
-	$(PY) -m experiments.verify results
+	$(PY) -m experiments verify results
 
 clean-results: ## Empty the trial stores under results/ (results/*/trials: every row is recomputed on the next run; < 1 s)
 	rm -rf results/*/trials
 
 robustness: $(STAMP) ## Wrong boards, outlier points, mixed pixels (experiment=outliers), write results/outliers/ (~40 s)
-	$(PY) -m experiments.outliers
+	$(PY) -m experiments outliers
 
 plan-check: $(STAMP) ## The capture planner against the simulator (conf/plan/check.yaml), write results/plan/ (~1 min)
-	$(PY) -m experiments.plan_check
+	$(PY) -m experiments plan-check
 
 clean: ## Remove the virtual environment and caches (< 1 s)
 	rm -rf $(VENV) .pytest_cache .ruff_cache outputs multirun

@@ -6,7 +6,7 @@
     python -m experiments.run -m experiment=noise                     # the paper's Fig. 3b, 6, 7
 
 Rows land in ``<results_dir>/<sweep>/trials/<setting-key>/``; re-running resumes. Then
-``python -m experiments.aggregate`` (tables), ``experiments.figures``, ``experiments.report``.
+``python -m experiments aggregate`` (tables), ``experiments.summary.figures``, ``experiments.paper.report``.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from omegaconf import DictConfig
 
 from calib_core.errors import LidarcamError
 
-from .config import cell_from_cfg, register_configs
-from .runner import run_cells
-from .validate import ConfigError
+from .config.schema import cell_from_cfg, register_configs
+from .config.validate import ConfigError
+from .engine.runner import run_cells
 
 register_configs()
 
@@ -50,17 +50,18 @@ def main(cfg: DictConfig) -> float:
 
 
 def check_argv(argv) -> None:
-    """The command line's overrides checked before Hydra composes them (``experiments.overrides``)."""
+    """The command line's overrides checked before Hydra composes them (``experiments.config.overrides``)."""
     from hydra import compose, initialize_config_dir
 
-    from .overrides import CONF_DIR, check_overrides
+    from .config.overrides import check_overrides
+    from .config.sweeps import CONF_DIR
 
     overrides = [a for a in argv if "=" in a and not a.startswith("-")]
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        check_overrides(overrides, lambda choices: compose(config_name="config", overrides=choices))
+        check_overrides(overrides, lambda choices: compose(config_name="config", overrides=choices), CONF_DIR)
 
 
 if __name__ == "__main__":
-    from .entry import run_main
+    from .engine.entry import run_main
 
     run_main(lambda: check_argv(sys.argv[1:]) or main())

@@ -15,13 +15,15 @@ import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
-from experiments import aggregate, claims, figures, report
-from experiments.cell import RESULT_COLUMNS, TIMING_COLUMNS, Cell
-from experiments.config import SIM_GROUPS, cell_from_cfg, register_configs, sim_group_of, sim_options
-from experiments.reproduce import CONF_DIR, expand_sweep_params, reproduce
-from experiments.runner import run_cells
-from experiments.store import load_cell
-from experiments.trial import simulate_trial
+from experiments.config.schema import SIM_GROUPS, cell_from_cfg, register_configs, sim_group_of, sim_options
+from experiments.config.sweeps import CONF_DIR, expand_sweep_params
+from experiments.engine.cell import RESULT_COLUMNS, TIMING_COLUMNS, Cell
+from experiments.engine.runner import run_cells
+from experiments.engine.store import load_cell
+from experiments.engine.trial import simulate_trial
+from experiments.paper import claims, report
+from experiments.paper.reproduce import reproduce
+from experiments.summary import aggregate, figures
 from simulate import SimOptions
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -265,7 +267,7 @@ def test_hydra_multirun_sweep(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    from experiments.store import load_sweep
+    from experiments.engine.store import load_sweep
 
     rows = load_sweep(tmp_path, "boards")
     assert sorted(rows["n_boards"].unique()) == [3, 5] and len(rows) == 2 * 3 * 2

@@ -51,7 +51,7 @@ SENS = {"sens_tilt": ("scene.max_tilt_deg", 4), "sens_board": ("scene.board_size
 
 @pytest.mark.parametrize("experiment", ["ablation", *SENS])
 def test_explain_experiments_compose(experiment):
-    from experiments.reproduce import experiment_cells
+    from experiments.config.sweeps import experiment_cells
 
     cells = experiment_cells(experiment, ["n_trials=2"])
     n_values = 1 if experiment == "ablation" else SENS[experiment][1]
@@ -68,7 +68,7 @@ def test_explain_experiments_compose(experiment):
 
 
 def test_tiny_explain_run(tmp_path):
-    from experiments.explain import explain
+    from experiments.paper.explain import explain
 
     (tmp_path / "paper").mkdir()
     (tmp_path / "paper" / "REPORT.md").write_text("# paper\n")

@@ -10,9 +10,9 @@ import pandas as pd
 from joblib.externals.loky import get_reusable_executor
 
 from calib_core.plugins import load_module
-from experiments import fingerprint
-from experiments.cell import CODE_COLUMN, Cell
-from experiments.runner import run_cells
+from experiments.engine import fingerprint
+from experiments.engine.cell import CODE_COLUMN, Cell
+from experiments.engine.runner import run_cells
 
 PLUGIN = '''
 from calib_core.registry import Method, get_method, register

@@ -6,12 +6,13 @@ from __future__ import annotations
 import pytest
 from hydra import compose, initialize_config_dir
 
-from experiments.cell import Cell
-from experiments.config import register_configs
-from experiments.entry import EXIT_INTERRUPTED, SweepInterrupted, run_main
-from experiments.overrides import CONF_DIR, check_overrides
-from experiments.runner import run_cells
-from experiments.validate import ConfigError
+from experiments.config.overrides import check_overrides
+from experiments.config.schema import register_configs
+from experiments.config.sweeps import CONF_DIR
+from experiments.config.validate import ConfigError
+from experiments.engine.cell import Cell
+from experiments.engine.entry import EXIT_INTERRUPTED, SweepInterrupted, run_main
+from experiments.engine.runner import run_cells
 
 
 def _trial_interrupted_at(stop: int):
@@ -51,7 +52,7 @@ def test_a_mistyped_hydra_override_is_one_line_with_the_closest_key(override, ne
     register_configs()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         with pytest.raises(ConfigError) as err:
-            check_overrides([override], lambda ch: compose(config_name="config", overrides=ch))
+            check_overrides([override], lambda ch: compose(config_name="config", overrides=ch), CONF_DIR)
         check_overrides(["scene.n_boards=3,4", "experiment=boards", "+methods.options.x.y=1"],
-                        lambda ch: compose(config_name="config", overrides=ch))
+                        lambda ch: compose(config_name="config", overrides=ch), CONF_DIR)
     assert needle in str(err.value) and "\n" not in str(err.value)

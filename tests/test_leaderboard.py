@@ -8,9 +8,9 @@ import pandas as pd
 import pytest
 
 from calib_core import save_observations
-from experiments.aggregate import wilson_interval
-from experiments.leaderboard import Suite, load_suites, plan, real_files, run_leaderboard
-from experiments.leaderboard_table import leaderboard_table, markdown_table
+from experiments.suites.leaderboard import Suite, load_suites, plan, real_files, run_leaderboard
+from experiments.suites.leaderboard_table import leaderboard_table, markdown_table
+from experiments.summary.aggregate import wilson_interval
 from simulate import SimOptions, generate
 
 
@@ -67,7 +67,7 @@ def test_a_setting_shared_by_two_suites_counts_once_in_the_pooled_figures():
 
 
 def test_suite_file_is_versioned_and_names_the_paper_sweeps():
-    from experiments.leaderboard import DEFAULT_SUITE
+    from experiments.suites.leaderboard import DEFAULT_SUITE
 
     version, suites = load_suites(DEFAULT_SUITE)
     names = {s.name: s for s in suites}

@@ -21,7 +21,7 @@ from calib_core.planning.capture import PlanError, greedy, plan_capture, plan_to
 from calib_core.planning.views import PlanRig, Workspace, board_poses_lidar, feasibility, noise_free_views
 from calib_core.refine.joint import _weighted, board_informations, joint_crlb
 from calib_core.refine.uncertainty import fisher_information
-from experiments.plan_check import rig_of
+from experiments.suites.plan_check import rig_of
 from rig.dataset import DatasetError
 from rig.plan_rig import load_plan_rig
 from simulate import SimOptions, generate, observe_poses
@@ -238,7 +238,7 @@ def test_the_calibration_report_ends_with_the_planners_verdict(tmp_path):
 def test_plan_check_removes_cells_of_other_code_and_keys_on_the_code(tmp_path, monkeypatch):
     import json
 
-    from experiments import plan_check
+    from experiments.suites import plan_check
 
     cells = tmp_path / "cells"
     cells.mkdir()

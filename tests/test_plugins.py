@@ -15,8 +15,8 @@ import calib_core.plugins as plugins
 from calib_core import calibrate
 from calib_core.plugins import PluginError, load_entry_point, load_module, load_plugins
 from calib_core.registry import METHODS
-from experiments.cell import Cell
-from experiments.runner import run_cells
+from experiments.engine.cell import Cell
+from experiments.engine.runner import run_cells
 from lidarcam_cli import main
 from simulate import SimOptions, generate
 

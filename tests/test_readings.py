@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pandas as pd
 
-from experiments.claims import FRANCISCO, FRANCISCO_CODE, francisco_twins, paper_claims, reading_fit
-from experiments.report import check_claim, readings_rows
+from experiments.paper.claims import FRANCISCO, FRANCISCO_CODE, francisco_twins, paper_claims, reading_fit
+from experiments.paper.report import check_claim, readings_rows
 
 
 def test_every_francisco_claim_has_its_twin():
@@ -49,7 +49,7 @@ def test_claim_one_judged_under_both_readings():
 
 
 def test_tiny_francisco_run_writes_both_readings(tmp_path):
-    from experiments.francisco import READING_METHODS, run
+    from experiments.paper.francisco import READING_METHODS, run
 
     text = run(trials=2, more_trials=0, results_dir=str(tmp_path), n_jobs=1).read_text()
     rows = [r for r in text.splitlines() if r.startswith("| 1 |")]

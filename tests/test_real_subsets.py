@@ -9,7 +9,7 @@ import pandas as pd
 
 from calib_core.crossval import jackknife_covariance, leave_one_out
 from calib_core.geometry.transforms import make_T, rotvec_to_matrix
-from experiments import real_subsets as sub
+from experiments.real import real_subsets as sub
 from simulate import SimOptions, generate
 
 

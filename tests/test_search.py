@@ -7,10 +7,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cell import Cell
-from experiments.claim_stats import claim_values, term_name
-from experiments.claims import Claim, claim_verdict, paper_claims
-from experiments.objective import load_search_conf, miss, score
+from experiments.engine.cell import Cell
+from experiments.paper.claim_stats import claim_values, term_name
+from experiments.paper.claims import Claim, claim_verdict, paper_claims
+from experiments.paper.objective import load_search_conf, miss, score
 from simulate import SimOptions, generate
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -110,8 +110,8 @@ def test_preset_is_the_searched_winner():
     best = ROOT / "results" / "search" / "best.json"
     preset = ROOT / "conf" / "preset" / "paper-matched.yaml"
     assert best.exists(), "the committed preset comes with the search result it was written from"
-    from experiments.reproduce import experiment_cells
-    from experiments.search import sim_fields
+    from experiments.config.sweeps import experiment_cells
+    from experiments.paper.search import sim_fields
 
     point = json.loads(best.read_text())
     assert f"point {point['point']}" in preset.read_text()
@@ -121,9 +121,9 @@ def test_preset_is_the_searched_winner():
 
 
 def test_tiny_search_and_matched_run(tmp_path):
-    from experiments import search as s
-    from experiments.matched import run_preset
-    from experiments.matched_report import write_matched_report
+    from experiments.paper import search as s
+    from experiments.paper.matched import run_preset
+    from experiments.paper.matched_report import write_matched_report
 
     conf = load_search_conf()
     points = s.design(conf)[:1]
@@ -142,8 +142,8 @@ def test_tiny_search_and_matched_run(tmp_path):
 def test_needed_trials_brings_every_interval_within_five_points(p_other):
     """Sized on a pilot, a rerun at the suggested count has every valid rate's Wilson interval and the paired
     gap's interval within +-5 points; a setting that is already narrow keeps its count."""
-    from experiments.aggregate import wilson_interval
-    from experiments.matched import TARGET_HALF_WIDTH_PTS, needed_trials
+    from experiments.paper.matched import TARGET_HALF_WIDTH_PTS, needed_trials
+    from experiments.summary.aggregate import wilson_interval
 
     pilot = _trials(100, p_other, seed=1)
     n = needed_trials(pilot)
@@ -159,7 +159,7 @@ def test_needed_trials_brings_every_interval_within_five_points(p_other):
 
 
 def test_sensitivity_lines_vary_one_setting_through_the_centre():
-    from experiments.search import SPACE_KEYS, sensitivity_points, sensitivity_ranges
+    from experiments.paper.search import SPACE_KEYS, sensitivity_points, sensitivity_ranges
 
     conf = load_search_conf()
     centre = {"max_tilt_deg": 35.0, "board_size_m": 0.85, "bearing_spread_deg": 55.0, "corner_noise_px": 0.75}

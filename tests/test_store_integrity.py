@@ -11,9 +11,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cell import Cell
-from experiments.runner import run_cells
-from experiments.store import DamagedChunk, load_cell_dir, verify_store
+from experiments.engine.cell import Cell
+from experiments.engine.runner import run_cells
+from experiments.engine.store import DamagedChunk, load_cell_dir, verify_store
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -80,7 +80,7 @@ def test_damaged_chunk_is_recomputed_to_the_same_table(tmp_path, kind):
 def test_verify_command(tmp_path):
     cell = _cell(tmp_path)
     run_cells([cell], n_jobs=1, chunk_size=3, trial_fn=fake_trial, progress=False)
-    cmd = [sys.executable, "-m", "experiments.verify", str(tmp_path)]
+    cmd = [sys.executable, "-m", "experiments", "verify", str(tmp_path)]
     assert subprocess.run(cmd, cwd=ROOT, capture_output=True).returncode == 0
     sorted(cell.dir.glob("chunk-*.csv"))[0].write_bytes(b"")
     out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
@@ -98,8 +98,8 @@ def test_verify_command(tmp_path):
 def test_bad_config_is_one_line_naming_the_key(tmp_path, override, key):
     from hydra import compose, initialize_config_dir
 
-    from experiments.config import cell_from_cfg
-    from experiments.validate import ConfigError
+    from experiments.config.schema import cell_from_cfg
+    from experiments.config.validate import ConfigError
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(config_name="config", overrides=[override, f"results_dir={tmp_path}"])

@@ -43,7 +43,7 @@ def main() -> None:
     cases = []
     for nb in a.boards:
         if a.sweep_trials:
-            from experiments.reproduce import experiment_cells
+            from experiments.config.sweeps import experiment_cells
 
             cell = experiment_cells("boards", [f"scene.n_boards={nb}", f"n_trials={a.cases}"])[0]
             opts, seed, stream = SimOptions(**cell.sim), cell.seed, cell.crn_stream

@@ -1,0 +1,285 @@
+"""``make real-data``: the five public rigs in ``../shared/real-data/`` end to end -> ``results/real/``.
+
+Per data set: import (rig.public_sets, the same functions and options as docs/real-rigs.md's commands), camera
+intrinsics from the images where the given ones are rough (rig.intrinsics), extraction with near-duplicates merged
+and the background learnt from the poses (rig.extract), a leaderboard of the methods with leave-one-pose-out
+residuals and spreads (experiments.real.real_eval), the degeneracy verdict, the scan drawn on the image, and on the sets
+with at least 8 usable boards the paper's real experiment (experiments.real.real_subsets: Fig. 8, Fig. 9, valid rates).
+Writes ``REPORT.md``, ``summary.json``, figures, and the observations under ``obs/`` (the leaderboard's real
+suite reads them; those of the sets without a licence are not committed, see .gitignore).
+
+    python -m experiments real-data [--data ../shared/real-data] [--out results/real] [--subsets 50]
+
+A missing data-set folder is reported as skipped (one line), never an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from calib_core.data.io import save_observations
+from calib_core.geometry.transforms import invert_T
+from rig import public_sets as ps
+from rig.dataset import DatasetError
+from rig.extract import extract, format_diagnostics
+from rig.intrinsics import format_intrinsics, refit_camera
+from rig.report import capture_verdict, save_overlay
+
+from ..engine.fingerprint import write_stamped
+from . import real_subsets as sub
+from .real_eval import (
+    degeneracy_verdict,
+    leaderboard,
+    leaderboard_md,
+    planar_calibration,
+    range_noise_m,
+    uncertainty_md,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022", "lidarcam")
+OVERLAY_METHOD = "lidarcam"
+SHORT = {ps.EDENSHIN: "edenshin", ps.KAZMIERCZAK: "kazmierczak", ps.NOWICKI: "nowicki", ps.ACFR: "acfr",
+         ps.YONGKGU: "yongkgu"}
+LOADERS = {ps.EDENSHIN: ps.load_edenshin, ps.KAZMIERCZAK: ps.load_kazmierczak, ps.NOWICKI: ps.load_nowicki,
+           ps.ACFR: ps.load_acfr, ps.YONGKGU: ps.load_yongkgu}
+SUBSET_MIN_BOARDS = 8
+"""The subset experiment runs on the sets with at least this many usable boards (the paper's largest count)."""
+
+
+def _best(rows, prefer=OVERLAY_METHOD):
+    """The preferred method's row where it solved, else the one with the lowest held-out residual."""
+    by = {r["method"]: r for r in rows if r["ok"]}
+    if prefer in by:
+        return by[prefer]
+
+    def key(r):
+        cv = (r.get("cv") or {}).get("rms_mm")
+        return (0, cv) if cv is not None and np.isfinite(cv) else (1, r.get("fit_rms_mm", np.inf))
+
+    return min(by.values(), key=key, default=None)
+
+
+def _best_held_out(rows):
+    """The row of the best held-out method (lowest pooled held-out RMS among those that solved on all boards)."""
+    ok = [r for r in rows if r["ok"] and np.isfinite((r.get("cv") or {}).get("rms_mm", np.nan))]
+    return min(ok, key=lambda r: r["cv"]["rms_mm"], default=None)
+
+
+def _images(rs) -> dict:
+    import cv2
+
+    if rs.dataset is not None:
+        return {p.name: p.read_image() for p in rs.dataset.poses if p.image_path is not None}
+    if rs.name == ps.EDENSHIN:
+        return {"4": cv2.imread(str(rs.folder / "data4.jpg"), cv2.IMREAD_GRAYSCALE)}
+    if rs.name == ps.YONGKGU:
+        return {"11": cv2.imread(str(rs.folder / "im12.bmp"), cv2.IMREAD_GRAYSCALE)}
+    return {}
+
+
+def _local_note(rs) -> str:
+    """For a set without a licence: its images stay out of the repository, so a picture drawn on one is written
+    by ``make real-data`` for local reading and not committed (.gitignore)."""
+    return (" (drawn on this set's own image; the set states no licence, so the picture is written locally by "
+            "`make real-data` and not committed)") if rs.name in ps.UNLICENSED else ""
+
+
+def _overlays(rs, obs, T, method, out: Path, names, images: dict, full_scans: dict) -> list[str]:
+    md = []
+    poses = list(obs.meta.get("poses", []))
+    for name in [n for n in names if n in poses]:
+        b = obs.boards[poses.index(name)]
+        gray = images.get(name)
+        note = ""
+        if gray is None:  # no image published: a grey canvas with the board's corners
+            import cv2
+
+            gray = np.full((rs.camera.height, rs.camera.width), 96, np.uint8)
+            for u, v in (b.corners_px if b.has_corners else np.zeros((0, 2))):
+                cv2.circle(gray, (int(round(u)), int(round(v))), 2, 255, -1)
+            note = " (no image published for this pose: grey canvas with its detected corners)"
+        p = out / f"overlay_{SHORT[rs.name]}_{name}.png"
+        save_overlay(p, gray, rs.camera, invert_T(T), b.T_cam_board, b.outline, full_scans.get(name), b.scan,
+                     f"{rs.name} pose {name}: {method}")
+        md.append(f"![pose {name}]({p.name}){note}{_local_note(rs)}")
+    return md
+
+
+def _observations(rs) -> tuple:
+    """(observations, extraction Markdown, intrinsics Markdown) of a loaded set."""
+    if rs.observations is not None:
+        return rs.observations, [], []
+    ds, intr = rs.dataset, []
+    if rs.refit_intrinsics:
+        ds, fit = refit_camera(ds)
+        rs.camera = fit.camera
+        intr = ["### Camera intrinsics from the images", "", "The given intrinsics are rough; refitted from the "
+                "detected boards (`--refit-intrinsics`):", ""] + format_intrinsics(fit) + [""]
+    obs, diags = extract(ds, rs.options)
+    merged = ", ".join(f"{k} + {'/'.join(v)}" for k, v in obs.meta.get("merged", {}).items()) or "none"
+    md = ["### Extraction", "", "```", format_diagnostics(diags), "```", "",
+          f"{sum(d.used for d in diags)} of {len(diags)} poses used, {obs.n_boards} boards after merging "
+          f"near-duplicates (merged: {merged}).", ""]
+    return obs, md, intr
+
+
+def _covariance_md(rows) -> list[str]:
+    r = next((r for r in rows if r["method"] == "lidarcam"), None)
+    if r is None or not r["ok"]:
+        return []
+    model = r.get("covariance_model") or "-"
+    why = ("every board carries its image corners and the file its camera, so the joint model over corners and "
+           "ranges ran (board poses estimated)") if model == "joint" else (
+        "the boards carry no image corners, so only the range-only model can run (board poses taken as exact)")
+    return [f"Covariance model of `lidarcam`: **{model}**: {why}.", ""]
+
+
+def _subset_md(rs, obs, rows, out: Path, images: dict, n_subsets: int, n_jobs: int) -> tuple[list[str], dict]:
+    ref = _best_held_out(rows)
+    if ref is None:
+        return ["No method solved on all boards: no reference for the subset experiment.", ""], {}
+    df = sub.run_subsets(SHORT[rs.name], obs, METHODS, out, n_jobs=n_jobs, n=n_subsets)
+    T_ref = np.asarray(ref["T_lidar_cam"])
+    sr, st, which = ref.get("sigma_rot_deg"), ref.get("sigma_trans_mm"), "reported"
+    if not sr:  # a method without a covariance: the spread of its leave-one-out answers
+        sr, st, which = ref.get("loo_sigma_rot_deg"), ref.get("loo_sigma_trans_mm"), "leave-one-out"
+    df = sub.valid_columns(df, T_ref, sr, None if st is None else st / 1000)
+    fig9 = out / f"fig9_{SHORT[rs.name]}.png"
+    sub.fig9(df, METHODS, fig9, f"{rs.name}: {n_subsets} random subsets per board count")
+    md = ["### The paper's real experiment (Sec. 3.2)", "",
+          f"{n_subsets} seeded random subsets of the {obs.n_boards} boards per board count, every method. Fig. 9: "
+          "theta_R and mu_t (eq. 15) of each answer:", "", f"![Fig. 9]({fig9.name})", "",
+          f"Valid rate against the all-board answer of the best held-out method (`{ref['method']}`): within 8 deg / "
+          "0.8 m, and within 3 of that answer's 1-sigma"
+          + (f" ({which}: {sr:.2f} deg, {st:.1f} mm)" if sr else " (none known: 0%)")
+          + "; a failure counts as invalid:",
+          ""] + sub.valid_table(df, METHODS) + [""]
+    fig8 = _fig8(rs, obs, df, out, images)
+    md += fig8
+    rates = {m: {int(k): float(d["valid"].mean()) for k, d in df[df["method"] == m].groupby("n_boards")}
+             for m in METHODS}
+    return md, {"reference": ref["method"], "valid": rates}
+
+
+def _fig8(rs, obs, df, out: Path, images: dict) -> list[str]:
+    """Fig. 8: on one image, the board's scan through two methods' answers from the first 4-board subset that
+    holds a pose with an image and on which both solved."""
+    poses = list(obs.meta.get("poses", []))
+    with_image = [poses.index(n) for n in images if n in poses]
+    two = ("peng2022", "lidarcam")
+    for s in df[df["n_boards"] == 4]["subset"].unique():
+        d = df[(df["subset"] == s) & df["method"].isin(two)]
+        idx = [int(i) for i in str(s).split()]
+        shown = [i for i in with_image if i in idx]
+        if len(d) == 2 and d["ok"].astype(bool).all() and shown:
+            i = shown[0]
+            answers = {m: np.array(json.loads(d[d["method"] == m]["T"].iloc[0])) for m in two}
+            p = out / f"fig8_{SHORT[rs.name]}.png"
+            sub.fig8(images[poses[i]], rs.camera, obs.boards[i], answers, p,
+                     f"{rs.name} pose {poses[i]}: boards {s} (4), laser points through peng2022 (red) and lidarcam "
+                     "(cyan)")
+            return ["Fig. 8: the laser points of one pose through two methods calibrated on 4 boards:", "",
+                    f"![Fig. 8]({p.name}){_local_note(rs)}", ""]
+    return []
+
+
+def _undetermined(obs, T, sigma) -> tuple[str, ...]:
+    """The mounting axes the library's degeneracy analysis names as not determined."""
+    from calib_core.checks.degeneracy import undetermined_directions
+
+    d = undetermined_directions(obs, T, sigma)
+    return tuple(d.axes) if not d.determined else ()
+
+
+def run_set(name: str, folder: Path, out: Path, n_subsets: int, n_jobs: int) -> tuple[list[str], dict]:
+    """One data set end to end: its report section and summary."""
+    rs = LOADERS[name](folder)
+    obs, extraction_md, intrinsics_md = _observations(rs)
+    (out / "obs").mkdir(exist_ok=True)
+    save_observations(obs, out / "obs" / f"{SHORT[name]}.json")
+    sigma = range_noise_m(obs)
+    rows = leaderboard(obs, METHODS, sigma, rs.published)
+    best = _best(rows)
+    T = None if best is None else np.asarray(best["T_lidar_cam"])
+    md = [f"## {name}", "", *[f"- {n}" for n in rs.notes], ""] + intrinsics_md + extraction_md
+    summary: dict = {"rows": rows, "range_sigma_mm": 1000 * sigma, "n_boards": obs.n_boards,
+                     "poses": obs.meta.get("poses")}
+    verdict = degeneracy_verdict(obs, T, sigma) if T is not None else ("no method solved", None)
+    md += ["### Leaderboard", ""] + leaderboard_md(rows, sigma, rs.published is not None) + [""]
+    md += _covariance_md(rows) + uncertainty_md(rows) + [""]
+    md += ["### Degeneracy", "", verdict[0], ""]
+    md += ["### Capture plan", "", capture_verdict(obs, T), ""]
+    axes = _undetermined(obs, T, sigma) if verdict[1] is False else ()
+    if axes:
+        planar, T_planar = planar_calibration(obs, axes)
+        md += ["### Calibration of the determined part", ""] + planar + [""]
+        summary["planar"] = planar
+        if T_planar is not None:
+            T, best = T_planar, {"method": "lidarcam (planar)"}
+    images = _images(rs)
+    if T is not None:
+        full = {p.name: p.scan.points for p in rs.dataset.poses if p.scan is not None} if rs.dataset else {}
+        if name == ps.EDENSHIN:
+            full = {"4": np.fromfile(folder / "lidar40.bin", dtype="<f4").reshape(-1, 4)[:, :2]}
+        names = list(images)[:: max(1, len(images) // 3)][:4] or list(obs.meta.get("poses", []))[:2]
+        md += ["### Scan on the image", "", "Through the extrinsic named in each title; colour: distance to the board "
+               "plane (mm); large dots: the board's segment; yellow: the pattern's outline (a lower bound of the "
+               "board's).", ""] + _overlays(rs, obs, T, best["method"], out, names, images, full) + [""]
+    if obs.n_boards >= SUBSET_MIN_BOARDS and n_subsets > 0:
+        smd, summary["subsets"] = _subset_md(rs, obs, rows, out, images, n_subsets, n_jobs)
+        md += smd
+    return md, summary
+
+
+def _timed_set(name: str, folder: Path, out: Path, n_subsets: int) -> tuple[list[str], dict]:
+    """``run_set`` in one worker, timed; an import failure is the section's one line."""
+    t1 = time.perf_counter()
+    print(f"== {name}", flush=True)
+    try:
+        section, summary = run_set(name, folder, out, n_subsets, n_jobs=1)
+    except DatasetError as err:
+        section, summary = [f"## {name}", "", f"Import failed: {err}", ""], {"error": str(err)}
+    summary["seconds"] = time.perf_counter() - t1
+    print(f"== {name}: {summary['seconds']:.0f} s", flush=True)
+    return section, summary
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap.add_argument("--data", default=str(ROOT.parent / "shared" / "real-data"), help="folder of the data sets")
+    ap.add_argument("--out", default=str(ROOT / "results" / "real"), help="output folder")
+    ap.add_argument("--subsets", type=int, default=sub.N_SUBSETS, help="random subsets per board count (0: none)")
+    ap.add_argument("--jobs", type=int, default=2, help="parallel workers (one data set each at a time)")
+    args = ap.parse_args(argv)
+    data, out = Path(args.data), Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    md = ["# lidarcam on real data", "", "Written by `make real-data` (`python -m experiments real-data`) from "
+          f"`{args.data}`; each data set's SOURCE.md gives its repository, licence and formats; "
+          "[docs/real-rigs.md](../../docs/real-rigs.md) has the commands that give the same boards.", ""]
+    from joblib import Parallel, delayed
+
+    present = [n for n in LOADERS if (data / n).is_dir()]
+    for n in LOADERS:
+        if n not in present:
+            print(f"skipped {n}: {data / n} not found", flush=True)
+    done = dict(zip(present, Parallel(n_jobs=args.jobs)(delayed(_timed_set)(n, data / n, out, args.subsets)
+                                                         for n in present), strict=True))
+    summary = {}
+    for name in LOADERS:
+        if name not in done:
+            md += [f"## {name}", "", f"Skipped: `{data / name}` not found.", ""]
+            continue
+        section, summary[name] = done[name]
+        md += section + [f"({name}: {summary[name]['seconds']:.0f} s in one worker)", ""]
+    md += [f"Total: {time.perf_counter() - t0:.0f} s wall ({args.jobs} workers, one data set each at a time)."]
+    write_stamped(out / "REPORT.md", "\n".join(md) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str) + "\n")
+    print(f"wrote {out / 'REPORT.md'} ({time.perf_counter() - t0:.0f} s)")
+    return 0

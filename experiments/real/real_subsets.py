@@ -1,0 +1,166 @@
+"""The paper's real experiment (Sec. 3.2, Fig. 8-9) on the public rigs: for each board count 3-8, seeded random
+subsets of the usable boards, every method; theta_R and mu_t (docs/METHOD.md eq. 15) per method and board count
+(Fig. 9), two methods' laser points on one image from 4 boards (Fig. 8), and the valid rate against the all-board
+answer of the best held-out method (within 8 deg / 0.8 m, and within 3 of that answer's sigmas): Fig. 3a on
+real data. Rows are stored per data set (``subsets_<set>.csv``) and reused when the data and settings match.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+import calib_core
+from calib_core.data.io import observations_to_dict
+from calib_core.data.observations import Observations
+from calib_core.geometry.metrics import pose_errors
+from rig.markdown import md_table
+
+BOARD_COUNTS = (3, 4, 5, 6, 7, 8)
+N_SUBSETS = 50
+VALID_DEG, VALID_M = 8.0, 0.8
+"""The paper's validity thresholds (docs/METHOD.md eq. 13-14)."""
+SIGMAS = 3.0
+"""The stricter validity: within this many of the reference answer's 1-sigma (rotation and translation)."""
+
+
+def theta_mu(T: np.ndarray) -> tuple[float, float]:
+    """eq. 15: ``theta_R = (180/pi) acos((trace R - 1)/2)`` (deg) and ``mu_t = |t|`` (m) of ``T_lidar_cam``."""
+    c = np.clip((np.trace(T[:3, :3]) - 1) / 2, -1.0, 1.0)
+    return float(np.degrees(np.arccos(c))), float(np.linalg.norm(T[:3, 3]))
+
+
+def subsets(name: str, n_boards: int, counts=BOARD_COUNTS, n: int = N_SUBSETS, seed: int = 0) -> list[tuple[int, ...]]:
+    """``n`` random board subsets per count (sorted indices), seeded by ``seed`` and the data set's name."""
+    rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
+    return [tuple(sorted(rng.choice(n_boards, k, replace=False).tolist())) for k in counts if k <= n_boards
+            for _ in range(n)]
+
+
+def _run(obs: Observations, subset: tuple[int, ...], methods) -> list[dict]:
+    out = []
+    sub = obs.subset(list(subset))
+    for m in methods:
+        res = calib_core.calibrate(sub, m)
+        row = {"n_boards": len(subset), "subset": " ".join(map(str, subset)), "method": m, "ok": res.ok,
+               "seconds": res.seconds, "theta_R_deg": math.nan, "mu_t_m": math.nan, "T": ""}
+        if res.ok:
+            row["theta_R_deg"], row["mu_t_m"] = theta_mu(res.T_lidar_cam)
+            row["T"] = json.dumps(np.round(res.T_lidar_cam, 9).tolist())
+        out.append(row)
+    return out
+
+
+def run_subsets(name: str, obs: Observations, methods, out: Path, n_jobs: int = 2, n: int = N_SUBSETS,
+                seed: int = 0) -> pd.DataFrame:
+    """Every method on every subset of ``subsets(...)``; stored in ``out/subsets_<name>.csv`` with a key of the data
+    and settings and of the library's code (``engine.fingerprint``), read back instead of rerun when it matches."""
+    from joblib import Parallel, delayed
+
+    from ..engine.fingerprint import package_hash
+
+    key = hashlib.sha256(json.dumps([observations_to_dict(obs)["boards"], list(methods), n, seed,
+                                     list(BOARD_COUNTS), package_hash("calib_core")], sort_keys=True,
+                                    default=str).encode()).hexdigest()[:16]
+    path = out / f"subsets_{name}.csv"
+    if path.exists():
+        df = pd.read_csv(path, keep_default_na=False, na_values=[""])
+        if len(df) and str(df["key"].iloc[0]) == key:
+            print(f"  subsets: {len(df)} rows reused from {path.name}", flush=True)
+            return df
+    jobs = subsets(name, obs.n_boards, n=n, seed=seed)
+    t0 = time.perf_counter()
+    parts = Parallel(n_jobs=n_jobs, batch_size=4)(delayed(_run)(obs, s, methods) for s in jobs)
+    df = pd.DataFrame([r for p in parts for r in p])
+    df.insert(0, "key", key)
+    df.to_csv(path, index=False)
+    print(f"  subsets: {len(jobs)} subsets x {len(methods)} methods in {time.perf_counter() - t0:.0f} s", flush=True)
+    return df
+
+
+def valid_columns(df: pd.DataFrame, T_ref: np.ndarray, sigma_rot_deg: float | None,
+                  sigma_trans_m: float | None) -> pd.DataFrame:
+    """``df`` with ``e_R_deg``, ``e_t_m`` against the reference answer and ``valid`` (8 deg / 0.8 m) and
+    ``valid_3sigma`` (within ``SIGMAS`` of the reference's 1-sigma; False when it has none)."""
+    df = df.copy()
+    e = [pose_errors(np.array(json.loads(T)), T_ref) if ok and isinstance(T, str) and T else (math.nan, math.nan)
+         for ok, T in zip(df["ok"], df["T"], strict=True)]
+    df["e_R_deg"] = [float(a) for a, _ in e]
+    df["e_t_m"] = [float(b) for _, b in e]
+    df["valid"] = (df["e_R_deg"] < VALID_DEG) & (df["e_t_m"] < VALID_M)
+    if sigma_rot_deg and sigma_trans_m:
+        df["valid_3sigma"] = (df["e_R_deg"] < SIGMAS * sigma_rot_deg) & (df["e_t_m"] < SIGMAS * sigma_trans_m)
+    else:
+        df["valid_3sigma"] = False
+    return df
+
+
+def valid_table(df: pd.DataFrame, methods) -> list[str]:
+    """Markdown: valid rate (8 deg / 0.8 m) and within 3 sigmas per method and board count."""
+    counts = sorted(df["n_boards"].unique())
+    rows = []
+    for m in methods:
+        d = df[df["method"] == m]
+        cells = []
+        for k in counts:
+            dk = d[d["n_boards"] == k]
+            cells.append(f"{100 * dk['valid'].mean():.0f}% / {100 * dk['valid_3sigma'].mean():.0f}%")
+        rows.append([f"`{m}`", *cells])
+    return md_table(["method", *(f"{k} boards" for k in counts)], rows, "l" + "r" * len(counts))
+
+
+def fig9(df: pd.DataFrame, methods, path: Path, title: str) -> None:
+    """Box plots of theta_R and mu_t (eq. 15) per method and board count (the paper's Fig. 9)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    counts = sorted(df["n_boards"].unique())
+    fig = Figure(figsize=(2.2 * len(methods), 5.2))
+    FigureCanvasAgg(fig)
+    for r, (col, label) in enumerate((("theta_R_deg", "theta_R (deg)"), ("mu_t_m", "mu_t (m)"))):
+        for c, m in enumerate(methods):
+            ax = fig.add_subplot(2, len(methods), r * len(methods) + c + 1)
+            d = df[(df["method"] == m) & df["ok"].astype(bool)]
+            data = [d[d["n_boards"] == k][col].dropna().to_numpy() for k in counts]
+            ax.boxplot([x if len(x) else [np.nan] for x in data], tick_labels=[str(k) for k in counts],
+                       showfliers=True, flierprops={"markersize": 2})
+            if r == 0:
+                ax.set_title(m, fontsize=8)
+            if c == 0:
+                ax.set_ylabel(label, fontsize=8)
+            if r == 1:
+                ax.set_xlabel("boards", fontsize=8)
+            ax.tick_params(labelsize=7)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def fig8(gray: np.ndarray, camera, board, answers: dict[str, np.ndarray], path: Path, title: str) -> None:
+    """Two methods' laser points (the board's scan) on one image through their extrinsics (the paper's Fig. 8).
+    ``board``: the ``BoardObservation`` of the pose shown; ``answers``: method -> ``T_lidar_cam``."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from calib_core.geometry.transforms import invert_T
+    from rig.report import project_scan
+
+    h, w = gray.shape[:2]
+    fig = Figure(figsize=(w / 100, h / 100 + 0.3), dpi=100)
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0, 0, 1, h / (h + 30)))
+    ax.imshow(gray, cmap="gray", vmin=0, vmax=255)
+    ax.set_axis_off()
+    for (m, T), colour in zip(answers.items(), ("red", "cyan", "yellow"), strict=False):
+        uv, ok = project_scan(camera, invert_T(T), board.scan)
+        ax.scatter(uv[ok, 0], uv[ok, 1], s=6, c=colour, label=m)
+    ax.legend(loc="lower right", fontsize=7)
+    fig.text(0.01, 0.99, title, fontsize=8, va="top")
+    fig.savefig(path)
