@@ -195,6 +195,21 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
         r[~np.isfinite(r) | (r > o.lidar_max_range_m) | (rng_lidar.random(len(r)) < dropout_prob)] = 0.0
         return r
 
+    names = [f"{i:03d}" for i in range(len(scene.T_lidar_board))]
+    owners = _write_scans(out, names, scene, images, bearings, r_room, noisy, scan_columns=scan_columns,
+                          keyed_scans=keyed_scans, image_format=image_format)
+    _write_camera_yaml(out / "camera.yaml", camera_style, o, K, dist)
+    write_board_yaml(out / "board.yaml", o, scene.outline)
+    _write_ground_truth(out / "ground_truth.yaml", o, scene, T_sim_ds, names, owners, seed=seed, trial=trial,
+                        sigma=sigma, walls=walls, yaw=yaw)
+    return out
+
+
+def _write_scans(out: Path, names, scene, images, bearings: np.ndarray, r_room: np.ndarray, noisy, *,
+                 scan_columns: str, keyed_scans: bool, image_format: str) -> list[np.ndarray]:
+    """Each pose's image and scan (board in front of the room, ``noisy`` ranges), and background.csv; returns
+    per pose which beams the board owns."""
+
     def scan_rows(r: np.ndarray) -> list[tuple[float, float]]:
         if scan_columns == "xy":
             return [(float(ri * np.cos(b)), float(ri * np.sin(b))) for b, ri in zip(bearings, r, strict=True)]
@@ -203,7 +218,6 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
     header = "x,y" if scan_columns == "xy" else "bearing_rad,range_m"
     if scan_columns not in ("xy", "bearing_range"):
         raise ValueError(f"scan_columns must be bearing_range or xy, got {scan_columns!r}")
-    names = [f"{i:03d}" for i in range(len(scene.T_lidar_board))]
     keyed_lines = ["pose," + header]
     owners = []
     for name, T_lb, img in zip(names, scene.T_lidar_board, images, strict=True):
@@ -221,15 +235,22 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
         (out / "scans.csv").write_text("\n".join(keyed_lines) + "\n")
     bg = noisy(r_room.copy())
     (out / "background.csv").write_text("\n".join([header] + [f"{a!r},{b!r}" for a, b in scan_rows(bg)]) + "\n")
+    return owners
 
+
+def _write_camera_yaml(path: Path, camera_style: str, o: SimOptions, K: np.ndarray, dist: np.ndarray) -> None:
     if camera_style == "opencv":
-        _opencv_camera_yaml(out / "camera.yaml", o.cam_width, o.cam_height, K, dist)
+        _opencv_camera_yaml(path, o.cam_width, o.cam_height, K, dist)
     elif camera_style == "plain":
-        _plain_camera_yaml(out / "camera.yaml", o.cam_width, o.cam_height, K, dist)
+        _plain_camera_yaml(path, o.cam_width, o.cam_height, K, dist)
     else:
         raise ValueError(f"camera_style must be opencv or plain, got {camera_style!r}")
-    write_board_yaml(out / "board.yaml", o, scene.outline)
 
+
+def _write_ground_truth(path: Path, o: SimOptions, scene, T_sim_ds: np.ndarray, names, owners, *, seed: int,
+                        trial: int, sigma: float, walls: np.ndarray, yaw: float) -> None:
+    """ground_truth.yaml: T_lidar_cam, the range noise (metres), the room, and per pose T_cam_board (dataset board
+    frame), the scan chord and the board's beam interval."""
     T_lc = scene.T_lidar_cam
     T_cb = scene.T_cam_board @ T_sim_ds
     chords = scan_chords(scene.T_lidar_board, scene.outline)
@@ -246,5 +267,4 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
     gt.append("options:")
     gt += [f"  {k}: {str(v).lower() if isinstance(v, bool) else repr(v)}" if not isinstance(v, str) else f"  {k}: '{v}'"
            for k, v in o.to_dict().items()]
-    (out / "ground_truth.yaml").write_text("\n".join(gt) + "\n")
-    return out
+    path.write_text("\n".join(gt) + "\n")

@@ -283,3 +283,20 @@ def test_reproduce_small(tmp_path):
     assert (tmp_path / "paper" / "figures" / "fig7_error_distribution_vs_noise.pdf").exists()
     s = aggregate.load_summary(tmp_path / "paper", "noise")
     assert len(s) == 12 and s["n_trials"].eq(2).all()
+
+
+EXPERIMENTS = sorted(p.stem for p in (CONF_DIR / "experiment").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("experiment", EXPERIMENTS)
+def test_every_experiment_config_runs_small(experiment, tmp_path):
+    """Every experiment config composes into cells and one trial of its first cell runs, every method of it giving
+    a row (lightning-hydra-template's sweep test)."""
+    from experiments.config.sweeps import experiment_cells
+    from experiments.engine.runner import run_cells
+
+    cells = experiment_cells(experiment, ["n_trials=1", f"results_dir={tmp_path}"])
+    assert cells and all(c.n_trials == 1 for c in cells)
+    df = run_cells(cells[:1], n_jobs=1, progress=False)
+    assert sorted(df["method"]) == sorted(cells[0].methods) and df["trial"].eq(0).all()
+    assert (df["ok"] | df["reason"].astype(str).str.len().gt(0)).all(), "a failed row must say why"
