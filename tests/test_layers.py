@@ -120,12 +120,12 @@ def test_module_and_function_sizes(pkg):
     assert not long, f"over {MAX_MODULE_LINES} lines a module or {MAX_FUNCTION_LINES} a function: {long}"
 
 
-EXPERIMENT_FLOORS = (("engine",), ("config", "summary", "real", "bench"), ("paper", "suites", "run", "__main__"),
+EXPERIMENT_FLOORS = (("engine",), ("config", "summary", "bench"), ("paper", "suites", "real", "run", "__main__"),
                      ("__init__",))
 """The rooms of ``experiments`` in import order, lowest first: ``engine`` runs and keeps trials; ``config`` (the
-Hydra side and the sweeps), ``summary`` (rows to tables and figures), ``real`` (the public rigs) and ``bench``
-(timings) stand on it; the studies of ``paper`` and ``suites``, the Hydra runner and the door stand on top, peers
-of one another (no study imports another)."""
+Hydra side and the sweeps), ``summary`` (rows to tables, figures and intervals) and ``bench`` (timings) stand on
+it; the studies of ``paper``, ``suites`` and ``real`` (the public rigs), the Hydra runner and the door stand on
+top, peers of one another (no study imports another)."""
 
 
 def _room(name: str) -> str:
