@@ -7,14 +7,14 @@ Units inside the library: metres and radians.
 
 from .data.io import extrinsic_yaml, load_observations, observations_from_dict, observations_to_dict, save_observations
 from .data.observations import BoardObservation, Observations
-from .errors import CalibrationError, LidarcamError, ObservationError
+from .errors import CalibrationError, LidarcamError, ObservationError, SolveFailure
 
 __all__ = [
     "BoardObservation", "CalibrationError", "LidarcamError", "ObservationError", "Observations",
     "extrinsic_yaml", "load_observations", "observations_from_dict", "observations_to_dict", "save_observations",
 ]
 
-from .data.result import CalibrationResult, SolveFailure, load_result  # noqa: E402
+from .data.result import CalibrationResult, load_result  # noqa: E402
 from .entry import calibrate  # noqa: E402
 from .methods import register_builtins  # noqa: E402
 from .registry import METHODS, get_method  # noqa: E402

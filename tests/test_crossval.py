@@ -1,12 +1,12 @@
-"""Leave-one-pose-out cross-validation (calib_core.crossval)."""
+"""Leave-one-pose-out cross-validation (calib_core.evaluate.crossval)."""
 
 import json
 
 import numpy as np
 from rigs import general_rig, vertical_rig
 
-from calib_core.crossval import held_out_residuals, leave_one_out
 from calib_core.data.observations import BoardObservation, Observations
+from calib_core.evaluate.crossval import held_out_residuals, leave_one_out
 from calib_core.geometry.mounting import params_from_T
 from calib_core.geometry.transforms import make_T
 

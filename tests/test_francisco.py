@@ -17,8 +17,9 @@ from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.transforms import make_T, rotvec_to_matrix
 from calib_core.methods.francisco import MSAC_THRESHOLD_PER_MM, msac_errors, msac_select
 from calib_core.solvers import vasconcelos_dual
+from calib_core.solvers._common import board_triples
 from calib_core.solvers.candidates import CandidateSet, minimal_candidates
-from calib_core.solvers.vasconcelos import board_triples, solve_triples
+from calib_core.solvers.vasconcelos import solve_triples
 from simulate import SimOptions, generate
 
 FIXTURE = Path(__file__).parent / "fixtures" / "francisco_reference.npz"

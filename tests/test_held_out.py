@@ -1,5 +1,5 @@
-"""Held-out scores beyond point-to-plane (calib_core.held_out): residuals in units of their predicted spread hold
-on simulated rigs whose board poses come from noisy corners, the factor on the board poses' sigmas is recovered
+"""Held-out scores beyond point-to-plane (calib_core.evaluate.held_out): residuals in units of their predicted spread
+hold on simulated rigs whose board poses come from noisy corners, the factor on the board poses' sigmas is recovered
 when the poses carry extra error, and the joint held-out residual re-estimates the board pose exactly."""
 
 from dataclasses import replace
@@ -7,9 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from calib_core.crossval import leave_one_out
+from calib_core.evaluate.crossval import leave_one_out
+from calib_core.evaluate.held_out import _board_pose_covariance, held_out_joint, held_out_spread, spread_summary
 from calib_core.geometry.transforms import rotvec_to_matrix
-from calib_core.held_out import _board_pose_covariance, held_out_joint, held_out_spread, spread_summary
 from simulate import SimOptions, generate
 
 

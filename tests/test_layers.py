@@ -88,8 +88,8 @@ def test_library_loads_no_io_or_plotting_stack():
     assert out.stdout.strip() == "", f"importing calib_core loads: {out.stdout.strip()}"
 
 
-CORE_FLOORS = (("errors",), ("geometry",), ("data",), ("solvers",), ("refine",), ("robust",), ("checks", "held_out"),
-               ("planning",), ("registry",), ("methods",), ("entry", "plugins"), ("crossval",), ("__init__",))
+CORE_FLOORS = (("errors",), ("geometry",), ("data",), ("solvers",), ("refine",), ("robust",), ("checks",),
+               ("planning",), ("registry",), ("methods",), ("entry", "plugins"), ("evaluate",), ("__init__",))
 """The stages of ``calib_core`` in import order, lowest first: a module imports only from its own stage or from a
 lower floor (the flow: data -> scan lines -> candidates -> refinement and robust choice -> checks -> methods ->
 the one entry; the capture planner reads the degeneracy analysis). ``registry`` sits below the methods that

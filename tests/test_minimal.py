@@ -9,17 +9,16 @@ import numpy as np
 import pytest
 
 from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix
-from calib_core.solvers.orientation import kabsch
-from calib_core.solvers.vasconcelos import (
+from calib_core.solvers._common import (
     MAX_SOLUTIONS,
     REASON_PLANES,
     REASON_SCAN_LINES,
     REASON_TRIANGLE,
     MinimalSolutions,
     board_triples,
-    solve_triple,
-    solve_triples,
 )
+from calib_core.solvers.orientation import kabsch
+from calib_core.solvers.vasconcelos import solve_triple, solve_triples
 
 N_SEEDS = 250
 TOL = 1e-9

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pandas as pd
 
-from calib_core.crossval import jackknife_covariance, leave_one_out
+from calib_core.evaluate.crossval import jackknife_covariance, leave_one_out
 from calib_core.geometry.transforms import make_T, rotvec_to_matrix
 from experiments.real import real_subsets as sub
 from experiments.summary.aggregate import wilson_interval

@@ -20,7 +20,7 @@ from test_minimal import (
 from calib_core import calibrate
 from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.transforms import invert_T, make_T
-from calib_core.solvers import vasconcelos, zhou2014
+from calib_core.solvers import _common, vasconcelos, zhou2014
 from simulate import SimOptions, generate
 
 N_SEEDS = 400
@@ -39,7 +39,7 @@ def test_truth_among_solutions_every_candidate_exact():
         T, n, d, p, u = random_scene(rng)
         sol = solve(n, d, p, u)
         assert sol.reasons[0] is None
-        assert 2 <= len(sol) <= zhou2014.MAX_SOLUTIONS and len(sol) % 2 == 0
+        assert 2 <= len(sol) <= _common.MAX_SOLUTIONS and len(sol) % 2 == 0
         counts.append(len(sol))
         eR, et = pose_errors(sol.T_lidar_cam, T)
         k = int(np.argmin(eR + et))
@@ -123,10 +123,10 @@ def test_degenerate_configurations_refused_with_reason():
     p_sl, u_sl = scan_lines(T, n_sl, d_sl)
     sol = zhou2014.solve_triples(np.array([n_par, n_sl, n]), np.array([d_par, d_sl, d]),
                                  np.array([p_par, p_sl, p]), np.array([u_par, u_sl, u]))
-    assert list(sol.reasons[:2]) == [vasconcelos.REASON_PLANES] * 2
+    assert list(sol.reasons[:2]) == [_common.REASON_PLANES] * 2
     assert sol.reasons[2] is None and set(sol.triple.tolist()) == {2}
     bad = zhou2014.solve_triples(np.full((1, 3, 3), np.nan), d[None], p[None], u[None])
-    assert len(bad) == 0 and bad.reasons[0] == vasconcelos.REASON_NONFINITE
+    assert len(bad) == 0 and bad.reasons[0] == _common.REASON_NONFINITE
 
 
 def test_two_parallel_scan_lines_solved_where_vasconcelos_refuses():
@@ -135,7 +135,7 @@ def test_two_parallel_scan_lines_solved_where_vasconcelos_refuses():
     nL = np.array([[1.0, 0.2, 0.3], [1.0, 0.2, -0.6], [0.1, 1.0, 0.2]])
     n, d = camera_planes_from_lidar(T, nL, np.array([4.0, 5.0, 3.0]))
     p, u = scan_lines(T, n, d)
-    assert vasconcelos.solve_triples(n[None], d[None], p[None], u[None]).reasons[0] == vasconcelos.REASON_SCAN_LINES
+    assert vasconcelos.solve_triples(n[None], d[None], p[None], u[None]).reasons[0] == _common.REASON_SCAN_LINES
     sol = solve(n, d, p, u)
     assert sol.reasons[0] is None and pose_distance(sol.T_lidar_cam, T).min() < 1e-8
 

@@ -92,7 +92,8 @@ def _candidates(obs: Observations, exhaustive: bool) -> np.ndarray:
     triple of scans when ``exhaustive``)."""
     from itertools import permutations
 
-    from ..solvers.vasconcelos import board_triples, solve_triples
+    from ..solvers._common import board_triples
+    from ..solvers.vasconcelos import solve_triples
 
     scan_lines(obs).require_line_like()
     tri = board_triples(obs.n_boards)

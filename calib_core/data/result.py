@@ -9,7 +9,6 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SolveFailure  # noqa: F401 -- re-exported: result.SolveFailure is public
 from ..geometry.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import invert_T
 

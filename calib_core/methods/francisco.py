@@ -14,7 +14,7 @@ import numpy as np
 
 from ..data.lines import scan_lines
 from ..data.observations import Observations
-from ..data.result import SolveFailure
+from ..errors import SolveFailure
 from ..refine.refine import refine
 from ..registry import Method
 from ..solvers.candidates import minimal_candidates

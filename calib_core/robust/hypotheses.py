@@ -14,7 +14,8 @@ import numpy as np
 
 from ..data.lines import triple_inputs
 from ..data.observations import Observations
-from ..solvers.vasconcelos import board_triples, solve_triples
+from ..solvers._common import board_triples
+from ..solvers.vasconcelos import solve_triples
 from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
 from ..solvers.zhang_pless import linear_subsets
 from .consensus import SCORE_TAU, board_statistics

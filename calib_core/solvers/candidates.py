@@ -8,8 +8,9 @@ import numpy as np
 
 from ..data.lines import scan_lines, triple_inputs
 from ..data.observations import Observations
-from ..data.result import SolveFailure
-from ..errors import CalibrationError
+from ..errors import CalibrationError, SolveFailure
+from . import vasconcelos, vasconcelos_dual, zhou2014
+from ._common import board_triples
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,8 +35,9 @@ class CandidateSet:
         return f"{len(self.triples)} triples, no real solution" + (f" ({'; '.join(parts)})" if parts else "")
 
 
-MINIMAL_SOLVERS = ("vasconcelos", "zhou2014", "vasconcelos_dual")
-"""The minimal solvers (modules of this package, each with ``solve_triples(n, d, p, u, **options)``)."""
+MINIMAL_SOLVERS = {"vasconcelos": vasconcelos.solve_triples, "zhou2014": zhou2014.solve_triples,
+                   "vasconcelos_dual": vasconcelos_dual.solve_triples}
+"""The minimal solvers by name: each ``solve_triples(n, d, p, u, **options) -> MinimalSolutions``."""
 
 
 def minimal_candidates(obs: Observations, solver: str = "vasconcelos", **solver_options) -> CandidateSet:
@@ -47,16 +49,7 @@ def minimal_candidates(obs: Observations, solver: str = "vasconcelos", **solver_
         raise SolveFailure(f"the minimal solver needs at least 3 boards, got {obs.n_boards}")
     if solver not in MINIMAL_SOLVERS:
         raise CalibrationError(f"unknown minimal solver {solver!r}; choose from {', '.join(MINIMAL_SOLVERS)}")
-    # the solver modules are the heavy part: load on use
-    from .vasconcelos import board_triples
-    if solver == "zhou2014":
-        from .zhou2014 import solve_triples
-    elif solver == "vasconcelos_dual":
-        from .vasconcelos_dual import solve_triples
-    else:
-        from .vasconcelos import solve_triples
-
     scan_lines(obs).require_line_like()
     tri = board_triples(obs.n_boards)
-    sol = solve_triples(*triple_inputs(obs, tri), **solver_options)
+    sol = MINIMAL_SOLVERS[solver](*triple_inputs(obs, tri), **solver_options)
     return CandidateSet(sol.T_lidar_cam, sol.triple, tri, sol.reasons)

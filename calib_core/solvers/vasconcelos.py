@@ -39,121 +39,29 @@ Method, per triple, all vectorised over triples (no Python loop over triples or 
 
 from __future__ import annotations
 
-import itertools
-from dataclasses import dataclass
-
 import numpy as np
 
-from ..errors import LidarcamError
-from ..geometry.transforms import make_T
+from ._common import (
+    REASON_PLANES,
+    REASON_QUARTIC,
+    REASON_SCAN_LINES,
+    REASON_TRIANGLE,
+    SCAN_LINE_PAIRS,
+    MinimalSolutions,
+    grunert_quartic,
+    plane_sv_min,
+    prologue,
+)
 from .orientation import abs_orientation_3pt, cross, cross2, dot, unit
 from .polynomial import keep_better, newton_roots, quartic_roots_closed, quartic_roots_eig
-
-# Reasons (the ``reasons`` entries; ``None`` means solved).
-REASON_NONFINITE = "non-finite input"
-REASON_PLANES = "planes do not meet in one point (sigma_min(N) < min_plane_sv)"
-REASON_SCAN_LINES = "scan lines nearly parallel (|sin angle| < min_line_sin)"
-REASON_TRIANGLE = "scan triangle degenerate (2 area / longest side^2 < min_triangle, or longest side < min_side)"
-REASON_QUARTIC = "degenerate quartic (roots at both 0 and infinity)"
-REASON_NO_REAL = "no real solution"
-
-MAX_SOLUTIONS = 8
 
 # Grunert point k (k = 1, 2, 3) -> original line index (0: v_12, 1: v_13, 2: v_23), chosen by the longest side.
 # Sides: 0 = |q12 q13|, 1 = |q12 q23|, 2 = |q13 q23|; Grunert's b is the side between points 1 and 3.
 _PERM_BY_LONGEST = np.array([[0, 2, 1], [0, 1, 2], [1, 0, 2]])
-# Which scan lines meet at q_a, a = 12, 13, 23.
-_PAIRS = np.array([[0, 1], [0, 2], [1, 2]])
-
-
-class MinimalSolverError(LidarcamError, ValueError):
-    """Bad input shapes or options for the minimal solver."""
-
-
-@dataclass(frozen=True)
-class MinimalSolutions:
-    """Every real solution of a batch of B plane-line triples.
-
-    ``T_lidar_cam`` (M,4,4): the candidates, grouped by triple (ascending) and, within one, in root order
-    with each solution followed by its mirror.  ``triple`` (M,): index of the input triple of each one.
-    ``near_real`` (M,): True where the candidate comes from a complex root pair kept by ``near_real_tol``.
-    ``reasons`` (B,) object: ``None`` when the triple was solved, else a ``REASON_*`` string (degenerate,
-    or ``REASON_NO_REAL`` when the quartic had no kept root).
-    """
-
-    T_lidar_cam: np.ndarray
-    triple: np.ndarray
-    near_real: np.ndarray
-    reasons: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.triple.shape[0])
-
-    def of_triple(self, b: int) -> np.ndarray:
-        """The candidates (K,4,4) of input triple ``b``."""
-        return self.T_lidar_cam[self.triple == b]
-
-    @classmethod
-    def pack(cls, R: np.ndarray, t_m: np.ndarray, triple: np.ndarray, solved: np.ndarray, reasons: np.ndarray,
-             near_real: np.ndarray) -> MinimalSolutions:
-        """The solutions of a solver: rotations (M,3,3) and translations (M,3) metres of ``T_lidar_cam``, the input
-        triple of each; ``solved`` the indices of the B triples that reached the solver, whose ``reasons``
-        (B,) become ``REASON_NO_REAL`` where no solution came out (others are kept)."""
-        n = len(reasons)
-        has = np.zeros(n, dtype=bool)
-        has[triple] = True
-        reached = np.zeros(n, dtype=bool)
-        reached[solved] = True
-        reasons[reached & ~has & (reasons == None)] = REASON_NO_REAL  # noqa: E711 -- elementwise on objects
-        return cls(T_lidar_cam=make_T(R, t_m), triple=triple, near_real=near_real, reasons=reasons)
-
-
-def board_triples(n_boards: int) -> np.ndarray:
-    """All ``C(n_boards, 3)`` triples of board indices, (C,3) int, lexicographic order."""
-    if n_boards < 3:
-        return np.zeros((0, 3), dtype=int)
-    return np.array(list(itertools.combinations(range(int(n_boards)), 3)), dtype=int)
 
 
 # ----------------------------------------------------------------------------------------------------------
 # Small vectorised helpers
-
-
-def _sym3_min_eig(A: np.ndarray) -> np.ndarray:
-    """Smallest eigenvalue of symmetric 3x3 matrices (...,3,3), closed form (trigonometric)."""
-    a11, a22, a33 = A[..., 0, 0], A[..., 1, 1], A[..., 2, 2]
-    a12, a13, a23 = A[..., 0, 1], A[..., 0, 2], A[..., 1, 2]
-    q = (a11 + a22 + a33) / 3.0
-    p1 = a12**2 + a13**2 + a23**2
-    p2 = (a11 - q) ** 2 + (a22 - q) ** 2 + (a33 - q) ** 2 + 2.0 * p1
-    p = np.sqrt(p2 / 6.0)
-    safe = p > 1e-300
-    ps = np.where(safe, p, 1.0)
-    b11, b22, b33 = (a11 - q) / ps, (a22 - q) / ps, (a33 - q) / ps
-    b12, b13, b23 = a12 / ps, a13 / ps, a23 / ps
-    detB = b11 * (b22 * b33 - b23**2) - b12 * (b12 * b33 - b23 * b13) + b13 * (b12 * b23 - b22 * b13)
-    phi = np.arccos(np.clip(detB / 2.0, -1.0, 1.0)) / 3.0
-    lam_min = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
-    return np.where(safe, lam_min, q)
-
-
-def _grunert_quartic(aa, bb, cc, ca, cb, cg) -> np.ndarray:
-    """Grunert's quartic in v = lambda_3 / lambda_1 (Haralick et al. 1994, eq. 9), coefficients (K,5) highest first.
-
-    ``aa, bb, cc``: squared sides |P2P3|^2, |P1P3|^2, |P1P2|^2; ``ca, cb, cg``: cosines of the angles between
-    lines (2,3), (1,3), (1,2).
-    """
-    q1 = (aa - cc) / bb
-    q2 = (aa + cc) / bb
-    q3 = (bb - cc) / bb
-    q4 = (bb - aa) / bb
-    ca2, cb2, cg2 = ca * ca, cb * cb, cg * cg
-    A4 = (q1 - 1.0) ** 2 - 4.0 * cc / bb * ca2
-    A3 = 4.0 * (q1 * (1.0 - q1) * cb - (1.0 - q2) * ca * cg + 2.0 * cc / bb * ca2 * cb)
-    A2 = 2.0 * (q1 * q1 - 1.0 + 2.0 * q1 * q1 * cb2 + 2.0 * q3 * ca2 - 4.0 * q2 * ca * cb * cg + 2.0 * q4 * cg2)
-    A1 = 4.0 * (-q1 * (1.0 + q1) * cb + 2.0 * aa / bb * cg2 * cb - (1.0 - q2) * ca * cg)
-    A0 = (1.0 + q1) ** 2 - 4.0 * aa / bb * cg2
-    return np.stack([A4, A3, A2, A1, A0], axis=-1)
 
 
 def _polish_lambdas(s, aa, bb, cc, ca, cb, cg, iters: int) -> np.ndarray:
@@ -188,39 +96,13 @@ def _polish_lambdas(s, aa, bb, cc, ca, cb, cg, iters: int) -> np.ndarray:
 # The solver
 
 
-def _checked(n, d, p, u, quartic: str):
-    """Inputs as float arrays of shapes (B,3,3), (B,3), (B,3,2), (B,3,2); MinimalSolverError otherwise."""
-    n, d, p, u = (np.asarray(a, dtype=float) for a in (n, d, p, u))
-    if n.ndim != 3 or n.shape[1:] != (3, 3):
-        raise MinimalSolverError(f"n must be (B,3,3), got {n.shape}")
-    B = n.shape[0]
-    if d.shape != (B, 3) or p.shape != (B, 3, 2) or u.shape != (B, 3, 2):
-        raise MinimalSolverError(f"expected d (B,3), p and u (B,3,2) with B={B}; got {d.shape}, {p.shape}, {u.shape}")
-    if quartic not in ("closed", "eig"):
-        raise MinimalSolverError(f"quartic must be 'closed' or 'eig', got {quartic!r}")
-    return n, d, p, u
-
-
-def _finite_normalised(n, d, p, u, reasons):
-    """Triples with finite, non-zero input (others get ``REASON_NONFINITE``): their indices and the input with
-    unit normals (offsets scaled with them) and unit line directions."""
-    finite = (np.isfinite(n).all(axis=(1, 2)) & np.isfinite(d).all(axis=1) & np.isfinite(p).all(axis=(1, 2))
-              & np.isfinite(u).all(axis=(1, 2)))
-    nn = np.linalg.norm(n, axis=2)
-    un = np.linalg.norm(u, axis=2)
-    finite &= (nn > 0).all(axis=1) & (un > 0).all(axis=1)
-    reasons[~finite] = REASON_NONFINITE
-    idx = np.flatnonzero(finite)
-    return idx, n[idx] / nn[idx][:, :, None], d[idx] / nn[idx], p[idx], u[idx] / un[idx][:, :, None]
-
-
 def _degeneracy(n, p, u, idx, reasons, *, min_plane_sv, min_line_sin, min_triangle, min_side):
     """Step 1, the degeneracy tests (reasons set in place): the solvable mask (K,), the scan lines' meeting
     points q (K,3,2) (q_12, q_13, q_23) and the squared sides of the scan triangle (K,3)."""
-    sv_min = np.sqrt(np.maximum(_sym3_min_eig(np.swapaxes(n, 1, 2) @ n), 0.0))
+    sv_min = plane_sv_min(n)
     bad_planes = ~(sv_min >= min_plane_sv)
-    ui, uj = u[:, _PAIRS[:, 0]], u[:, _PAIRS[:, 1]]
-    pi, pj = p[:, _PAIRS[:, 0]], p[:, _PAIRS[:, 1]]
+    ui, uj = u[:, SCAN_LINE_PAIRS[:, 0]], u[:, SCAN_LINE_PAIRS[:, 1]]
+    pi, pj = p[:, SCAN_LINE_PAIRS[:, 0]], p[:, SCAN_LINE_PAIRS[:, 1]]
     sin_ij = cross2(ui, uj)  # (K,3)
     bad_lines = ~(np.abs(sin_ij).min(axis=1) >= min_line_sin)
     s_ij = cross2(pj - pi, uj) / np.where(bad_lines[:, None], 1.0, sin_ij)
@@ -335,17 +217,14 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     Returns:
         ``MinimalSolutions``; at most 8 candidates per triple (4 roots, each with its mirror through ``O``).
     """
-    n, d, p, u = _checked(n, d, p, u, quartic)
-    B = n.shape[0]
-    reasons = np.full(B, None, dtype=object)
-    idx, n, d, p, u = _finite_normalised(n, d, p, u, reasons)
+    reasons, idx, n, d, p, u = prologue(n, d, p, u, quartic)
     ok, q, sides2 = _degeneracy(n, p, u, idx, reasons, min_plane_sv=min_plane_sv, min_line_sin=min_line_sin,
                                 min_triangle=min_triangle, min_side=min_side)
     idx, n, d, q, sides2 = idx[ok], n[ok], d[ok], q[ok], sides2[ok]
     O, Vg, Qg, g = _grunert_setup(n, d, q, sides2)
 
     # 3. Quartic, normalised; reversed where the constant term dominates.
-    A = _grunert_quartic(*g)
+    A = grunert_quartic(*g)
     A = A / np.abs(A).max(axis=1, keepdims=True)
     rev = np.abs(A[:, 4]) > np.abs(A[:, 0])
     A = np.where(rev[:, None], A[:, ::-1], A)

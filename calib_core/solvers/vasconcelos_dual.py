@@ -28,20 +28,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from .orientation import cross, dot, kabsch
-from .polynomial import newton_roots, quartic_roots_closed, quartic_roots_eig
-from .vasconcelos import (
+from ._common import (
     REASON_PLANES,
     REASON_SCAN_LINES,
+    SCAN_LINE_PAIRS,
     MinimalSolutions,
-    _checked,
-    _finite_normalised,
-    _grunert_quartic,
-    _sym3_min_eig,
+    grunert_quartic,
+    plane_sv_min,
+    prologue,
 )
+from .orientation import cross, dot, kabsch
+from .polynomial import newton_roots, quartic_roots_closed, quartic_roots_eig
 
 SCAN_PLANE_Z_MM = 10.0
-_PAIRS = np.array([[0, 1], [0, 2], [1, 2]])
 
 
 def _closest_point(U: np.ndarray, C: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -76,12 +75,10 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     scan plane in metres); ``real_parts`` keeps a candidate per complex-conjugate pair of roots (marked
     ``near_real``), as the authors' code does.  Candidates are returned in our frame (scan plane z = 0, metres).
     """
-    n, d, p, u = _checked(n, d, p, u, quartic)
-    B = n.shape[0]
-    reasons = np.full(B, None, dtype=object)
-    idx, n, d, p, u = _finite_normalised(n, d, p, u, reasons)
-    sv = np.sqrt(np.maximum(_sym3_min_eig(np.swapaxes(n, 1, 2) @ n), 0.0))
-    sin = np.abs(u[:, _PAIRS[:, 0], 0] * u[:, _PAIRS[:, 1], 1] - u[:, _PAIRS[:, 0], 1] * u[:, _PAIRS[:, 1], 0])
+    reasons, idx, n, d, p, u = prologue(n, d, p, u, quartic)
+    sv = plane_sv_min(n)
+    ui, uj = u[:, SCAN_LINE_PAIRS[:, 0]], u[:, SCAN_LINE_PAIRS[:, 1]]
+    sin = np.abs(ui[..., 0] * uj[..., 1] - ui[..., 1] * uj[..., 0])
     bad_planes, bad_lines = ~(sv >= min_plane_sv), ~(sin.min(axis=1) >= min_line_sin)
     reasons[idx[bad_lines]] = REASON_SCAN_LINES
     reasons[idx[bad_planes]] = REASON_PLANES
@@ -92,10 +89,10 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     p3 = np.concatenate([1e3 * p, np.full(p.shape[:2] + (1,), SCAN_PLANE_Z_MM)], axis=2)
     u3 = np.concatenate([u, np.zeros(u.shape[:2] + (1,))], axis=2)
     m = cross(u3, p3)                                                         # Plucker moments
-    k = cross(a[:, _PAIRS[:, 0]], a[:, _PAIRS[:, 1]])                          # rays k_12, k_13, k_23
+    k = cross(a[:, SCAN_LINE_PAIRS[:, 0]], a[:, SCAN_LINE_PAIRS[:, 1]])                          # rays k_12, k_13, k_23
     k = k / np.linalg.norm(k, axis=-1, keepdims=True)
     mn = m / np.linalg.norm(m, axis=-1, keepdims=True)
-    ll = cross(mn[:, _PAIRS[:, 0]], mn[:, _PAIRS[:, 1]])
+    ll = cross(mn[:, SCAN_LINE_PAIRS[:, 0]], mn[:, SCAN_LINE_PAIRS[:, 1]])
     P = ll / ll[..., 2:]                                                      # (K,3,3) points P_12, P_13, P_23
     ca, cb, cg = dot(k[:, 1], k[:, 2]), dot(k[:, 0], k[:, 2]), dot(k[:, 0], k[:, 1])
     sa = np.linalg.norm(P[:, 1] - P[:, 2], axis=-1)
@@ -103,7 +100,7 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     sc = np.linalg.norm(P[:, 0] - P[:, 1], axis=-1)
     scale = (sa + sb + sc) / 3.0
     sa, sb, sc = sa / scale, sb / scale, sc / scale
-    A = _grunert_quartic(sa**2, sb**2, sc**2, ca, cb, cg)
+    A = grunert_quartic(sa**2, sb**2, sc**2, ca, cb, cg)
     A = A / np.abs(A).max(axis=1, keepdims=True)
     roots = quartic_roots_closed(A) if quartic == "closed" else quartic_roots_eig(A)
     roots = newton_roots(A, roots, root_newton_iters)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..data.observations import Observations
-from ..data.result import SolveFailure
+from ..errors import SolveFailure
 from ..geometry.transforms import invert_T, make_T, project_to_so3
 
 MIN_BOARDS = 5

@@ -35,19 +35,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._common import REASON_PLANES, MinimalSolutions, plane_sv_min, prologue
 from .orientation import cross
 from .polynomial import keep_better, newton_roots, quartic_roots_closed, quartic_roots_eig
-from .vasconcelos import (
-    REASON_PLANES,
-    MinimalSolutions,
-    _checked,
-    _finite_normalised,
-    _sym3_min_eig,
-)
 
 REASON_CONICS = "the orthonormality conics share a component (quartic vanishes: infinitely many rotations)"
 
-MAX_SOLUTIONS = 8
 
 
 def _pmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -164,11 +157,8 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
         ``MinimalSolutions`` (``near_real`` all False); at most 8 candidates per triple, each root followed by its
         sign-flipped twin.
     """
-    n, d, p, u = _checked(n, d, p, u, quartic)
-    B = n.shape[0]
-    reasons = np.full(B, None, dtype=object)
-    idx, n, d, p, u = _finite_normalised(n, d, p, u, reasons)
-    sv_min = np.sqrt(np.maximum(_sym3_min_eig(np.swapaxes(n, 1, 2) @ n), 0.0))
+    reasons, idx, n, d, p, u = prologue(n, d, p, u, quartic)
+    sv_min = plane_sv_min(n)
     ok = sv_min >= min_plane_sv
     reasons[idx[~ok]] = REASON_PLANES
     idx, n, d, p, u = idx[ok], n[ok], d[ok], p[ok], u[ok]

@@ -100,7 +100,7 @@ def time_scaling(counts: Sequence[int], n_problems: int, method: str = "lidarcam
 def triple_arrays(obs_list: list, n_triples: int):
     """Stacked plane/line arrays of at least ``n_triples`` board triples drawn from ``obs_list``, and the true
     ``T_lidar_cam`` (B,4,4) of each triple's problem."""
-    from calib_core.solvers.vasconcelos import board_triples
+    from calib_core.solvers._common import board_triples
 
     ns, ds, ps, us, Ts = [], [], [], [], []
     while sum(len(x) for x in ns) < n_triples:

@@ -1,5 +1,5 @@
 """Evaluation of methods on one real rig without ground truth: full fit, leave-one-pose-out residual
-(``calib_core.crossval``), agreement with a published result, time, and the degeneracy verdict
+(``calib_core.evaluate.crossval``), agreement with a published result, time, and the degeneracy verdict
 (``calib_core.checks.degeneracy``).
 """
 
@@ -11,9 +11,9 @@ import numpy as np
 
 import calib_core
 from calib_core.checks.degeneracy import undetermined_directions
-from calib_core.crossval import leave_one_out
 from calib_core.data.lines import scan_noise_estimate
 from calib_core.data.observations import Observations
+from calib_core.evaluate.crossval import leave_one_out
 from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.mounting import UNIT_NAMES
 from calib_core.geometry.transforms import invert_T
@@ -33,7 +33,7 @@ def held_out(obs: Observations, method: str, sigma_m: float, **options) -> dict:
     cv = leave_one_out(obs, method, range_sigma_m=sigma_m, **options)
     d = cv.to_dict()
     return {"rms_mm": cv.overall_rms_mm, "rms_sigmas": cv.overall_rms_sigmas, "n_ok": cv.n_ok,
-            "n": len(cv.names), "seconds": cv.seconds, "source": "calib_core.crossval",
+            "n": len(cv.names), "seconds": cv.seconds, "source": "calib_core.evaluate.crossval",
             "joint_rms_sigmas": d["joint_rms_sigmas"], "joint_scan_rms_mm": d["joint_scan_rms_mm"],
             "corner_sigma_px": cv.corner_sigma_px, "range_sigma_mm": 1000 * cv.range_sigma_m, "spread": d["spread"],
             "spread_scan_noise": d["spread_scan_noise"], "folds": cv.T_lidar_cam}
@@ -78,7 +78,7 @@ def leaderboard(obs: Observations, methods, sigma_m: float, published: np.ndarra
 def loo_spread(res, folds: np.ndarray) -> dict:
     """The leave-one-out (jackknife) 1-sigma of the answer (rotation deg, translation mm: roots of the traces, as
     the reported ones) and its ratio to the reported 1-sigma (> 1: the reported sigma is too small)."""
-    from calib_core.crossval import jackknife_covariance
+    from calib_core.evaluate.crossval import jackknife_covariance
     from calib_core.geometry.metrics import sigma_rot_deg, sigma_trans_m
 
     cov = jackknife_covariance(res.T_lidar_cam, folds)
@@ -133,11 +133,13 @@ def uncertainty_md(rows: list[dict]) -> list[str]:
     off = [why_off(r) for r in rows if max(r["loo_ratio_rot"], r["loo_ratio_trans"]) > 1.5]
     out += [""] + [f"- {o}" for o in off] if off else []
     return out + ["", "Leave-one-out 1-sigma: the jackknife spread of the fold answers, "
-                  "`(n-1)/n sum (x_i - mean)^2` over the poses left out (`calib_core.crossval.jackknife_covariance`); "
+                  "`(n-1)/n sum (x_i - mean)^2` over the poses left out "
+                  "(`calib_core.evaluate.crossval.jackknife_covariance`); "
                   "ratio = leave-one-out / reported (within 1.5 of 1: the reported sigma holds on this data). "
                   "Held-out z: each held-out scan point's range residual (against its board plane from the camera, "
                   "through the fold's extrinsic) over its predicted std, range noise as the fold's model estimates it "
-                  "+ the fold's extrinsic covariance + the board pose's from its corners (`calib_core.held_out`); RMS, "
+                  "+ the fold's extrinsic covariance + the board pose's from its corners "
+                  "(`calib_core.evaluate.held_out`); RMS, "
                   "90% quantile of |z| over the Gaussian's 1.645, and the Mahalanobis statistic per point over each "
                   "board's correlated points: all 1 when the model's spread holds."]
 

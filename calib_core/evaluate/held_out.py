@@ -1,4 +1,4 @@
-"""Held-out scores of one leave-one-pose-out fold beyond the point-to-plane distance (``calib_core.crossval``).
+"""Held-out scores of one leave-one-pose-out fold beyond the point-to-plane distance (``calib_core.evaluate.crossval``).
 
 - Residuals in units of their predicted spread: the held-out board's range residuals (lidar frame, metres, along
   each beam) against its plane as the camera sees it, through the fold's extrinsic, with their predicted (K,K)
@@ -19,11 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
-from .data.lines import residual_sigma
-from .data.observations import Observations
-from .data.residuals import range_residuals
-from .refine.joint import board_poses, corner_residuals, joint_range_residuals, scan_data_at
-from .refine.uncertainty import _inverse_information
+from ..data.lines import residual_sigma
+from ..data.observations import Observations
+from ..data.residuals import range_residuals
+from ..refine.joint import board_poses, corner_residuals, joint_range_residuals, scan_data_at
+from ..refine.uncertainty import _inverse_information
 
 GAUSS_Q90 = 1.6449
 """The 90% quantile of ``|z|`` for a standard normal ``z``."""

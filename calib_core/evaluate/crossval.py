@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .data.lines import scan_noise_estimate
-from .data.observations import Observations
-from .data.residuals import plane_residuals
-from .entry import calibrate
-from .errors import JointError, UncertaintyError
+from ..data.lines import scan_noise_estimate
+from ..data.observations import Observations
+from ..data.residuals import plane_residuals
+from ..entry import calibrate
+from ..errors import JointError, UncertaintyError
 from .held_out import HeldOutSpread, corner_noise_px, held_out_joint, held_out_spread, spread_summary
 
 
@@ -201,7 +201,7 @@ def jackknife_covariance(T_full: np.ndarray, folds: np.ndarray) -> np.ndarray | 
     answers as left rotation perturbations of ``T_full`` in the lidar frame (rad) and translation offsets (m),
     ``(n-1)/n sum (x_i - mean)(x_i - mean)^T`` (the covariance's convention, ``calib_core.data.result``). None with
     fewer than 3 folds."""
-    from .geometry.transforms import matrix_to_rotvec
+    from ..geometry.transforms import matrix_to_rotvec
 
     good = folds[np.all(np.isfinite(folds), axis=(1, 2))]
     n = len(good)
