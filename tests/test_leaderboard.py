@@ -10,7 +10,7 @@ import pytest
 from calib_core import save_observations
 from experiments.suites.leaderboard import Suite, load_suites, plan, real_files, run_leaderboard
 from experiments.suites.leaderboard_table import leaderboard_table, markdown_table
-from experiments.summary.aggregate import wilson_interval
+from experiments.summary.intervals import wilson_interval
 from simulate import SimOptions, generate
 
 

@@ -10,7 +10,7 @@ import pandas as pd
 from calib_core.evaluate.crossval import jackknife_covariance, leave_one_out
 from calib_core.geometry.transforms import make_T, rotvec_to_matrix
 from experiments.real import real_subsets as sub
-from experiments.summary.aggregate import wilson_interval
+from experiments.summary.intervals import wilson_interval
 from simulate import SimOptions, generate
 
 

@@ -143,7 +143,7 @@ def test_needed_trials_brings_every_interval_within_five_points(p_other):
     """Sized on a pilot, a rerun at the suggested count has every valid rate's Wilson interval and the paired
     gap's interval within +-5 points; a setting that is already narrow keeps its count."""
     from experiments.paper.matched import TARGET_HALF_WIDTH_PTS, needed_trials
-    from experiments.summary.aggregate import wilson_interval
+    from experiments.summary.intervals import wilson_interval
 
     pilot = _trials(100, p_other, seed=1)
     n = needed_trials(pilot)

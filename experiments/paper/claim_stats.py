@@ -10,10 +10,13 @@ trials, so a resample draws trials, not rows: the interval of a difference is pa
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import pandas as pd
 
 from ..summary.aggregate import nanmean
+from ..summary.intervals import paired_bootstrap
 from .claims import FRANCISCO, Claim
 from .claims import PAPER as OURS
 
@@ -69,11 +72,8 @@ def claim_values(trials: pd.DataFrame | None, claim: Claim, x: str, n_boot: int 
         value = float(claim_statistic(claim.kind, arr[OURS], other, np.arange(n)[None], smooth)[0])
         lo = hi = np.nan
         if n_boot:
-            idx = np.random.default_rng(seed).integers(0, n, size=(n_boot, n))
-            boot = claim_statistic(claim.kind, arr[OURS], other, idx, smooth)
-            boot = boot[~np.isnan(boot)]
-            if len(boot):
-                lo, hi = np.quantile(boot, 0.025, method="lower"), np.quantile(boot, 0.975, method="higher")
+            lo, hi = paired_bootstrap(partial(claim_statistic, claim.kind, arr[OURS], other, smooth=smooth),
+                                      n, n_boot, seed)
         rows.append({x: xv, "n_trials": n, "value": value, "lo95": float(lo), "hi95": float(hi)})
     return pd.DataFrame(rows, columns=[x, "n_trials", "value", "lo95", "hi95"])
 

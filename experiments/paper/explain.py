@@ -33,8 +33,9 @@ from ..engine.catalog import method_colour, method_label, method_order  # noqa: 
 from ..engine.fingerprint import write_stamped
 from ..engine.runner import run_cells  # noqa: E402
 from ..engine.store import load_cell  # noqa: E402
-from ..summary.aggregate import Z95, summarise, write_tables  # noqa: E402
+from ..summary.aggregate import summarise, write_tables  # noqa: E402
 from ..summary.figures import save_figure  # noqa: E402
+from ..summary.intervals import paired_half_width  # noqa: E402
 
 SENSITIVITY = {  # experiment -> (swept column, axis label)
     "sens_tilt": ("max_tilt_deg", "largest board tilt (deg)"),
@@ -69,10 +70,9 @@ def paired_differences(df: pd.DataFrame, base: str = BASE) -> pd.DataFrame:
             de = (e_R[m] - e_R[base]).dropna()
             rows.append({"n_boards": nb, "noise_mm": nz, "method": m, "n_trials": len(dv),
                          "valid_base": 100 * valid[base].mean(), "valid_method": 100 * valid[m].mean(),
-                         "d_valid_pts": dv.mean(), "d_valid_ci95": Z95 * dv.std(ddof=1) / np.sqrt(len(dv))
-                         if len(dv) > 1 else np.nan,
+                         "d_valid_pts": dv.mean(), "d_valid_ci95": paired_half_width(dv),
                          "n_both_ok": len(de), "d_e_R_deg": de.mean() if len(de) else np.nan,
-                         "d_e_R_ci95": Z95 * de.std(ddof=1) / np.sqrt(len(de)) if len(de) > 1 else np.nan,
+                         "d_e_R_ci95": paired_half_width(de),
                          "share_same_choice": float((e_R[m] == e_R[base]).mean())})
     return pd.DataFrame(rows)
 

@@ -33,8 +33,9 @@ from ..config.sweeps import experiment_cells
 from ..engine.cell import Cell
 from ..engine.runner import run_cells
 from ..engine.store import load_cell
-from ..summary.aggregate import Z95, wilson_interval, write_tables
+from ..summary.aggregate import write_tables
 from ..summary.figures import draw_sweep
+from ..summary.intervals import paired_half_width, wilson_interval
 from .claims import PAPER
 from .reproduce import PAPER_EXPERIMENTS
 
@@ -61,7 +62,7 @@ def needed_trials(rows: pd.DataFrame, target_pts: float = TARGET_HALF_WIDTH_PTS)
     widths = list(100 * (hi - lo) / 2)
     if PAPER in v.columns:
         gaps = v[PAPER].to_numpy()[:, None] - v.drop(columns=PAPER).to_numpy()
-        widths += list(100 * Z95 * gaps.std(axis=0, ddof=1) / np.sqrt(n))
+        widths += list(100 * paired_half_width(gaps))
     worst, goal = max(widths, default=0.0), SIZING_MARGIN * target_pts
     return n if worst <= goal else int(min(MAX_TRIALS, max(n, np.ceil(n * (worst / goal) ** 2))))
 

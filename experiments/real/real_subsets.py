@@ -24,7 +24,7 @@ from calib_core.data.observations import Observations
 from calib_core.geometry.metrics import pose_errors
 from rig.markdown import md_table
 
-from ..summary.aggregate import wilson_interval
+from ..summary.intervals import wilson_interval
 
 BOARD_COUNTS = (3, 4, 5, 6, 7, 8)
 N_SUBSETS = 50

@@ -1,7 +1,7 @@
 """The leaderboard's table and figure from the runner's trial rows (``experiments.suites.leaderboard`` runs them).
 
 One row per method, pooled over the simulated suites: valid rate with its 95% Wilson interval
-(``aggregate.wilson_interval``) and per suite, median errors (solutions returned), RMS errors (valid solutions),
+(``intervals.wilson_interval``) and per suite, median errors (solutions returned), RMS errors (valid solutions),
 RMS / CRLB and mean NEES where the method reports a covariance, median time per call.
 
 RMS / CRLB and NEES come from the per-setting summaries of ``aggregate.summarise`` (the one home of those
@@ -26,8 +26,9 @@ import pandas as pd  # noqa: E402
 from rig.markdown import md_table, num, pct  # noqa: E402
 
 from ..engine.catalog import method_colour  # noqa: E402
-from ..summary.aggregate import rms, summarise, wilson_interval  # noqa: E402
+from ..summary.aggregate import rms, summarise  # noqa: E402
 from ..summary.figures import save_figure  # noqa: E402
+from ..summary.intervals import wilson_interval  # noqa: E402
 
 
 def _median(x: pd.Series) -> float:

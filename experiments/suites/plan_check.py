@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 from omegaconf import OmegaConf
-from scipy.stats import bootstrap
 
 from calib_core import calibrate
 from calib_core.data.camera import Camera
@@ -35,6 +34,7 @@ from simulate import SimOptions, observe_poses
 from simulate.camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners
 
 from ..engine.fingerprint import package_hash
+from ..summary.intervals import bootstrap_interval
 from .plan_report import write_plan_report
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -195,9 +195,8 @@ def main(argv=None) -> int:
 def _rms_ci(x: np.ndarray, seed: int) -> tuple[float, float, float]:
     x = np.asarray(x, float)
     stat = float(np.sqrt(np.mean(x**2)))
-    ci = bootstrap((x,), lambda a, axis: np.sqrt(np.mean(a**2, axis=axis)), n_resamples=2000, method="percentile",
-                   random_state=seed).confidence_interval
-    return stat, float(ci.low), float(ci.high)
+    lo, hi = bootstrap_interval((x,), lambda a, axis: np.sqrt(np.mean(a**2, axis=axis)), seed)
+    return stat, lo, hi
 
 
 def _ratio_ci(rand_rms: np.ndarray, planned: np.ndarray, seed: int) -> tuple[float, float, float]:
@@ -206,9 +205,8 @@ def _ratio_ci(rand_rms: np.ndarray, planned: np.ndarray, seed: int) -> tuple[flo
         return np.median(r, axis=axis) / np.sqrt(np.mean(p**2, axis=axis))
 
     value = float(stat(rand_rms, planned, None))
-    ci = bootstrap((rand_rms, planned), stat, n_resamples=2000, method="percentile", random_state=seed,
-                   paired=False).confidence_interval
-    return value, float(ci.low), float(ci.high)
+    lo, hi = bootstrap_interval((rand_rms, planned), stat, seed)
+    return value, lo, hi
 
 
 def summarise(results: list[dict], pred: dict, conf) -> dict:

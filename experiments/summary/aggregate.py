@@ -21,8 +21,8 @@ import pandas as pd
 from ..engine.catalog import method_order
 from ..engine.cell import RESULT_COLUMNS
 from ..engine.store import load_sweep, read_table
+from .intervals import wilson_interval
 
-Z95 = 1.959963984540054
 # Settings that always label a row (the two the paper sweeps), and those never used to group.
 LABEL_COLUMNS = ("n_boards", "noise_mm")
 NON_SETTING = set(RESULT_COLUMNS) | {"sweep", "setting_key"}
@@ -30,18 +30,6 @@ TRIAL_TABLE_COLUMNS = ("sweep", "setting_key", "n_boards", "noise_mm", "trial", 
                        "e_R_deg", "e_t_m", "n_candidates", "true_among_candidates", "some_candidate_valid",
                        "best_candidate_e_R_deg", "best_candidate_e_t_m", "seconds", "crlb_rot_deg",
                        "crlb_trans_mm", "conditioning", "nees", "sigma_rot_deg", "sigma_trans_mm")
-
-
-def wilson_interval(k, n, z: float = Z95) -> tuple[np.ndarray, np.ndarray]:
-    """Wilson score interval of a proportion ``k/n`` (arrays broadcast); NaN where ``n == 0``."""
-    k = np.asarray(k, float)
-    n = np.asarray(n, float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        p = k / n
-        denom = 1.0 + z * z / n
-        centre = (p + z * z / (2 * n)) / denom
-        half = z / denom * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return np.clip(centre - half, 0.0, 1.0), np.clip(centre + half, 0.0, 1.0)
 
 
 def setting_columns(df: pd.DataFrame) -> list[str]:
