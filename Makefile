@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
 .DEFAULT_GOAL := help
-.PHONY: help setup test test-slow lint bench reproduce-paper explain-paper corner-noise real-data leaderboard verify-results search-paper robustness plan-check clean clean-results
+.PHONY: help setup test test-slow lint bench reproduce-paper rig-like explain-paper corner-noise real-data leaderboard verify-results search-paper robustness plan-check clean clean-results
 
 help: ## List the targets (durations: wall time on 2 idle cores from an empty store, as measured)
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
@@ -64,6 +64,9 @@ verify-results: $(STAMP) ## Check every stored trial chunk under results/ parses
 
 clean-results: ## Empty the trial stores under results/ (results/*/trials: every row is recomputed on the next run; < 1 s)
 	rm -rf results/*/trials
+
+rig-like: $(STAMP) ## Every method on boards 3-8 under rig conditions (conf/preset/rig-like.yaml), write results/rig-like/ (RIG_TRIALS=200)
+	$(PY) -m experiments rig-like --trials $(or $(RIG_TRIALS),200)
 
 robustness: $(STAMP) ## Wrong boards, outlier points, mixed pixels (experiment=outliers), write results/outliers/ (~40 s)
 	$(PY) -m experiments outliers
