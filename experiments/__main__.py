@@ -21,7 +21,7 @@ STUDIES = {
     "search": ("paper.search", "search the paper's unstated settings (make search-paper)"),
     "explain": ("paper.explain", "ablations of peng2022 and unstated-setting sweeps (make explain-paper)"),
     "francisco": ("paper.francisco", "claim 1 under both readings of Francisco"),
-    "rig-like": ("paper.rig_like", "every method at 3-8 boards under rig conditions, the claims judged (make rig-like)"),
+    "rig-like": ("paper.rig_like", "every method at 3-8 boards under rig conditions (make rig-like)"),
     "leaderboard": ("suites.leaderboard", "every registered method on a leaderboard suite (make leaderboard)"),
     "outliers": ("suites.outliers", "wrong boards, outlier points, mixed pixels (make robustness)"),
     "corner-noise": ("suites.corner_noise", "camera-noise sweeps, joint model (make corner-noise)"),
