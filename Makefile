@@ -56,7 +56,7 @@ REAL_DATA ?= ../shared/real-data
 real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; ~1.5 min)
 	$(PY) -m experiments real-data --data $(REAL_DATA)
 
-leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v1.yaml -> results/leaderboard/ (~3 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
+leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v2.yaml -> results/leaderboard/ (~3 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
 	$(PY) -m experiments leaderboard $(if $(FULL),--full) $(ARGS)
 
 verify-results: $(STAMP) ## Check every stored trial chunk under results/ parses in full; list reports stale against the code (~3 s)
