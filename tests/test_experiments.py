@@ -300,3 +300,28 @@ def test_every_experiment_config_runs_small(experiment, tmp_path):
     df = run_cells(cells[:1], n_jobs=1, progress=False)
     assert sorted(df["method"]) == sorted(cells[0].methods) and df["trial"].eq(0).all()
     assert (df["ok"] | df["reason"].astype(str).str.len().gt(0)).all(), "a failed row must say why"
+
+
+def test_rig_like_rates_and_leaders_from_rows():
+    from experiments.paper.rig_like import ACCURATE_ROT_DEG, leaders, rates
+
+    rng = np.random.default_rng(5)
+    rows = []
+    for nb in (3, 4):
+        for trial in range(40):
+            for m in ("peng2022", "lidarcam"):
+                ok = bool(rng.random() > 0.1)
+                e_R = float(rng.uniform(0, 3)) if ok else np.nan
+                rows.append({"n_boards": nb, "trial": trial, "method": m, "ok": ok, "valid": ok and e_R < 2,
+                             "e_R_deg": e_R, "e_t_m": 0.01 if ok else np.nan,
+                             "nees": 5.0 if m == "lidarcam" else np.nan})
+    df = pd.DataFrame(rows)
+    r = rates(df)
+    for x in r.itertuples():
+        g = df[(df["n_boards"] == x.n_boards) & (df["method"] == x.method)]
+        acc = (g["ok"] & (g["e_R_deg"] < ACCURATE_ROT_DEG) & (g["e_t_m"] < 0.030)).mean()
+        assert np.isclose(x.valid_rate, g["valid"].mean()) and np.isclose(x.accurate_rate, acc)
+        assert x.valid_lo95 <= x.valid_rate <= x.valid_hi95 and np.isclose(x.refused_rate, (~g["ok"]).mean())
+        assert (x.median_nees == 5.0) if x.method == "lidarcam" else np.isnan(x.median_nees)
+    best = {nb: g.set_index("method")["valid_rate"] for nb, g in r.groupby("n_boards")}
+    assert leaders(r, "valid") == [nb for nb, s in best.items() if s["lidarcam"] >= s["peng2022"]]
