@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import LidarcamError
 from ..geometry.transforms import make_T
+from .polynomial import Quartic
 
 # Reasons (the ``reasons`` entries; ``None`` means solved).
 REASON_NONFINITE = "non-finite input"
@@ -115,7 +116,7 @@ def grunert_quartic(aa, bb, cc, ca, cb, cg) -> np.ndarray:
     return np.stack([A4, A3, A2, A1, A0], axis=-1)
 
 
-def checked_inputs(n, d, p, u, quartic: str):
+def checked_inputs(n, d, p, u, quartic: Quartic | str):
     """Inputs as float arrays of shapes (B,3,3), (B,3), (B,3,2), (B,3,2); MinimalSolverError otherwise."""
     n, d, p, u = (np.asarray(a, dtype=float) for a in (n, d, p, u))
     if n.ndim != 3 or n.shape[1:] != (3, 3):
@@ -123,8 +124,8 @@ def checked_inputs(n, d, p, u, quartic: str):
     B = n.shape[0]
     if d.shape != (B, 3) or p.shape != (B, 3, 2) or u.shape != (B, 3, 2):
         raise MinimalSolverError(f"expected d (B,3), p and u (B,3,2) with B={B}; got {d.shape}, {p.shape}, {u.shape}")
-    if quartic not in ("closed", "eig"):
-        raise MinimalSolverError(f"quartic must be 'closed' or 'eig', got {quartic!r}")
+    if quartic not in tuple(Quartic):
+        raise MinimalSolverError(f"quartic must be one of {', '.join(Quartic)}, got {quartic!r}")
     return n, d, p, u
 
 
@@ -147,7 +148,7 @@ def plane_sv_min(n: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(sym3_min_eig(np.swapaxes(n, 1, 2) @ n), 0.0))
 
 
-def prologue(n, d, p, u, quartic: str):
+def prologue(n, d, p, u, quartic: Quartic | str):
     """Every solver's first step: ``(reasons, idx, n, d, p, u)`` with ``reasons`` (B,) object (``None`` or
     ``REASON_NONFINITE``), ``idx`` the finite triples and their input made unit (``checked_inputs``,
     ``finite_normalised``)."""

@@ -4,7 +4,17 @@ a leading batch dimension, in complex arithmetic."""
 
 from __future__ import annotations
 
+from enum import StrEnum
+
 import numpy as np
+
+
+class Quartic(StrEnum):
+    """How a minimal solver finds its quartic's roots: ``closed`` (Ferrari, fast) or ``eig`` (companion-matrix
+    eigenvalues, the reference)."""
+
+    CLOSED = "closed"
+    EIG = "eig"
 
 
 def poly_eval(A: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,3 +99,8 @@ def keep_better(x: np.ndarray, f: np.ndarray, fn: np.ndarray, x_new: np.ndarray,
     fn_new = np.einsum("ki,ki->k", f_new, f_new)
     better = np.isfinite(fn_new) & (fn_new < fn)
     return (np.where(better[:, None], x_new, x), np.where(better[:, None], f_new, f), np.where(better, fn_new, fn))
+
+
+def quartic_roots(A: np.ndarray, quartic: Quartic | str) -> np.ndarray:
+    """The four complex roots (...,4) of quartics ``A`` (...,5) by the way ``quartic`` names (``Quartic``)."""
+    return quartic_roots_closed(A) if Quartic(quartic) is Quartic.CLOSED else quartic_roots_eig(A)

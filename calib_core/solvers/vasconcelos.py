@@ -53,7 +53,7 @@ from ._common import (
     prologue,
 )
 from .orientation import abs_orientation_3pt, cross, cross2, dot, unit
-from .polynomial import keep_better, newton_roots, quartic_roots_closed, quartic_roots_eig
+from .polynomial import Quartic, keep_better, newton_roots, quartic_roots
 
 # Grunert point k (k = 1, 2, 3) -> original line index (0: v_12, 1: v_13, 2: v_23), chosen by the longest side.
 # Sides: 0 = |q12 q13|, 1 = |q12 q23|, 2 = |q13 q23|; Grunert's b is the side between points 1 and 3.
@@ -140,10 +140,10 @@ def _grunert_setup(n, d, q, sides2):
     return O, Vg, Qg, (aa, bb, cc, ca, cb, cg)
 
 
-def _kept_roots(A, quartic: str, root_newton_iters: int, imag_tol: float, near_real_tol: float | None):
+def _kept_roots(A, quartic: Quartic | str, root_newton_iters: int, imag_tol: float, near_real_tol: float | None):
     """The quartics' real roots (and near-real pairs with ``near_real_tol``), polished: for each kept root its
     quartic's index (row-major, grouped by quartic), its real part and whether it is near-real."""
-    roots = quartic_roots_closed(A) if quartic == "closed" else quartic_roots_eig(A)
+    roots = quartic_roots(A, quartic)
     roots = newton_roots(A, roots, root_newton_iters)
     im_scale = 1.0 + np.abs(roots)
     is_real = np.abs(roots.imag) <= imag_tol * im_scale
@@ -183,7 +183,7 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
                   imag_tol: float = 1e-8, near_real_tol: float | None = None, real_parts: bool = False,
                   min_plane_sv: float = 1e-3, min_line_sin: float = 1e-3, min_triangle: float = 1e-3,
                   min_side: float = 1e-6,
-                  quartic: str = "closed", root_newton_iters: int = 2,
+                  quartic: Quartic | str = Quartic.CLOSED, root_newton_iters: int = 2,
                   lambda_newton_iters: int = 2) -> MinimalSolutions:
     """Every real ``T_lidar_cam`` of B plane-line triples (Vasconcelos, Barreto & Nunes, TPAMI 2012).
 

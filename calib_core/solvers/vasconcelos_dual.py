@@ -38,7 +38,7 @@ from ._common import (
     prologue,
 )
 from .orientation import cross, dot, kabsch
-from .polynomial import newton_roots, quartic_roots_closed, quartic_roots_eig
+from .polynomial import Quartic, newton_roots, quartic_roots
 
 SCAN_PLANE_Z_MM = 10.0
 
@@ -68,7 +68,7 @@ def _translation_mm(R: np.ndarray, a: np.ndarray, u3: np.ndarray, m: np.ndarray)
 
 def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *, real_parts: bool = True,
                   imag_tol: float = 1e-8, min_plane_sv: float = 1e-3, min_line_sin: float = 1e-3,
-                  quartic: str = "eig", root_newton_iters: int = 2) -> MinimalSolutions:
+                  quartic: Quartic | str = Quartic.EIG, root_newton_iters: int = 2) -> MinimalSolutions:
     """Every candidate ``T_lidar_cam`` of B plane-line triples in the authors' dual formulation (module docstring).
 
     Same inputs as ``solvers.vasconcelos.solve_triples`` (camera planes ``n . p = d`` in metres, scan lines in the
@@ -102,7 +102,7 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     sa, sb, sc = sa / scale, sb / scale, sc / scale
     A = grunert_quartic(sa**2, sb**2, sc**2, ca, cb, cg)
     A = A / np.abs(A).max(axis=1, keepdims=True)
-    roots = quartic_roots_closed(A) if quartic == "closed" else quartic_roots_eig(A)
+    roots = quartic_roots(A, quartic)
     roots = newton_roots(A, roots, root_newton_iters)
     real = np.abs(roots.imag) <= imag_tol * (1.0 + np.abs(roots))
     near = ~real & (roots.imag > 0) if real_parts else np.zeros_like(real)

@@ -8,6 +8,8 @@ linear equation ``N_i^T H (x, y, 1)^T = |N_i|^2`` with ``N_i = d_i n_i`` (camera
 
 from __future__ import annotations
 
+from enum import StrEnum
+
 import numpy as np
 
 from ..data.observations import Observations
@@ -17,22 +19,30 @@ from ..geometry.transforms import invert_T, make_T, project_to_so3
 MIN_BOARDS = 5
 
 
-def _equations(obs: Observations, weighting: str) -> list[tuple[np.ndarray, np.ndarray]]:
+class Weighting(StrEnum):
+    """How Zhang & Pless's linear equations are weighted: ``paper`` (``N_i^T H q = |N_i|^2`` as printed) or
+    ``unit`` (each divided by ``|N_i| = 1/d_i``: every equation in metres)."""
+
+    PAPER = "paper"
+    UNIT = "unit"
+
+
+def _equations(obs: Observations, weighting: Weighting | str) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per board, the rows (K_i,9) and right-hand sides (K_i,) of the equations ``N_i^T H q = |N_i|^2`` (``"paper"``)
     or ``n_i^T H q = d_i`` (``"unit"``), the coefficient of ``H[j,l]`` being ``N_j q_l``, ``q = (x, y, 1)``."""
-    if weighting not in ("paper", "unit"):
-        raise ValueError(f"weighting must be 'paper' or 'unit', got {weighting!r}")
+    if weighting not in tuple(Weighting):
+        raise ValueError(f"weighting must be one of {', '.join(Weighting)}, got {weighting!r}")
     n, d = obs.planes_cam()
     out = []
     for i, b in enumerate(obs.boards):
         q = np.column_stack([b.scan, np.ones(len(b.scan))])           # (K,3) = (x, y, 1)
-        N = d[i] * n[i] if weighting == "paper" else n[i]
+        N = d[i] * n[i] if weighting == Weighting.PAPER else n[i]
         out.append((np.einsum("j,kl->kjl", N, q).reshape(len(q), 9),
-                    np.full(len(q), N @ N if weighting == "paper" else d[i])))
+                    np.full(len(q), N @ N if weighting == Weighting.PAPER else d[i])))
     return out
 
 
-def linear_H(obs: Observations, *, weighting: str = "paper") -> tuple[np.ndarray, np.ndarray]:
+def linear_H(obs: Observations, *, weighting: Weighting | str = Weighting.PAPER) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares ``H`` (3x3) and the singular values of the scaled design matrix.
 
     ``weighting="paper"`` uses the equations ``N_i^T H q = |N_i|^2`` as printed; ``"unit"`` divides each by
@@ -70,7 +80,8 @@ def linear_subsets(obs: Observations, subsets: np.ndarray, *, rank_tol: float = 
     return invert_T(make_T(Phi, Delta)), full
 
 
-def zhang_pless_linear(obs: Observations, *, weighting: str = "paper", rank_tol: float = 1e-9) -> np.ndarray:
+def zhang_pless_linear(obs: Observations, *, weighting: Weighting | str = Weighting.PAPER,
+                       rank_tol: float = 1e-9) -> np.ndarray:
     """The linear Zhang & Pless solution as ``T_lidar_cam`` (4x4), ``Phi`` projected onto SO(3).
 
     Raises SolveFailure for fewer than 5 boards or a rank-deficient system (e.g. all boards parallel).

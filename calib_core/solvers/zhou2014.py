@@ -37,7 +37,7 @@ import numpy as np
 
 from ._common import REASON_PLANES, MinimalSolutions, plane_sv_min, prologue
 from .orientation import cross
-from .polynomial import keep_better, newton_roots, quartic_roots_closed, quartic_roots_eig
+from .polynomial import Quartic, keep_better, newton_roots, quartic_roots
 
 REASON_CONICS = "the orthonormality conics share a component (quartic vanishes: infinitely many rotations)"
 
@@ -97,7 +97,7 @@ def _conics(n: np.ndarray, u: np.ndarray):
     return Kb, C1, 0.5 * (G12 + np.swapaxes(G12, 1, 2))
 
 
-def _common_points(C1, C2, quartic: str, root_newton_iters: int, imag_tol: float, alpha_newton_iters: int):
+def _common_points(C1, C2, quartic: Quartic | str, root_newton_iters: int, imag_tol: float, alpha_newton_iters: int):
     """Step 4: the conics' real common points with ``|alpha|^2 = 2``: (index of the triple, alpha (R,3)) per root,
     and the mask (K,) of triples whose quartic vanishes."""
     # Eliminate the coordinate with the largest diagonal weight in the two conics (never zero in both).
@@ -113,7 +113,7 @@ def _common_points(C1, C2, quartic: str, root_newton_iters: int, imag_tol: float
     A = A / np.where(scale > 0, scale, 1.0)
     rev = np.abs(A[:, 4]) > np.abs(A[:, 0])                                  # roots near infinity: use 1/w
     A = np.where(rev[:, None], A[:, ::-1], A)
-    roots = quartic_roots_closed(A) if quartic == "closed" else quartic_roots_eig(A)
+    roots = quartic_roots(A, quartic)
     roots = newton_roots(A, roots, root_newton_iters)
     real = (np.abs(roots.imag) <= imag_tol * (1.0 + np.abs(roots))) & ~flat[:, None]
     k, slot = np.nonzero(real)
@@ -139,7 +139,7 @@ def _common_points(C1, C2, quartic: str, root_newton_iters: int, imag_tol: float
 
 
 def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *, imag_tol: float = 1e-8,
-                  min_plane_sv: float = 1e-3, quartic: str = "closed", root_newton_iters: int = 2,
+                  min_plane_sv: float = 1e-3, quartic: Quartic | str = Quartic.CLOSED, root_newton_iters: int = 2,
                   alpha_newton_iters: int = 3) -> MinimalSolutions:
     """Every real ``T_lidar_cam`` of B plane-line triples by Zhou's algebra (module docstring).
 
