@@ -99,7 +99,7 @@ def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
     sigma = search.sigma_m
     best = choose_and_refine(search.obs_used, search.pool, sigma, score, opts.refine, refined=search.refined)
     if best.ties:
-        raise tie_failure(best, search.all_candidates, score.prior is not None)
+        raise tie_failure(best, search.all_candidates, score.prior is not None, opts.refine.tie_log_likelihood)
     if not np.isfinite(best.cost):
         raise SolveFailure("lidarcam: every refined answer puts some board in an implausible place (behind a sensor, "
                            "or the sensors on opposite sides of its plane)", search.all_candidates)
@@ -111,7 +111,8 @@ def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
     return Found(search, best, tests, start)
 
 
-def tie_failure(best: Choice, candidates: np.ndarray, with_prior: bool) -> SolveFailure:
+def tie_failure(best: Choice, candidates: np.ndarray, with_prior: bool,
+                tie: float = TIE_LOG_LIKELIHOOD) -> SolveFailure:
     """The refusal of a tie (``choose.TIE_LOG_LIKELIHOOD``): the reason names every tied answer (as mounting
     parameters) and its cost; ``info["alternatives"]`` holds each as ``{"T_lidar_cam", "cost", "mounting"}``, best
     first."""
@@ -123,7 +124,7 @@ def tie_failure(best: Choice, candidates: np.ndarray, with_prior: bool) -> Solve
     hint = "the mounting prior given does not separate them" if with_prior else \
         "a mounting prior (calibrate(obs, prior=MountingPrior...), CLI --prior/--prior-sigma) or more boards decide"
     return SolveFailure(f"lidarcam: the data do not decide between {len(alts)} distinct answers (costs within "
-                        f"{TIE_LOG_LIKELIHOOD:g} of each other in log-likelihood): {named}; {hint}", candidates,
+                        f"{tie:g} of each other in log-likelihood): {named}; {hint}", candidates,
                         {"alternatives": alts})
 
 

@@ -30,10 +30,12 @@ GIVE_UP_FACTOR = 100.0
 """... when its cost is still above this times the best cost found so far (a start that far off, after that many
 steps, has not found a better minimum: on the paper's three-board cell, where polishes travel farthest, no stopped
 polish would have won)."""
-TIE_LOG_LIKELIHOOD = 3.0
+TIE_LOG_LIKELIHOOD = 0.1
 """Distinct refined answers (the distinct-start rule) whose costs, negative log-likelihoods, differ by less than this
-are a tie: the better is less than e^3 (about 20) times as likely as the other, which the data do not decide
-(``ties``); the method then refuses rather than follow rounding, unless a mounting prior separates them."""
+are a tie: their likelihoods are equal within a factor e^0.1 (10%), which the data do not decide (``with_ties``);
+the method then refuses, naming them, rather than follow rounding, unless a mounting prior separates them. Larger
+values refuse more: on the paper's three-board cell (exact outlines) the better of two answers within 3.0 is the
+right one 20 times in 24, and a threshold of 3.0 would refuse those 20 answers too."""
 POLISH_METHOD = "trf"
 """The ``least_squares`` method of ``polish``."""
 
