@@ -66,6 +66,8 @@ def margin_residuals(obs: Observations, candidates: np.ndarray, sigma_m: float =
     ``gradient`` also (M, 2n, 2): its gradient in the end's board-frame (x, y)."""
     lb = lower_bound_boards(obs)
     C = np.asarray(candidates, float).reshape(-1, 4, 4)
+    if not len(lb):
+        return (np.zeros((len(C), 0)), np.zeros((len(C), 0, 2))) if gradient else np.zeros((len(C), 0))
     P = endpoints_2d(obs, C, frames)                                          # (M,N,2,2)
     out, grad = np.zeros(P.shape[:3]), np.zeros(P.shape)
     for idx, outline in lower_bound_groups(obs):
@@ -79,11 +81,13 @@ def lower_bound_rows(obs: Observations, T: np.ndarray, frames: tuple, chord_sigm
     """At one (4,4) ``T_lidar_cam``: (chord residuals (2n,), their Jacobian (2n,6), margin residuals (2n,), theirs
     (2n,6)) in ``x = (w, dt)`` (``data.residuals``' left perturbation); ``frames``: ``board_frames(obs, T[None])``."""
     lb = lower_bound_boards(obs)
+    if not len(lb):
+        return np.zeros(0), np.zeros((0, 6)), np.zeros(0), np.zeros((0, 6))
     rc, gc = chord_residuals(obs, T[None], chord_sigma_m, cap, frames, gradient=True)
     rm, gm = margin_residuals(obs, T[None], margin_sigma_m, frames, gradient=True)
     ends = scan_endpoints(obs)[lb].reshape(-1, 3)                             # (2n,3): board i's two ends
     board = np.repeat(lb, 2)
     Jc = sum(board_frame_rows(obs, T, np.repeat(scan_endpoints(obs)[lb][:, j], 2, axis=0), board, gc[0][:, j],
-                              frames) for j in (0, 1)) if len(lb) else np.zeros((0, 6))
-    Jm = board_frame_rows(obs, T, ends, board, gm[0], frames) if len(lb) else np.zeros((0, 6))
+                              frames) for j in (0, 1))
+    Jm = board_frame_rows(obs, T, ends, board, gm[0], frames)
     return rc[0], Jc, rm[0], Jm
