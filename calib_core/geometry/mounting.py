@@ -99,7 +99,7 @@ def with_units(theta: np.ndarray) -> dict[str, float]:
     return {k: float(np.degrees(v) if j < 3 else v) for j, (k, v) in enumerate(zip(UNIT_NAMES, theta, strict=True))}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class MountingPrior:
     """A rough guess of the mounting (from CAD or a tape measure), as a Gaussian prior on ``T_lidar_cam``.
 
