@@ -255,3 +255,21 @@ def test_cli_prior_flags_parse_with_units_and_decide_the_tie(tmp_path, capsys):
     e_R, _ = pose_errors(np.array(r2["T_lidar_cam"]), np.array(json.loads((tmp_path / "r.json").read_text())
                                                                ["alternatives"][1]["T_lidar_cam"]))
     assert e_R < 3
+
+
+def test_a_weakly_decided_answer_names_its_runners_up_in_a_warning_and_the_json():
+    import itertools
+
+    obs = load_observations(NOWICKI)
+    for s in itertools.islice(itertools.combinations(range(obs.n_boards), 3), 60):
+        res = calibrate(obs.subset(list(s)))
+        if res.ok and res.info.get("alternatives"):
+            break
+    else:
+        pytest.fail("no weakly decided three-board subset among the first 60")
+    alts = res.info["alternatives"]
+    np.testing.assert_allclose(alts[0]["T_lidar_cam"], res.T_lidar_cam, atol=0.2)  # the answer first (before joint)
+    assert all(0.1 <= a["cost"] - alts[0]["cost"] < 3.0 for a in alts[1:])
+    weak = [w for w in res.warnings if w.startswith("weakly decided")]
+    assert len(weak) == 1 and all(f"cost {a['cost']:.6g}" in weak[0] for a in alts)
+    assert res.to_dict()["alternatives"] == alts

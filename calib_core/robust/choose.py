@@ -36,6 +36,9 @@ are a tie: their likelihoods are equal within a factor e^0.1 (10%), which the da
 the method then refuses, naming them, rather than follow rounding, unless a mounting prior separates them. Larger
 values refuse more: on the paper's three-board cell (exact outlines) the better of two answers within 3.0 is the
 right one 20 times in 24, and a threshold of 3.0 would refuse those 20 answers too."""
+WEAK_LOG_LIKELIHOOD = 3.0
+"""A distinct refined answer whose cost is within this of the chosen one's (but not a tie) is named in a warning:
+the data prefer the answer by less than e^3 (about 20) to 1 (``Choice.runners_up``)."""
 POLISH_METHOD = "trf"
 """The ``least_squares`` method of ``polish``."""
 
@@ -157,7 +160,8 @@ class Choice:
     """The chosen, refined extrinsic: ``cost`` its all-evidence score, ``refined`` the range refinement,
     ``T`` the answer (polished or not), ``start`` the candidate it was refined from; ``ties``: the other refined
     answers, distinct from ``T``, whose cost is within ``TIE_LOG_LIKELIHOOD`` of it, as (T, cost) pairs, best
-    first (empty when the data decide)."""
+    first (empty when the data decide); ``runners_up``: likewise those within ``WEAK_LOG_LIKELIHOOD`` but not
+    tied."""
 
     cost: float
     refined: RefineResult
@@ -165,6 +169,7 @@ class Choice:
     polished: bool
     start: np.ndarray
     ties: tuple = ()
+    runners_up: tuple = ()
 
 
 def refine_start(obs: Observations, T0: np.ndarray, sigma_m: float, score: ScoreOptions,
@@ -189,18 +194,20 @@ def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOpti
     return Choice(f2, c.refined, T2, True, c.start) if f2 < c.cost else c
 
 
-def with_ties(out: list[Choice], opts: RefineOptions, tie: float = TIE_LOG_LIKELIHOOD) -> Choice:
-    """The best of ``out`` with ``ties``: the others distinct from it (the distinct-start rule) whose cost is within
-    ``tie`` of its own, best first."""
+def with_ties(out: list[Choice], opts: RefineOptions, tie: float = TIE_LOG_LIKELIHOOD,
+              weak: float = WEAK_LOG_LIKELIHOOD) -> Choice:
+    """The best of ``out`` with ``ties`` (the others distinct from it, by the distinct-start rule, whose cost is
+    within ``tie`` of its own) and ``runners_up`` (within ``weak``, not tied), each best first."""
     out = sorted(out, key=lambda c: c.cost)
     best = out[0]
-    ties = []
+    ties, near = [], []
     for c in out[1:]:
-        if not np.isfinite(c.cost) or c.cost - best.cost >= tie:
+        if not np.isfinite(c.cost) or c.cost - best.cost >= max(tie, weak):
             break
-        if not near_any(c.T, np.array([best.T, *(T for T, _ in ties)]), opts.distinct_rot_deg, opts.distinct_trans_m):
-            ties.append((c.T, c.cost))
-    return replace(best, ties=tuple(ties))
+        if not near_any(c.T, np.array([best.T, *(T for T, _ in ties + near)]), opts.distinct_rot_deg,
+                        opts.distinct_trans_m):
+            (ties if c.cost - best.cost < tie else near).append((c.T, c.cost))
+    return replace(best, ties=tuple(ties), runners_up=tuple(near))
 
 
 def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
