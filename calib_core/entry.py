@@ -12,6 +12,7 @@ from .checks.verdict import check, data_warnings
 from .data.observations import Observations
 from .data.result import CalibrationResult
 from .errors import CalibrationError, SolveFailure, UncertaintyError
+from .geometry.mounting import MountingPrior
 from .registry import get_method
 
 
@@ -39,8 +40,13 @@ def _failure(obs: Observations, method: str, reason: str, candidates, t0: float,
                              seconds=time.perf_counter() - t0, info=info)
 
 
+PRIOR_METHODS = ("lidarcam",)
+"""The methods that take a mounting prior (``calibrate(..., prior=...)``); the paper's methods have none in their
+model, and a prior given to any other method is refused (``CalibrationError``) rather than ignored."""
+
+
 def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: bool = True,
-              **options) -> CalibrationResult:
+              prior: MountingPrior | None = None, **options) -> CalibrationResult:
     """Calibrate ``T_lidar_cam`` from ``observations`` with the registered ``method``.
 
     Returns a ``CalibrationResult``; a method that cannot solve (too few boards, degenerate data) gives
@@ -49,8 +55,18 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
     contradict is ``ok=False`` with the reason, except for the paper's methods (``Method.paper``), whose answer
     stands with the contradiction as a warning. ``verdict=False`` skips the test. Unknown methods or options
     raise ``CalibrationError``.
+
+    ``prior``: a mounting prior (``geometry.mounting.MountingPrior``: a rough guess of the pose with its sigmas),
+    for the methods of ``PRIOR_METHODS``: it enters the selection, the refinement and the covariance, and decides
+    between answers the data leave tied (without it such a tie is ``ok=False`` naming the alternatives).
     """
     m = get_method(method)
+    if prior is not None:
+        if method not in PRIOR_METHODS:
+            raise CalibrationError(f"{method}: takes no mounting prior (only {', '.join(PRIOR_METHODS)} does)")
+        if not isinstance(prior, MountingPrior):
+            raise CalibrationError(f"prior must be a MountingPrior, got {type(prior).__name__}")
+        options["prior"] = prior
     t0 = time.perf_counter()
     if observations.n_boards < m.min_boards:
         return CalibrationResult(method, False, reason=f"{method} needs at least {m.min_boards} boards, "

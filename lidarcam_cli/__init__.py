@@ -52,6 +52,8 @@ def _cmd_calibrate(args) -> int:
     frames = _frames(args)
     obs = load_observations(args.observations)
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
+    if args.prior or args.prior_sigma:
+        options["prior"] = parse_prior(args.prior, args.prior_sigma)
     res = calibrate(obs, method=get_method(args.method).name, **options)
     print("\n".join(res.summary_lines(obs.n_boards, obs.T_lidar_cam_true)))
     ros = frame_export(res.T_lidar_cam, *frames) if res.ok and frames else None
@@ -83,9 +85,9 @@ FIX_HELP = ("hold mounting parameters at given values and calibrate the rest, e.
             "z_m, roll_deg); for lidarcam and X+ml / X+plane")
 
 
-def parse_fix(text: str) -> dict:
+def parse_fix(text: str, flag: str = "--fix") -> dict:
     """``"z=0.12,roll=0"`` -> ``{"z_m": 0.12, "roll_deg": 0.0}`` (units: degrees for angles, metres for
-    offsets); CalibrationError naming a bad item."""
+    offsets); CalibrationError naming ``flag`` and a bad item."""
     from calib_core.errors import CalibrationError
     from calib_core.geometry.mounting import PARAMS, UNIT_NAMES
 
@@ -95,13 +97,47 @@ def parse_fix(text: str) -> dict:
         key = key.strip()
         name = UNIT_NAMES[PARAMS.index(key)] if key in PARAMS else key
         if not eq or name not in UNIT_NAMES:
-            raise CalibrationError(f"--fix: bad item {item!r}; expected NAME=VALUE with NAME one of "
+            raise CalibrationError(f"{flag}: bad item {item!r}; expected NAME=VALUE with NAME one of "
                                    f"{', '.join(PARAMS)} (or {', '.join(UNIT_NAMES)})")
         try:
             out[name] = float(value)
         except ValueError:
-            raise CalibrationError(f"--fix: {key} must be a number, got {value.strip()!r}") from None
+            raise CalibrationError(f"{flag}: {key} must be a number, got {value.strip()!r}") from None
     return out
+
+
+SIGMA_UNITS = {"m": ("trans", 1.0), "cm": ("trans", 0.01), "mm": ("trans", 0.001), "deg": ("rot", 1.0),
+               "rad": ("rot", 57.29577951308232)}
+"""Units ``--prior-sigma`` reads, each to (which sigma, factor to metres or degrees)."""
+
+
+def parse_prior(pose: str | None, sigma: str | None):
+    """``--prior x=0.1,...,yaw=90`` (all six, as ``--fix`` reads them) and ``--prior-sigma 50mm,10deg`` (one
+    translation and one rotation sigma, each with its unit: m, cm, mm, deg, rad) -> ``MountingPrior``;
+    CalibrationError naming what is missing or bad."""
+    from calib_core.errors import CalibrationError
+    from calib_core.geometry.mounting import MountingPrior
+
+    if not pose or not sigma:
+        raise CalibrationError("--prior and --prior-sigma go together (e.g. --prior x=0.1,y=0,z=0.05,roll=0,"
+                               "pitch=0,yaw=90 --prior-sigma 50mm,10deg)")
+    sig: dict = {}
+    for item in filter(None, (p.strip() for p in sigma.split(","))):
+        unit = next((u for u in sorted(SIGMA_UNITS, key=len, reverse=True) if item.endswith(u)), None)
+        try:
+            value = float(item[:-len(unit)]) if unit else None
+        except ValueError:
+            value = None
+        if unit is None or value is None:
+            raise CalibrationError(f"--prior-sigma: bad item {item!r}; expected a number with its unit "
+                                   f"({', '.join(SIGMA_UNITS)}), e.g. 50mm,10deg")
+        which, factor = SIGMA_UNITS[unit]
+        if which in sig:
+            raise CalibrationError(f"--prior-sigma: two {'translation' if which == 'trans' else 'rotation'} sigmas")
+        sig[which] = value * factor
+    if set(sig) != {"trans", "rot"}:
+        raise CalibrationError("--prior-sigma: one translation and one rotation sigma are needed, e.g. 50mm,10deg")
+    return MountingPrior.from_params(parse_fix(pose, "--prior"), sig["rot"], sig["trans"])
 
 
 def _plugin_option(p: argparse.ArgumentParser) -> None:
@@ -149,6 +185,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--out", help="write the result JSON (lidarcam.result/1) here")
     sp.add_argument("--yaml", help="write the extrinsic as YAML here")
     sp.add_argument("--fix", metavar="NAME=VALUE,...", help=FIX_HELP)
+    sp.add_argument("--prior", metavar="NAME=VALUE,...", help="a rough guess of the mounting (CAD, a tape measure), "
+                    "all six as --fix reads them, e.g. x=0.1,y=0,z=0.05,roll=0,pitch=0,yaw=90; it decides between "
+                    "answers the boards leave tied and enters the covariance (lidarcam only)")
+    sp.add_argument("--prior-sigma", metavar="TRANS,ROT", help="the prior's 1-sigma, each with its unit, e.g. "
+                    "50mm,10deg (the same along every axis)")
     sp.add_argument("--parent-frame", help="ROS frame name of the parent sensor (the lidar unless --parent-sensor "
                     "camera): prints static_transform_publisher lines and a URDF joint, adds them to the YAML")
     sp.add_argument("--child-frame", help="ROS frame name of the other sensor (the camera by default)")

@@ -90,8 +90,10 @@ def test_lower_bound_outline_lets_the_scan_run_past_it():
     assert not any("lower_bound" in w for w in calibrate(obs, "peng2022").warnings)
 
 
-def test_lidarcam_score_ignores_lower_bound_and_missing_outlines():
-    """Only exact outlines enter the endpoint and outline terms: any lower-bound outline, or none, scores alike."""
+def test_lidarcam_score_reads_lower_bounds_one_sided_and_missing_outlines_not_at_all():
+    """Only exact outlines enter the endpoint and outline terms; a lower-bound outline enters only the one-sided
+    chord and margin term (``robust.lower_bound``), and a missing one nothing: without that term every kind
+    scores alike, and a pattern well inside the board (its chord covered) costs only the margin prior."""
     obs = generate(SimOptions(n_boards=5), seed=4, trial=0)
     rng = np.random.default_rng(4)
     C = np.repeat(obs.T_lidar_cam_true[None], 20, axis=0)
@@ -99,8 +101,10 @@ def test_lidarcam_score_ignores_lower_bound_and_missing_outlines():
     costs = [lidarcam_score(with_kind(obs, k, o), C, return_details=True)
              for k, o in (("none", None), ("lower_bound", obs.boards[0].outline),
                           ("lower_bound", shrunk(obs.boards[0].outline, 0.3)))]
+    assert np.all(costs[0][1]["lower_bound"] == 0) and np.all(costs[2][1]["lower_bound"] > 0)
     for cost, parts in costs:
         assert np.all(parts["edge"] == 0) and np.all(parts["outline"] == 0)
-        np.testing.assert_allclose(cost, costs[0][0], rtol=1e-12)
+        np.testing.assert_allclose(cost - parts["lower_bound"], costs[0][0], rtol=1e-12)
     cost_exact, parts_exact = lidarcam_score(obs, C, return_details=True)
     assert np.all(parts_exact["edge"] > 0) and np.all(cost_exact > costs[0][0])
+    assert np.all(parts_exact["lower_bound"] == 0)

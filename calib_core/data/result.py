@@ -14,10 +14,12 @@ from ..geometry.transforms import invert_T
 
 RESULT_SCHEMA = "lidarcam.result/1"
 
-JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note")
+JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
-(``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note)."""
+(``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
+answers a refused tie could not decide between (``alternatives``: each ``{"T_lidar_cam": 4x4, "cost": the negative
+log-likelihood, "mounting": its parameters}``, best first) and the mounting prior given (``prior``)."""
 
 
 @dataclass(frozen=True, eq=False)

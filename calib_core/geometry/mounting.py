@@ -17,11 +17,13 @@ At the edges (user options, reports) the names carry their units: ``roll_deg``, 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import CalibrationError
-from .transforms import make_T
+from .transforms import make_T, so3_left_jacobian
 
 PARAMS = ("roll", "pitch", "yaw", "x", "y", "z")
 """The mounting parameters, in the order of ``theta``."""
@@ -63,23 +65,29 @@ def params_jacobian(theta: np.ndarray) -> np.ndarray:
     return M
 
 
-def parse_fixed(fixed: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(mask (6,) bool of the fixed parameters, values (6,) in radians and metres, NaN where free) of a
-    ``{"z_m": 0.12, "roll_deg": 0.0, ...}`` dict; CalibrationError naming a bad key or value."""
+def parse_params(values: dict, who: str = "fixed") -> tuple[np.ndarray, np.ndarray]:
+    """(mask (6,) bool of the parameters given, values (6,) in radians and metres, NaN where not given) of a
+    ``{"z_m": 0.12, "roll_deg": 0.0, ...}`` dict; CalibrationError naming ``who`` and a bad key or value."""
     mask = np.zeros(6, bool)
-    values = np.full(6, np.nan)
-    for key, value in dict(fixed).items():
+    out = np.full(6, np.nan)
+    for key, value in dict(values).items():
         if key not in UNIT_NAMES:
-            raise CalibrationError(f"fixed: unknown parameter {key!r}; known: {', '.join(UNIT_NAMES)}")
+            raise CalibrationError(f"{who}: unknown parameter {key!r}; known: {', '.join(UNIT_NAMES)}")
         try:
             v = float(value)
         except (TypeError, ValueError):
-            raise CalibrationError(f"fixed: {key} must be a number, got {value!r}") from None
+            raise CalibrationError(f"{who}: {key} must be a number, got {value!r}") from None
         if not np.isfinite(v):
-            raise CalibrationError(f"fixed: {key} must be finite, got {value!r}")
+            raise CalibrationError(f"{who}: {key} must be finite, got {value!r}")
         j = UNIT_NAMES.index(key)
         mask[j] = True
-        values[j] = np.radians(v) if j < 3 else v
+        out[j] = np.radians(v) if j < 3 else v
+    return mask, out
+
+
+def parse_fixed(fixed: dict) -> tuple[np.ndarray, np.ndarray]:
+    """``parse_params`` of user-fixed values, refusing all six (nothing would be left to calibrate)."""
+    mask, values = parse_params(fixed, "fixed")
     if mask.all():
         raise CalibrationError("fixed: all six parameters are fixed; nothing is left to calibrate")
     return mask, values
@@ -89,3 +97,65 @@ def with_units(theta: np.ndarray) -> dict[str, float]:
     """``{"roll_deg": ..., ..., "z_m": ...}`` of ``theta`` (radians, metres)."""
     theta = np.asarray(theta, float)
     return {k: float(np.degrees(v) if j < 3 else v) for j, (k, v) in enumerate(zip(UNIT_NAMES, theta, strict=True))}
+
+
+@dataclass(frozen=True, eq=False)
+class MountingPrior:
+    """A rough guess of the mounting (from CAD or a tape measure), as a Gaussian prior on ``T_lidar_cam``.
+
+    Attributes:
+        T_lidar_cam: (4,4) the guessed pose (``T_from_params`` of the guessed roll, pitch, yaw, x, y, z).
+        sigma_rot_rad: 1-sigma of the rotation (radians), the same about every axis.
+        sigma_trans_m: 1-sigma of the translation (metres), the same along every axis.
+
+    Its residuals (``residuals``): ``log(R_0^T R) / sigma_rot`` (the rotation vector of the error, scipy's) and
+    ``(t - t_0) / sigma_trans``; their squared norm halved is minus the prior's log-density (up to a constant).
+    """
+
+    T_lidar_cam: np.ndarray
+    sigma_rot_rad: float
+    sigma_trans_m: float
+
+    def __post_init__(self) -> None:
+        T = np.array(self.T_lidar_cam, float)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise CalibrationError("prior: T_lidar_cam must be a finite 4x4 matrix")
+        for name in ("sigma_rot_rad", "sigma_trans_m"):
+            v = float(getattr(self, name))
+            if not (np.isfinite(v) and v > 0):
+                raise CalibrationError(f"prior: {name} must be finite and > 0, got {v!r}")
+            object.__setattr__(self, name, v)
+        T.setflags(write=False)
+        object.__setattr__(self, "T_lidar_cam", T)
+
+    @classmethod
+    def from_params(cls, pose: dict, sigma_rot_deg: float, sigma_trans_m: float) -> MountingPrior:
+        """From ``{"roll_deg": ..., "x_m": ...}`` (``UNIT_NAMES``; every one of the six is needed) and sigmas in
+        degrees and metres."""
+        mask, values = parse_params(pose, "prior")
+        if not mask.all():
+            missing = [UNIT_NAMES[j] for j in np.flatnonzero(~mask)]
+            raise CalibrationError(f"prior: every mounting parameter is needed; missing {', '.join(missing)}")
+        return cls(T_from_params(values), np.radians(float(sigma_rot_deg)), float(sigma_trans_m))
+
+    def residuals(self, candidates: np.ndarray) -> np.ndarray:
+        """(M,6) the prior's normalised residuals of (M,4,4) candidates (or (6,) of one (4,4))."""
+        T = np.asarray(candidates, float)
+        C = T.reshape(-1, 4, 4)
+        R0 = self.T_lidar_cam[:3, :3]
+        w = Rotation.from_matrix(R0.T @ C[:, :3, :3]).as_rotvec()
+        r = np.concatenate([w / self.sigma_rot_rad, (C[:, :3, 3] - self.T_lidar_cam[:3, 3]) / self.sigma_trans_m],
+                           axis=1)
+        return r[0] if T.ndim == 2 else r
+
+    def jacobian(self, T: np.ndarray) -> np.ndarray:
+        """(6,6) d residuals / d (w, dt) at one (4,4) ``T`` (``calib_core.data.residuals``' left perturbation
+        ``R = exp([w]x) R``): ``log(R_0^T exp(w) R) = log(exp(R_0^T w) R_0^T R)``, whose derivative is
+        ``J_l(phi)^-1 R_0^T`` with ``phi = log(R_0^T R)`` and ``J_l`` the left Jacobian of SO(3)."""
+        R0 = self.T_lidar_cam[:3, :3]
+        phi = Rotation.from_matrix(R0.T @ np.asarray(T, float)[:3, :3]).as_rotvec()
+        J = np.zeros((6, 6))
+        J[:3, :3] = np.linalg.solve(so3_left_jacobian(phi), R0.T) / self.sigma_rot_rad
+        J[3:, 3:] = np.eye(3) / self.sigma_trans_m
+        return J
+

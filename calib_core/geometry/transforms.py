@@ -88,3 +88,13 @@ def skew(v: np.ndarray) -> np.ndarray:
     S[..., 1, 0], S[..., 1, 2] = v[..., 2], -v[..., 0]
     S[..., 2, 0], S[..., 2, 1] = -v[..., 1], v[..., 0]
     return S
+
+
+def so3_left_jacobian(w: np.ndarray) -> np.ndarray:
+    """Left Jacobian ``J_l(w)`` of SO(3) (``w`` a rotation vector, radians): ``exp(w + dw) = exp(J_l(w) dw) exp(w)``
+    to first order."""
+    th = float(np.linalg.norm(w))
+    W = skew(w)
+    if th < 1e-8:
+        return np.eye(3) + 0.5 * W
+    return np.eye(3) + (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * (W @ W)

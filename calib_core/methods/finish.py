@@ -12,8 +12,9 @@ import numpy as np
 from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, undetermined_directions
 from ..data.lines import scan_noise_estimate
 from ..data.observations import Observations
+from ..data.residuals import perturb
 from ..errors import JointError, SolveFailure, UncertaintyError
-from ..geometry.mounting import parse_fixed
+from ..geometry.mounting import MountingPrior, params_from_T, parse_fixed, with_units
 from ..refine.joint import JointOptions, joint_step
 from ..refine.partial import calibrate_fixed, fixed_starts
 from ..refine.refine import F_SCALE_SIGMAS
@@ -79,3 +80,23 @@ def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], n
                               range_sigma_m=range_sigma_m, max_nfev=max_nfev)
     return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "refine_residual": residual,
                                    "refine_loss": str(loss), "warnings": board_set_warnings(obs)}
+
+
+def with_prior(T: np.ndarray, cov: np.ndarray, prior: MountingPrior, step: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The answer ``T`` with covariance ``cov`` (6x6 in ``(w, dt)``, ``data.residuals``' left perturbation) combined
+    with the mounting ``prior``: its information ``J^T J`` added (``J = prior.jacobian(T)``), and with ``step`` one
+    Gauss-Newton step of the posterior ``x^T cov^-1 x + |r + J x|^2`` (an answer the prior did not enter yet; exact
+    for a Gaussian likelihood)."""
+    J = prior.jacobian(T)
+    info = np.linalg.inv(cov) + J.T @ J
+    post = np.linalg.inv(info)
+    post = 0.5 * (post + post.T)
+    if step:
+        T = perturb(T, -post @ (J.T @ prior.residuals(T)))
+    return T, post
+
+
+def prior_info(prior: MountingPrior) -> dict:
+    """The mounting prior as the result reports it: its pose (``with_units``) and sigmas (degrees, metres)."""
+    return {"mounting": with_units(params_from_T(prior.T_lidar_cam)),
+            "sigma_rot_deg": float(np.degrees(prior.sigma_rot_rad)), "sigma_trans_m": prior.sigma_trans_m}

@@ -16,15 +16,24 @@ import numpy as np
 
 from ..checks.degeneracy import degeneracy_warnings, explain_failure
 from ..data.observations import Observations
-from ..errors import SolveFailure
+from ..errors import CalibrationError, SolveFailure
+from ..geometry.mounting import params_from_T, with_units
 from ..refine.joint import RANGE_ONLY_MODEL
 from ..refine.uncertainty import conditioning
 from ..registry import Method
-from ..robust.choose import Choice, choose_and_refine
+from ..robust.choose import TIE_LOG_LIKELIHOOD, WEAK_LOG_LIKELIHOOD, Choice, choose_and_refine
 from ..robust.inliers import trim
 from ..robust.scorers import lidarcam as lidarcam_score
 from ..robust.search import FinalTests, Search, consensus_search, final_tests
-from .finish import NO_CORNERS, fixed_calibration, range_covariance, refuse_undetermined, try_joint
+from .finish import (
+    NO_CORNERS,
+    fixed_calibration,
+    prior_info,
+    range_covariance,
+    refuse_undetermined,
+    try_joint,
+    with_prior,
+)
 from .options import FLAT_KEYWORDS, LidarcamOptions
 
 
@@ -56,6 +65,9 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
     closed-form start when roll, pitch and z are given (else from the full method's answer).
     """
     opts = LidarcamOptions.from_keywords(options, **keywords)
+    if opts.fixed is not None and opts.score.prior is not None:
+        raise CalibrationError("lidarcam: a mounting prior and fixed parameters do not go together (fix what "
+                               "is known, or give it as the prior)")
     if opts.fixed is not None:
         return fixed_calibration(obs, opts.fixed, lambda: search_and_refine(obs, opts).best.T, loss=opts.refine.loss,
                                  f_scale_m=opts.refine.f_scale_m, f_scale_sigmas=opts.refine.f_scale_sigmas,
@@ -69,13 +81,15 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
 
 @dataclass(frozen=True, eq=False)
 class Found:
-    """Steps 1-4 of ``lidarcam``: the search, the chosen and refined answer, its final tests, and the score of
-    the start it was refined from."""
+    """Steps 1-4 of ``lidarcam``: the search, the chosen and refined answer, its final tests, the score of the
+    start it was refined from, and ``first``: the choice before the final tests (its ``runners_up`` were scored on
+    the same boards when the tests changed nothing)."""
 
     search: Search
     best: Choice
     tests: FinalTests
     score_start: float
+    first: Choice
 
 
 def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
@@ -86,12 +100,53 @@ def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
                               outline_sigma_m=score.outline_sigma_m, options=opts.consensus)
     sigma = search.sigma_m
     best = choose_and_refine(search.obs_used, search.pool, sigma, score, opts.refine, refined=search.refined)
+    if best.ties:
+        raise tie_failure(best, search.all_candidates, score.prior is not None, opts.refine.tie_log_likelihood)
+    if not np.isfinite(best.cost):
+        raise SolveFailure("lidarcam: every refined answer puts some board in an implausible place (behind a sensor, "
+                           "or the sensors on opposite sides of its plane)", search.all_candidates)
     start = best.cost if np.array_equal(best.start, best.T) else \
         float(lidarcam_score(search.obs_used, best.start[None], range_sigma_m=sigma, **score.kwargs())[0])
     tests = final_tests(search, best.T, reject=opts.consensus.reject_boards)
+    first = best
     if tests.changed:  # boards or points left out (or taken back) at the refined pose: refine on what is left
         best = choose_and_refine(tests.obs_used, best.T, sigma, score, opts.refine, n_refine=1)
-    return Found(search, best, tests, start)
+    return Found(search, best, tests, start, first)
+
+
+def alternatives(answers) -> list[dict]:
+    """``info["alternatives"]``: each (T, cost) as ``{"T_lidar_cam": 4x4 list, "cost", "mounting"}``."""
+    return [{"T_lidar_cam": np.asarray(T).tolist(), "cost": float(c), "mounting": with_units(params_from_T(T))}
+            for T, c in answers]
+
+
+def named(alts: list[dict]) -> str:
+    """The answers of ``alternatives`` for a reason or a warning: each cost and its mounting parameters."""
+    return "; ".join(f"cost {a['cost']:.6g}: " + ", ".join(f"{k} {v:.3g}" for k, v in a["mounting"].items())
+                     for a in alts)
+
+
+def runner_up_warning(best: Choice) -> tuple[list[str], dict]:
+    """A warning naming the distinct answers nearly as likely as ``best`` (``choose.WEAK_LOG_LIKELIHOOD``) and
+    the ``alternatives`` entry (the answer first), or nothing when the data prefer it clearly."""
+    if not best.runners_up:
+        return [], {}
+    alts = alternatives([(best.T, best.cost), *best.runners_up])
+    return [f"weakly decided: distinct answers nearly as likely (within {WEAK_LOG_LIKELIHOOD:g} in log-likelihood; "
+            f"the answer first): {named(alts)}; a mounting prior or more boards would decide"], {"alternatives": alts}
+
+
+def tie_failure(best: Choice, candidates: np.ndarray, with_prior: bool,
+                tie: float = TIE_LOG_LIKELIHOOD) -> SolveFailure:
+    """The refusal of a tie (``choose.TIE_LOG_LIKELIHOOD``): the reason names every tied answer (as mounting
+    parameters) and its cost; ``info["alternatives"]`` holds each as ``{"T_lidar_cam", "cost", "mounting"}``, best
+    first."""
+    alts = alternatives([(best.T, best.cost), *best.ties])
+    hint = "the mounting prior given does not separate them" if with_prior else \
+        "a mounting prior (calibrate(obs, prior=MountingPrior...), CLI --prior/--prior-sigma) or more boards decide"
+    return SolveFailure(f"lidarcam: the data do not decide between {len(alts)} distinct answers (costs within "
+                        f"{tie:g} of each other in log-likelihood): {named(alts)}; {hint}", candidates,
+                        {"alternatives": alts})
 
 
 def finish(found: Found, opts: LidarcamOptions):
@@ -102,19 +157,26 @@ def finish(found: Found, opts: LidarcamOptions):
     deg = refuse_undetermined(obs_u, best.T, np.concatenate([best.T[None], C]), "lidarcam", sigma_given,
                               opts.degeneracy)
     joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.refine.loss, options=opts.joint)
+    prior = opts.score.prior
     if joint is not None:
         T, cov, jinfo = joint
+        if prior is not None:  # the joint model ran without the prior: one Gauss-Newton step of the posterior
+            T, cov = with_prior(T, cov, prior, step=True)
     else:
         T, cov = best.T, range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given)
+        if prior is not None:  # the refinement held the prior already: its information only
+            T, cov = with_prior(T, cov, prior, step=False)
         jinfo = {"covariance_model": RANGE_ONLY_MODEL}
         if why is not None and why != NO_CORNERS:
             jinfo["warnings"] = [f"{why}; covariance of the range model only"]
+    weak, alts = runner_up_warning(found.first) if not tests.changed else ([], {})
     warnings = tests.warnings + jinfo.pop("warnings", []) + degeneracy_warnings(obs_u, T) + \
-        ([deg.message()] if len(deg.directions) else [])
+        ([deg.message()] if len(deg.directions) else []) + weak
     return T, C, {"cost": best.cost, "polished": best.polished, "score_start": found.score_start,
-                  "n_refined": opts.refine.n_refine, "sigma_m_selection": found.search.sigma_m,
+                  "n_refined": opts.refine.n_refine, **({"prior": prior_info(prior)} if prior is not None else {}),
+                  "sigma_m_selection": found.search.sigma_m,
                   "refine_cost": best.refined.cost, "refine_nfev": best.refined.nfev, **tests.info, "covariance": cov,
-                  "conditioning": conditioning(obs_u, T), "warnings": warnings, **jinfo}
+                  "conditioning": conditioning(obs_u, T), "warnings": warnings, **jinfo, **alts}
 
 
 def _signature() -> inspect.Signature:

@@ -11,7 +11,8 @@ from scipy.optimize import least_squares, leastsq
 from ..data.observations import ScanData
 from ..data.residuals import RESIDUALS, perturb
 from ..errors import CalibrationError
-from ..geometry.transforms import skew
+from ..geometry.mounting import MountingPrior
+from ..geometry.transforms import so3_left_jacobian
 
 
 class Loss(StrEnum):
@@ -57,7 +58,8 @@ class RefineResult:
 
 
 def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str = "linear",
-           f_scale_m: float | None = None, max_nfev: int = 100, x_scale: np.ndarray | None = None) -> RefineResult:
+           f_scale_m: float | None = None, max_nfev: int = 100, x_scale: np.ndarray | None = None,
+           prior: MountingPrior | None = None, prior_scale_m: float = 1.0) -> RefineResult:
     """Minimise ``sum rho(e_k^2)`` over the 6-dof extrinsic from ``T0``.
 
     Args:
@@ -66,6 +68,10 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
         residual: ``"range"`` (along-beam, the true noise model) or ``"plane"`` (point-to-plane distance).
         loss: a ``Loss`` or its scipy name; ``f_scale_m`` its scale (metres), e.g. ``F_SCALE_SIGMAS`` times the
             range noise std (required for a robust loss).
+        prior: a mounting prior (``geometry.mounting.MountingPrior``): its six normalised residuals times
+            ``prior_scale_m`` (the range-noise std, so that the whole is that std times the negative
+            log-likelihood's residuals) are minimised with the scan residuals; ``residuals`` and ``jacobian`` of
+            the result are the scan's, ``cost`` holds both.
     """
     loss = loss_name(loss)
     if loss != Loss.LINEAR and f_scale_m is None:
@@ -76,6 +82,8 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
     except KeyError:
         raise CalibrationError(f"unknown residual {residual!r}; choose from {sorted(RESIDUALS)}") from None
     T0 = np.asarray(T0, float)
+    if prior is not None:
+        fn = _with_prior(fn, prior, float(prior_scale_m))
     last: dict = {}  # the latest step: its pose, residuals and Jacobian (both computed in one pass)
 
     def at(x):
@@ -104,8 +112,18 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
         x, success, message, nfev, cost = sol.x, bool(sol.success), str(sol.message), int(sol.nfev), float(sol.cost)
     step = at(x)
     T, (e, J) = step["T"], step["eJ"]
-    return RefineResult(T, robust_cost(e) if cost is None else cost, robust_cost(e0, loss, f_scale), e, J, success,
-                        message, nfev)
+    K = len(data.points)
+    return RefineResult(T, robust_cost(e) if cost is None else cost, robust_cost(e0, loss, f_scale), e[:K], J[:K],
+                        success, message, nfev)
+
+
+def _with_prior(fn, prior: MountingPrior, scale_m: float):
+    """``fn(T, data, jacobian=True)`` with the prior's residuals and Jacobian (times ``scale_m``) appended."""
+    def both(T, data, jacobian=False):
+        e, J = fn(T, data, jacobian=True)
+        return np.concatenate([e, scale_m * prior.residuals(T)]), np.concatenate([J, scale_m * prior.jacobian(T)])
+
+    return both
 
 
 LM_TOLERANCE = 1e-8
@@ -134,11 +152,3 @@ def robust_cost(e: np.ndarray, loss: str = "linear", scale: float = 1.0) -> floa
         return 0.5 * float(e @ e)
     return 0.5 * scale**2 * float(np.sum(_RHO[loss]((np.asarray(e) / scale) ** 2)))
 
-
-def so3_left_jacobian(w: np.ndarray) -> np.ndarray:
-    """Left Jacobian ``J_l(w)`` of SO(3): ``exp(w + dw) = exp(J_l(w) dw) exp(w)`` to first order."""
-    th = float(np.linalg.norm(w))
-    W = skew(w)
-    if th < 1e-8:
-        return np.eye(3) + 0.5 * W
-    return np.eye(3) + (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * (W @ W)

@@ -5,7 +5,7 @@ polished on the whole cost; the best is kept. Lidar frame, metres, radians.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -30,6 +30,15 @@ GIVE_UP_FACTOR = 100.0
 """... when its cost is still above this times the best cost found so far (a start that far off, after that many
 steps, has not found a better minimum: on the paper's three-board cell, where polishes travel farthest, no stopped
 polish would have won)."""
+TIE_LOG_LIKELIHOOD = 0.1
+"""Distinct refined answers (the distinct-start rule) whose costs, negative log-likelihoods, differ by less than this
+are a tie: their likelihoods are equal within a factor e^0.1 (10%), which the data do not decide (``with_ties``);
+the method then refuses, naming them, rather than follow rounding, unless a mounting prior separates them. Larger
+values refuse more: on the paper's three-board cell (exact outlines) the better of two answers within 3.0 is the
+right one 20 times in 24, and a threshold of 3.0 would refuse those 20 answers too."""
+WEAK_LOG_LIKELIHOOD = 3.0
+"""A distinct refined answer whose cost is within this of the chosen one's (but not a tie) is named in a warning:
+the data prefer the answer by less than e^3 (about 20) to 1 (``Choice.runners_up``)."""
 POLISH_METHOD = "trf"
 """The ``least_squares`` method of ``polish``."""
 
@@ -39,7 +48,7 @@ class RefineOptions:
     """Choosing and refining: ``n_refine`` best distinct starts (``distinct_rot_deg``, ``distinct_trans_m``),
     maximum likelihood on the range residuals with ``loss`` at scale ``f_scale_m`` metres (default
     ``f_scale_sigmas`` range-noise stds), at most ``max_nfev`` evaluations; ``polish`` on the whole cost above
-    ``polish_threshold``."""
+    ``polish_threshold``; distinct answers within ``tie_log_likelihood`` of the best are ties."""
 
     n_refine: int = 3
     loss: Loss = Loss.LINEAR
@@ -50,6 +59,7 @@ class RefineOptions:
     polish_threshold: float = POLISH_THRESHOLD
     distinct_rot_deg: float = DISTINCT_ROT_DEG
     distinct_trans_m: float = DISTINCT_TRANS_M
+    tie_log_likelihood: float = TIE_LOG_LIKELIHOOD
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "loss", Loss(self.loss))
@@ -148,13 +158,18 @@ def best_starts(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOp
 @dataclass(frozen=True, eq=False)
 class Choice:
     """The chosen, refined extrinsic: ``cost`` its all-evidence score, ``refined`` the range refinement,
-    ``T`` the answer (polished or not), ``start`` the candidate it was refined from."""
+    ``T`` the answer (polished or not), ``start`` the candidate it was refined from; ``ties``: the other refined
+    answers, distinct from ``T``, whose cost is within ``TIE_LOG_LIKELIHOOD`` of it, as (T, cost) pairs, best
+    first (empty when the data decide); ``runners_up``: likewise those within ``WEAK_LOG_LIKELIHOOD`` but not
+    tied."""
 
     cost: float
     refined: RefineResult
     T: np.ndarray
     polished: bool
     start: np.ndarray
+    ties: tuple = ()
+    runners_up: tuple = ()
 
 
 def refine_start(obs: Observations, T0: np.ndarray, sigma_m: float, score: ScoreOptions,
@@ -162,12 +177,13 @@ def refine_start(obs: Observations, T0: np.ndarray, sigma_m: float, score: Score
     """Refine one start on the range likelihood (``refined``: its refinement, already run on ``obs``): its
     ``Choice`` (unpolished) and whether the refined pose disagrees with the board outlines (endpoint and outline
     terms above ``opts.polish_threshold``)."""
-    r = refined if refined is not None else refine(obs.scan_data, T0, residual="range", loss=opts.loss,
-                                                   f_scale_m=opts.scale_m(sigma_m), max_nfev=opts.max_nfev)
+    r = refined if refined is not None and score.prior is None else \
+        refine(obs.scan_data, T0, residual="range", loss=opts.loss, f_scale_m=opts.scale_m(sigma_m),
+               max_nfev=opts.max_nfev, prior=score.prior, prior_scale_m=sigma_m)
     T1 = r.T_lidar_cam
     final, parts = lidarcam_score(obs, T1[None], range_sigma_m=sigma_m, **score.kwargs(), return_details=True)
-    return Choice(float(final[0]), r, T1, False, T0), bool(parts["edge"][0] + parts["outline"][0] >
-                                                          opts.polish_threshold)
+    off = parts["edge"][0] + parts["outline"][0] + parts["lower_bound"][0]
+    return Choice(float(final[0]), r, T1, False, T0), bool(off > opts.polish_threshold)
 
 
 def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
@@ -176,6 +192,22 @@ def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOpti
     T2 = polish(obs, c.T, opts.max_nfev, score, sigma_m, give_up_above)
     f2 = float(lidarcam_score(obs, T2[None], range_sigma_m=sigma_m, **score.kwargs())[0])
     return Choice(f2, c.refined, T2, True, c.start) if f2 < c.cost else c
+
+
+def with_ties(out: list[Choice], opts: RefineOptions, tie: float = TIE_LOG_LIKELIHOOD,
+              weak: float = WEAK_LOG_LIKELIHOOD) -> Choice:
+    """The best of ``out`` with ``ties`` (the others distinct from it, by the distinct-start rule, whose cost is
+    within ``tie`` of its own) and ``runners_up`` (within ``weak``, not tied), each best first."""
+    out = sorted(out, key=lambda c: c.cost)
+    best = out[0]
+    ties, near = [], []
+    for c in out[1:]:
+        if not np.isfinite(c.cost) or c.cost - best.cost >= max(tie, weak):
+            break
+        if not near_any(c.T, np.array([best.T, *(T for T, _ in ties + near)]), opts.distinct_rot_deg,
+                        opts.distinct_trans_m):
+            (ties if c.cost - best.cost < tie else near).append((c.T, c.cost))
+    return replace(best, ties=tuple(ties), runners_up=tuple(near))
 
 
 def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
@@ -190,13 +222,14 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
     n = opts.n_refine if n_refine is None else n_refine
     starts = best_starts(obs, C, sigma_m, score, n, opts.distinct_rot_deg, opts.distinct_trans_m)
     if not starts:
-        raise SolveFailure("lidarcam: no candidate has a finite score (every one puts a board behind the camera)", C)
+        raise SolveFailure("lidarcam: no candidate has a finite score (under every one some board is implausible: "
+                           "behind a sensor, or the sensors on opposite sides of its plane)", C)
     known = refined if opts.loss == Loss.LINEAR else ()
     out: list[Choice] = []
     for c, off in _refine_starts(obs, C[starts], sigma_m, score, opts, known):
         best = min((o.cost for o in out), default=np.inf)
         out.append(polish_choice(obs, c, sigma_m, score, opts, GIVE_UP_FACTOR * best) if opts.polish and off else c)
-    return min(out, key=lambda c: c.cost)
+    return with_ties(out, opts, opts.tie_log_likelihood)
 
 
 def gauss_newton_steps(data, T0: np.ndarray, boards: np.ndarray | None = None, n: int = BASIN_STEPS) -> np.ndarray:

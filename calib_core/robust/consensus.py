@@ -12,7 +12,11 @@ each scan, so scoring M hypotheses on N boards costs O(M N) (not O(M x points)):
 * outline: the two scan ends, mapped into the board frame, lie inside the board outline; their distances outside
   it over ``outline_sigma`` squared (boards with an exact outline only: a ``lower_bound`` or no outline is no
   evidence against the scan ends).
-* a board whose scan centroid falls behind the camera gets ``inf``.
+* lower bound: on a board whose outline is a lower bound (``robust.lower_bound``), the squared chord and margin
+  residuals of its two scan ends (at their default scales; the chord's capped, so a partial segment costs at most
+  ``2 CHORD_CAP``).
+* an implausible board (``robust.plausible``: its scan behind the camera or the lidar, or the two sensors on
+  opposite sides of its plane) gets ``inf``.
 
 This test (chi-square with an inflation for unmodelled noise) decides which boards the consensus keeps, at every
 hypothesis; the verdict (``calib_core.checks.verdict``) is a second, independent test of the final answer on every
@@ -28,9 +32,12 @@ import functools
 import numpy as np
 from scipy.stats import chi2
 
+from ..data.chords import lower_bound_boards
 from ..data.lines import ScanLines, scan_lines
 from ..data.observations import Observations
 from ..data.residuals import board_frames, outline_groups, outside_outline
+from .lower_bound import chord_residuals, margin_residuals
+from .plausible import plausible_boards
 
 SCORE_TAU = 400.0
 """MSAC truncation of the per-board statistic while scoring hypotheses (minimal hypotheses are noisy: a good board
@@ -82,7 +89,11 @@ def _statistics(obs: Observations, L: ScanLines, var: tuple, T: np.ndarray, outl
     p_W = L.ends[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]             # (M,N,2,2)
     for idx, outline in outline_groups(obs):          # boards sharing one outline at once
         q[:, idx] += np.sum((outside_outline(p_W[:, idx], outline) / outline_sigma_m) ** 2, axis=-1)
-    q = np.where((depth > 0) & np.isfinite(q), q, np.inf)
+    lb = lower_bound_boards(obs)
+    if len(lb):                                       # lower-bound outlines: chord coverage and the margin prior
+        low = chord_residuals(obs, T) ** 2 + margin_residuals(obs, T) ** 2
+        q[:, lb] += low.reshape(len(T), len(lb), 2).sum(axis=-1)
+    q = np.where((depth > 0) & plausible_boards(obs, T) & np.isfinite(q), q, np.inf)
     return q
 
 

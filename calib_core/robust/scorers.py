@@ -27,6 +27,9 @@ from ..data.residuals import (
     scan_endpoints,
 )
 from ..errors import CalibrationError, SolveFailure
+from ..geometry.mounting import MountingPrior
+from .lower_bound import CHORD_CAP, CHORD_SIGMA_M, MARGIN_SIGMA_M, chord_residuals, lower_bound_rows, margin_residuals
+from .plausible import plausible_boards
 
 EDGE_SIGMA_M = 0.03
 """Scale (metres) of the endpoint-against-edge term of the ``lidarcam`` score: absorbs the range noise and the beam
@@ -181,16 +184,27 @@ def _peng_normaliser(log_pi_of, blocks, N: int, normalise: bool):
 
 @dataclass(frozen=True)
 class ScoreOptions:
-    """Scales (metres) of the ``lidarcam`` score's endpoint and outline terms, and its cost per board behind the
-    camera (``lidarcam``)."""
+    """Scales (metres) of the ``lidarcam`` score's endpoint and outline terms (exact outlines) and of its chord and
+    margin terms (lower-bound outlines, ``robust.lower_bound``), its cost per implausible board (behind a sensor,
+    or the sensors on opposite sides of its plane: ``robust.plausible``), and the mounting ``prior`` (None: no
+    prior)."""
 
     edge_sigma_m: float = EDGE_SIGMA_M
     outline_sigma_m: float = OUTLINE_SIGMA_M
     behind_penalty: float = np.inf
+    chord_sigma_m: float = CHORD_SIGMA_M
+    chord_cap: float = CHORD_CAP
+    margin_sigma_m: float = MARGIN_SIGMA_M
+    prior: MountingPrior | None = None
 
     def kwargs(self) -> dict:
         return {"edge_sigma_m": self.edge_sigma_m, "outline_sigma_m": self.outline_sigma_m,
-                "behind_penalty": self.behind_penalty}
+                "behind_penalty": self.behind_penalty, "chord_sigma_m": self.chord_sigma_m,
+                "chord_cap": self.chord_cap, "margin_sigma_m": self.margin_sigma_m, "prior": self.prior}
+
+
+LOWER_BOUND_KEYS = ("chord_sigma_m", "chord_cap", "margin_sigma_m", "prior")
+"""The score's keywords beyond the exact-outline ones: the lower-bound terms and the mounting prior."""
 
 
 def _evidence_constants(obs: Observations):
@@ -200,56 +214,66 @@ def _evidence_constants(obs: Observations):
 
 
 def _evidence(obs: Observations, C: np.ndarray, range_sigma_m: float, edge_sigma_m: float, outline_sigma_m: float,
-              with_outline: bool = True):
+              with_outline: bool = True, **lower):
     """The ``lidarcam`` score's normalised residuals of (M,4,4) candidates: range (M,K), endpoints and outline
-    distances of the boards with an exact outline (scan-data order), and the number of boards behind the camera
-    (M,)."""
+    distances of the boards with an exact outline (scan-data order), the chord, margin and prior residuals
+    (``lower``: ``LOWER_BOUND_KEYS``), and the number of implausible boards (M,)."""
     data = obs.scan_data
-    exact, on_exact, centres = obs.derived("scorers.evidence_constants", _evidence_constants)
+    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
     rng = range_residuals(C, data) / range_sigma_m
-    edge = point_line_errors(obs, C)[:, exact].reshape(len(C), -1) / edge_sigma_m
-    out = outside_outlines(obs, C)[:, on_exact] / outline_sigma_m if with_outline else np.zeros((len(C), 0))
-    depth = np.einsum("mna,ma->mn", centres[None] - C[:, None, :3, 3], C[:, :3, 2])  # z of R^T (c - t)
-    return rng, edge, out, np.sum(depth <= 0, axis=1).astype(float)
+    frames = board_frames(obs, C)
+    edge = point_line_errors(obs, C, frames=frames)[:, exact].reshape(len(C), -1) / edge_sigma_m
+    out = outside_outlines(obs, C, frames=frames)[:, on_exact] / outline_sigma_m if with_outline else \
+        np.zeros((len(C), 0))
+    chord = chord_residuals(obs, C, lower.get("chord_sigma_m", CHORD_SIGMA_M), lower.get("chord_cap", CHORD_CAP),
+                            frames)
+    margin = margin_residuals(obs, C, lower.get("margin_sigma_m", MARGIN_SIGMA_M), frames)
+    prior = lower.get("prior")
+    pri = prior.residuals(C) if prior is not None else np.zeros((len(C), 0))
+    bad = np.sum(~plausible_boards(obs, C), axis=1).astype(float)
+    return rng, edge, out, np.concatenate([chord, margin], axis=1), pri, bad
 
 
 def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
              edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
-             behind_penalty: float = np.inf, return_details: bool = False, with_outline: bool = True):
+             behind_penalty: float = np.inf, return_details: bool = False, with_outline: bool = True, **lower):
     """Our selection cost: a negative log-likelihood over all the evidence, per candidate (lower is better).
 
     ``cost = 0.5 sum_k (e_k / sigma)^2 + 0.5 sum_{i,end} (d_{i,end} / edge_sigma)^2 + 0.5 sum_k (o_k / outline_sigma)^2
-    + behind_penalty * (boards behind the camera)`` with ``e_k`` the range residual of every scan point against
-    its board plane, ``d`` the point-line errors of the two endpoints of every board (docs/METHOD.md eq. 8-12), ``o_k``
-    the distance of every scan point, mapped into its board's frame, outside the board outline (``d`` and ``o`` on
-    boards with an exact outline only, ``exact_outline_boards``), and a board
-    "behind the camera" when the centroid of its scan points mapped into the camera frame has depth <= 0.
+    + 0.5 |r_lower|^2 + 0.5 |r_prior|^2 + behind_penalty * (implausible boards)`` with ``e_k`` the range residual of
+    every scan point against its board plane, ``d`` the point-line errors of the two endpoints of every board
+    (docs/METHOD.md eq. 8-12), ``o_k`` the distance of every scan point, mapped into its board's frame, outside the
+    board outline (``d`` and ``o`` on boards with an exact outline only, ``exact_outline_boards``), ``r_lower`` the
+    chord and margin residuals of the boards with a lower-bound outline (``robust.lower_bound``), ``r_prior`` the
+    mounting prior's (when given), and a board implausible when it is behind the camera or the lidar or the two
+    sensors lie on opposite sides of its plane (``robust.plausible``).
 
     Args:
         range_sigma_m: range-noise std (metres).
         edge_sigma_m, outline_sigma_m: scales (metres) of the endpoint and outline terms; they absorb the
             range noise and the beam spacing at the board edges (0.25 deg at 5 m is 22 mm).
-        behind_penalty: cost per board behind the camera (inf: such a candidate is never chosen).
+        behind_penalty: cost per implausible board (inf: such a candidate is never chosen).
         with_outline: False leaves the outline term out (the dearest): a lower bound of the cost, for pruning.
+        lower: ``LOWER_BOUND_KEYS`` (the chord and margin scales, the cap, the mounting prior).
     Returns:
-        (M,) cost; with ``return_details`` also a dict of the four terms, each (M,).
+        (M,) cost; with ``return_details`` also a dict of the terms, each (M,).
     """
     candidates = np.asarray(candidates, float).reshape(-1, 4, 4)
     if len(candidates) > candidate_chunk(obs):  # bounded memory: score the candidates in chunks
         opts = {"range_sigma_m": range_sigma_m, "edge_sigma_m": edge_sigma_m, "outline_sigma_m": outline_sigma_m,
-                "behind_penalty": behind_penalty, "with_outline": with_outline}
+                "behind_penalty": behind_penalty, "with_outline": with_outline, **lower}
         out = in_chunks(lambda C: lidarcam(obs, C, **opts, return_details=True), obs, candidates)
         return out if return_details else out[0]
-    rng, edge, out, behind = _evidence(obs, candidates, range_sigma_m, edge_sigma_m, outline_sigma_m, with_outline)
-    rng_term = 0.5 * np.sum(rng**2, axis=1)
-    edge_term = 0.5 * np.sum(edge**2, axis=1)
-    out_term = 0.5 * np.sum(out**2, axis=1)
+    rng, edge, out, low, pri, behind = _evidence(obs, candidates, range_sigma_m, edge_sigma_m, outline_sigma_m,
+                                                 with_outline, **lower)
+    terms = {"range": rng, "edge": edge, "outline": out, "lower_bound": low, "prior": pri}
+    terms = {k: 0.5 * np.sum(v**2, axis=1) for k, v in terms.items()}
     with np.errstate(invalid="ignore"):
         pen = np.where(behind > 0, behind * behind_penalty, 0.0)
-    cost = rng_term + edge_term + out_term + pen
+    cost = sum(terms.values()) + pen
     cost = np.where(np.isnan(cost), np.inf, cost)
     if return_details:
-        return cost, {"range": rng_term, "edge": edge_term, "outline": out_term, "behind": behind}
+        return cost, {**terms, "behind": behind}
     return cost
 
 
@@ -263,26 +287,29 @@ def outline_term(obs: Observations, candidates: np.ndarray, outline_sigma_m: flo
 
 def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
                        edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
-                       behind_penalty: float = np.inf) -> np.ndarray:
+                       behind_penalty: float = np.inf, **lower) -> np.ndarray:
     """The residual vector of the ``lidarcam`` cost at one extrinsic (its squared norm / 2 is the cost without the
-    behind-the-camera penalty, which is not a residual): range residuals / sigma, endpoint errors / edge sigma,
-    outline distances / outline sigma. A (M,4,4) batch of extrinsics gives (M, n), one row each."""
+    implausible-board penalty, which is not a residual): range residuals / sigma, endpoint errors / edge sigma,
+    outline distances / outline sigma, the chord and margin residuals, the prior's. A (M,4,4) batch of extrinsics
+    gives (M, n), one row each."""
     T = np.asarray(T_lidar_cam, float)
     C = T.reshape(-1, 4, 4)
-    rng, edge, out, _ = _evidence(obs, C, range_sigma_m, edge_sigma_m, outline_sigma_m)
-    res = np.concatenate([rng, edge, out], axis=1)
+    rng, edge, out, low, pri, _ = _evidence(obs, C, range_sigma_m, edge_sigma_m, outline_sigma_m, **lower)
+    res = np.concatenate([rng, edge, out, low, pri], axis=1)
     return res[0] if T.ndim == 2 else res
 
 
 def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
                         edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
-                        behind_penalty: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+                        behind_penalty: float = np.inf, chord_sigma_m: float = CHORD_SIGMA_M,
+                        chord_cap: float = CHORD_CAP, margin_sigma_m: float = MARGIN_SIGMA_M,
+                        prior: MountingPrior | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``lidarcam_residuals`` (n,) at one (4,4) ``T_lidar_cam`` and their analytic Jacobian (n,6) with respect to
     ``x = (w, dt)``, the left perturbation of ``calib_core.data.residuals`` (radians, metres): range rows from
-    ``range_residuals``; endpoint and outline rows by the chain rule through the board-frame coordinates of the
-    scan points (``board_frame_rows``), each endpoint's edge pairing and each point's nearest outline edge
-    held fixed (both are piecewise constant). ``behind_penalty`` is not a residual; it is accepted for the
-    scorer's keywords."""
+    ``range_residuals``; endpoint, outline, chord and margin rows by the chain rule through the board-frame
+    coordinates of the scan points (``board_frame_rows``), each endpoint's edge pairing and each point's nearest
+    outline edge held fixed (both are piecewise constant); the prior's rows from ``MountingPrior.jacobian``.
+    ``behind_penalty`` is not a residual; it is accepted for the scorer's keywords."""
     T = np.asarray(T_lidar_cam, float)
     data = obs.scan_data
     exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
@@ -293,9 +320,12 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
     J_edge = board_frame_rows(obs, T, scan_endpoints(obs)[exact].reshape(-1, 3), np.repeat(exact, 2),
                               g_edge[0][exact].reshape(-1, 3), frames)
     J_out = board_frame_rows(obs, T, data.points[on_exact], data.board[on_exact], g_out[0][on_exact], frames)
+    rc, Jc, rm, Jm = lower_bound_rows(obs, T, frames, chord_sigma_m, chord_cap, margin_sigma_m)
+    rp, Jp = (prior.residuals(T), prior.jacobian(T)) if prior is not None else (np.zeros(0), np.zeros((0, 6)))
     res = np.concatenate([rng / range_sigma_m, edge[0][exact].ravel() / edge_sigma_m,
-                          out[0][on_exact] / outline_sigma_m])
-    return res, np.concatenate([J_rng / range_sigma_m, J_edge / edge_sigma_m, J_out / outline_sigma_m], axis=0)
+                          out[0][on_exact] / outline_sigma_m, rc, rm, rp])
+    return res, np.concatenate([J_rng / range_sigma_m, J_edge / edge_sigma_m, J_out / outline_sigma_m, Jc, Jm, Jp],
+                               axis=0)
 
 
 PENG2022_OPTIONS = ("delta_m", "normalise_candidates", "beta_norm", "beta_eps", "error", "weighting")

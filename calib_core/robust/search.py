@@ -22,6 +22,7 @@ from .choose import distinct_order, gauss_newton_steps, near_any
 from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
 from .inliers import TRIM_SIGMAS, TrimReport
+from .plausible import implausible_reason
 
 POOL_MAX = 64
 """The final selection scores at most this many hypotheses, the best by MSAC cost (the per-board statistics are
@@ -181,7 +182,8 @@ def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m
     tau = TEST_CHI2 * max(res.inflation for res in results)
     best = min(results, key=lambda res: float(msac_cost(res.q[None], tau)[0]))
     used = best.used
-    rejected = rejected + [_rejection(good[k], board_reason(best.q[k], TEST_CHI2 * best.inflation), best.q[k])
+    rejected = rejected + [_rejection(good[k], board_reason(best.q[k], TEST_CHI2 * best.inflation,
+                                                            implausible_reason(obs_g, best.T, k)), best.q[k])
                            for k in np.flatnonzero(~used)]
     if used.sum() < 3:
         raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(good)} boards agree on one extrinsic "
@@ -211,10 +213,10 @@ def _in_basin(T1: np.ndarray | None, first: np.ndarray, done: dict) -> bool:
     return near_any(T1, np.array(near))
 
 
-def board_reason(q: float, threshold: float) -> str:
-    """Why a board failed the per-board test, for the report."""
+def board_reason(q: float, threshold: float, implausible: str | None = None) -> str:
+    """Why a board failed the per-board test, for the report (``implausible``: ``plausible.implausible_reason``)."""
     if not np.isfinite(q):
-        return "its scan falls behind the camera under the consensus extrinsic"
+        return f"{implausible or 'its scan falls behind the camera'} under the consensus extrinsic"
     return (f"scan inconsistent with the board plane and outline (chi-square statistic {q:.3g} > {threshold:.3g}): "
             "not this board's scan, or a moved board")
 
@@ -263,7 +265,8 @@ def final_tests(s: Search, T: np.ndarray, *, reject: bool) -> FinalTests:
                            "refined extrinsic (at least 3 are needed): the boards do not agree on one extrinsic",
                            s.hyps.T)
     rejected = [r for r in s.rejected if r["index"] not in set(s.good.tolist())]
-    rejected += [_rejection(s.good[k], board_reason(q[k], TEST_CHI2 * s2), q[k]) for k in np.flatnonzero(~used)]
+    rejected += [_rejection(s.good[k], board_reason(q[k], TEST_CHI2 * s2, implausible_reason(s.obs_good, T, k)), q[k])
+                 for k in np.flatnonzero(~used)]
     obs_u, n_pts = _point_test(s.obs.subset(s.good[used]), T, s.sigma_m)
     warnings = [f"board {r['index']} left out: {r['reason']}" for r in sorted(rejected, key=lambda r: r["index"])]
     trimmed = s.trim.summary() if s.trim is not None else {"total": 0}
