@@ -71,7 +71,9 @@ def test_suite_file_is_versioned_and_names_the_paper_sweeps():
 
     version, suites = load_suites(DEFAULT_SUITE)
     names = {s.name: s for s in suites}
-    assert version == "1" and {"boards", "noise", "corner_noise", "outliers", "real"} <= set(names)
+    assert f"v{version}" == DEFAULT_SUITE.stem and {"boards", "noise", "corner_noise", "outliers", "rig_like",
+                                                   "real"} <= set(names)
+    assert not names["rig_like"].crlb          # the bound takes the intrinsics as exact
     assert names["boards"].crlb and names["boards"].trials < names["boards"].full_trials
 
 
