@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
 .DEFAULT_GOAL := help
-.PHONY: help setup test test-slow lint bench reproduce-paper rig-like explain-paper corner-noise real-data leaderboard verify-results search-paper robustness plan-check clean clean-results
+.PHONY: help setup test test-slow test-slurm lint bench reproduce-paper rig-like explain-paper corner-noise real-data leaderboard verify-results search-paper robustness plan-check clean clean-results
 
 help: ## List the targets (durations: wall time on 2 idle cores from an empty store, as measured)
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  %-18s %s\n", $$1, $$2}'
@@ -27,6 +27,12 @@ test: $(STAMP) ## Run the fast test suite (~1.5 min; SHUFFLE=seed: random order)
 
 test-slow: $(STAMP) ## Run only the slow, opt-in tests (not measured as a whole; 100-board peng2022 ~2 min)
 	$(PY) -m pytest -m slow
+
+test-slurm: $(STAMP) ## Sweeps through a real SLURM scheduler: a one-node cluster (dev/slurm/cluster.sh; apt-get as root if missing), tests/test_slurm.py, cluster stopped unless it was up or KEEP=1 (~1.5 min)
+	@up=0; dev/slurm/cluster.sh status >/dev/null 2>&1 && up=1; \
+	dev/slurm/cluster.sh start && eval "$$(dev/slurm/cluster.sh env)" && \
+	LIDARCAM_REQUIRE_SLURM=1 $(PY) -m pytest -m slurm -rA tests/test_slurm.py; rc=$$?; \
+	if [ $$up = 0 ] && [ -z "$(KEEP)" ]; then dev/slurm/cluster.sh stop; fi; exit $$rc
 
 lint: $(STAMP) ## ruff check (~5 s)
 	$(VENV)/bin/ruff check .
