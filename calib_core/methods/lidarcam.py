@@ -18,6 +18,7 @@ from ..checks.degeneracy import degeneracy_warnings, explain_failure
 from ..data.observations import Observations
 from ..errors import SolveFailure
 from ..refine.joint import RANGE_ONLY_MODEL
+from ..refine.joint_intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.uncertainty import conditioning
 from ..registry import Method
 from ..robust.choose import Choice, choose_and_refine
@@ -106,7 +107,7 @@ def finish(found: Found, opts: LidarcamOptions):
         T, cov, jinfo = joint
     else:
         T, cov = best.T, range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given)
-        jinfo = {"covariance_model": RANGE_ONLY_MODEL}
+        jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS}
         if why is not None and why != NO_CORNERS:
             jinfo["warnings"] = [f"{why}; covariance of the range model only"]
     warnings = tests.warnings + jinfo.pop("warnings", []) + degeneracy_warnings(obs_u, T) + \
