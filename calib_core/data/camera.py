@@ -89,12 +89,13 @@ class Camera:
         object.__setattr__(self, "dist", d12)
 
     def to_dict(self) -> dict:
-        """Plain-JSON form: ``K``, ``dist`` (trailing zeros beyond the 5th coefficient dropped), width, height."""
+        """Plain-JSON form: ``K``, ``dist`` (trailing zeros beyond the 5th coefficient dropped, or as long as
+        ``std_intrinsics`` says), width, height, and ``std_intrinsics`` when given."""
         n = 5 if not np.any(self.dist[5:]) else (8 if not np.any(self.dist[8:]) else 12)
         d = {"K": self.K.tolist(), "dist": self.dist[:n].tolist(), "width": self.width, "height": self.height}
         if self.std_intrinsics is not None:
-            n_std = len(self.std_intrinsics) - 4
-            d["dist"] = self.dist[:max(n, n_std)].tolist() if n_std > 0 else d["dist"]
+            n_std = len(self.std_intrinsics) - 4  # the dist length it was given with (validated on creation)
+            d["dist"] = self.dist[:n_std].tolist() if n_std > 0 else d["dist"]
             d["std_intrinsics"] = self.std_intrinsics.tolist()
         return d
 
@@ -104,11 +105,12 @@ class Camera:
         return np.r_[self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2], self.dist]
 
     def with_intrinsics(self, k: np.ndarray) -> Camera:
-        """This camera with intrinsics ``k`` (``intrinsics`` order; a shorter vector leaves the rest as they are)."""
+        """This camera with intrinsics ``k`` (``intrinsics`` order; a shorter vector leaves the rest as they are),
+        without ``std_intrinsics`` (the 1-sigma of other values)."""
         v = self.intrinsics
         v[:len(k)] = k
         K = np.array([[v[0], 0.0, v[2]], [0.0, v[1], v[3]], [0.0, 0.0, 1.0]])
-        return Camera(K, v[4:], self.width, self.height, self.std_intrinsics)
+        return Camera(K, v[4:], self.width, self.height)
 
 
 def _checked_std(std, n_dist: int) -> np.ndarray:
