@@ -10,6 +10,7 @@ import sys
 from calib_core.errors import LidarcamError
 
 from . import bag, demo, importer, plan, rig, simulate
+from .intrinsics_flag import STD_INTRINSICS_HELP, with_std_intrinsics
 
 
 def _cmd_methods(args) -> int:
@@ -51,6 +52,8 @@ def _cmd_calibrate(args) -> int:
 
     frames = _frames(args)
     obs = load_observations(args.observations)
+    if args.std_intrinsics:
+        obs = with_std_intrinsics(obs, args.std_intrinsics)
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
     res = calibrate(obs, method=get_method(args.method).name, **options)
     print("\n".join(res.summary_lines(obs.n_boards, obs.T_lidar_cam_true)))
@@ -149,6 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--out", help="write the result JSON (lidarcam.result/1) here")
     sp.add_argument("--yaml", help="write the extrinsic as YAML here")
     sp.add_argument("--fix", metavar="NAME=VALUE,...", help=FIX_HELP)
+    sp.add_argument("--std-intrinsics", metavar="FX,FY,CX,CY[,K1..]|F%,Cpx", help=STD_INTRINSICS_HELP)
     sp.add_argument("--parent-frame", help="ROS frame name of the parent sensor (the lidar unless --parent-sensor "
                     "camera): prints static_transform_publisher lines and a URDF joint, adds them to the YAML")
     sp.add_argument("--child-frame", help="ROS frame name of the other sensor (the camera by default)")
