@@ -159,25 +159,34 @@ def observe_poses(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board: n
                   trial: int = 0) -> Observations:
     """Fresh measurements of given board poses ``T_lidar_board`` (N,4,4) under ``T_lidar_cam``: each board's own
     scan with range noise and its camera pose (and corners) under ``options.pose_mode`` (the camera and lidar
-    streams of ``trial_rngs(options, seed, trial)``), as ``generate`` would give them for that scene.
+    streams of ``trial_rngs(options, seed, trial)``), as ``generate`` would give them for that scene, rig
+    conditions included (a margin drawn per board, the trial's erroneous camera: ``simulate.rig``).
 
     Raises CameraError when a board's pose cannot be estimated (e.g. no detection in ``image`` mode)."""
     o = options
     _, rng_lidar, rng_cam = trial_rngs(o, seed, trial)
+    rng_margin, _ = rig_rngs(o, seed, trial)
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     spec = BoardSpec.of(o)
-    outline = spec.outline()
+    camera = file_camera(o, seed, trial)
     bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
     T_cam = invert_T(np.asarray(T_lidar_cam, float))
     P = checkerboard_corners(o)
-    boards = []
+    boards, margins = [], []
     for T in np.asarray(T_lidar_board, float).reshape(-1, 4, 4):
-        scan = cast_scan(bearings, T[None], outline, o.lidar_max_range_m, o.noise_mm / 1000.0, rng_lidar)[0]
+        m = draw_margin(o, rng_margin) if margins_on(o) else None
+        outline, kind = (spec.outline(), "exact") if m is None else file_outline(o, m)
+        seen = spec.outline() if m is None else physical_outline(o, m)
+        scan = cast_scan(bearings, T[None], seen, o.lidar_max_range_m, o.noise_mm / 1000.0, rng_lidar)[0]
         T_cb, uv = observe_board(K, T_cam @ T, spec, o.pose_mode, o.cam_width, o.cam_height, rng_cam,
                                  o.pixel_noise_px, o.image_noise_std, o.render_supersample)
-        boards.append(BoardObservation(T_cb, outline, scan, uv, None if uv is None else P))
-    camera = None if o.pose_mode == "exact" else Camera(K, [], o.cam_width, o.cam_height)
+        if o.intrinsics_error_on:
+            T_cb = pose_from_corners(camera.K, P, uv, camera.dist)
+        boards.append(BoardObservation(T_cb, outline, scan, uv, None if uv is None else P, outline_kind=kind))
+        margins.append(m)
     meta = {"generator": GENERATOR, "options": o.to_dict(), "seed": int(seed), "trial": int(trial)}
+    if margins_on(o):
+        meta["board_margin_m"] = margins
     if o.pose_mode != "exact":
         meta["T_cam_board_true"] = (T_cam[None] @ np.asarray(T_lidar_board, float)).tolist()
     return Observations(tuple(boards), np.asarray(T_lidar_cam, float), meta, camera)

@@ -33,6 +33,14 @@ def rig_rngs(options: SimOptions, seed: int, trial: int, stream: int | None = No
     return tuple(np.random.default_rng(kids[i]) for i in RIG_STREAMS)
 
 
+def refuse_rig_conditions(options: SimOptions, who: str) -> None:
+    """ValueError when ``options`` ask for rig conditions that ``who`` (a writer of images and raw scans, whose
+    board and camera are the nominal ones) does not simulate."""
+    if margins_on(options) or options.intrinsics_error_on:
+        raise ValueError(f"{who}: board margins and intrinsics error are simulated by simulate.generate only; "
+                         "set board_margin_max_m, focal_error_rel, principal_point_error_px, distortion_error to 0")
+
+
 def margins_on(options: SimOptions) -> bool:
     """True when the physical board is drawn larger than its printed pattern."""
     return options.board_margin_max_m > 0

@@ -119,3 +119,22 @@ def test_the_rig_options_at_their_defaults_leave_hashes_and_keys_as_they_were():
 def test_rig_options_are_validated(bad, msg):
     with pytest.raises(ValueError, match=msg):
         SimOptions(**bad)
+
+
+def test_observe_poses_applies_the_rig_conditions_and_the_writers_refuse_them(tmp_path):
+    from simulate import file_camera, observe_poses
+    from simulate.dataset import write_dataset
+
+    o = SimOptions(pose_mode="pixel", n_boards=3, focal_error_rel=0.003, principal_point_error_px=2.0, **MARGINS)
+    obs = generate(o, seed=6, trial=2)
+    T_lb = obs.T_lidar_cam_true[None] @ np.array(obs.meta["T_cam_board_true"])
+    again = observe_poses(o, obs.T_lidar_cam_true, T_lb, seed=6, trial=2)
+    np.testing.assert_array_equal(again.camera.K, file_camera(o, 6, 2).K)
+    np.testing.assert_array_equal(again.camera.K, obs.camera.K)
+    assert all(b.outline_kind == "lower_bound" for b in again.boards)
+    assert len(again.meta["board_margin_m"]) == 3
+    for b in again.boards:
+        ok, rvec, tvec = cv2.solvePnP(b.corners_board, b.corners_px, again.camera.K, None, flags=cv2.SOLVEPNP_IPPE)
+        np.testing.assert_allclose(tvec.ravel(), b.T_cam_board[:3, 3], atol=1e-9)
+    with pytest.raises(ValueError, match="write_dataset: board margins and intrinsics error"):
+        write_dataset(o, 0, tmp_path / "ds")
