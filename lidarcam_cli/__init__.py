@@ -10,6 +10,7 @@ import sys
 from calib_core.errors import LidarcamError
 
 from . import bag, demo, importer, plan, rig, simulate
+from .intrinsics_flag import STD_INTRINSICS_HELP, with_std_intrinsics
 
 
 def _cmd_methods(args) -> int:
@@ -51,6 +52,8 @@ def _cmd_calibrate(args) -> int:
 
     frames = _frames(args)
     obs = load_observations(args.observations)
+    if args.std_intrinsics:
+        obs = with_std_intrinsics(obs, args.std_intrinsics)
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
     if args.prior or args.prior_sigma:
         options["prior"] = parse_prior(args.prior, args.prior_sigma)
@@ -190,6 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "answers the boards leave tied and enters the covariance (lidarcam only)")
     sp.add_argument("--prior-sigma", metavar="TRANS,ROT", help="the prior's 1-sigma, each with its unit, e.g. "
                     "50mm,10deg (the same along every axis)")
+    sp.add_argument("--std-intrinsics", metavar="FX,FY,CX,CY[,K1..]|F%,Cpx", help=STD_INTRINSICS_HELP)
     sp.add_argument("--parent-frame", help="ROS frame name of the parent sensor (the lidar unless --parent-sensor "
                     "camera): prints static_transform_publisher lines and a URDF joint, adds them to the YAML")
     sp.add_argument("--child-frame", help="ROS frame name of the other sensor (the camera by default)")

@@ -232,7 +232,7 @@ def _camera(dataset: Dataset) -> tuple[Camera | None, str]:
     why the joint model cannot use them."""
     c = dataset.camera
     try:
-        return Camera(c.K, c.dist, c.width, c.height), ""
+        return Camera(c.K, c.dist, c.width, c.height, c.std_intrinsics), ""
     except ObservationError as err:
         return None, f"image corners left out, the joint model cannot use the camera: {err}"
 

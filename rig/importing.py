@@ -164,7 +164,7 @@ def observations_from_bouguet(mat, points, outline_kind: str = "lower_bound", co
     square = calib.square_m or float(np.median(np.diff(np.unique(np.round(calib.views[0].grid_m[:, 0], 6)))))
     outline = None if outline_kind == "none" else grid_outline(calib.views[0].grid_m, square)
     c = calib.camera
-    camera = Camera(c.K, c.dist, c.width, c.height) if corners else None
+    camera = Camera(c.K, c.dist, c.width, c.height, c.std_intrinsics) if corners else None
     boards, names, skipped = [], [], {}
     for v in calib.views:
         p = pts.get(str(v.index))

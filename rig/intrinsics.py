@@ -73,7 +73,7 @@ def calibrate_intrinsics(images: dict[str, np.ndarray], board: BoardSpec, fix_k3
     if fix_k3:
         sigma["k3"] = 0.0
     dist = np.asarray(dist, float).ravel()[:5]
-    cam = CameraModel(int(w), int(h), np.asarray(K, float), dist)
+    cam = CameraModel(int(w), int(h), np.asarray(K, float), dist, np.array([sigma[n] for n in PARAM_NAMES]))
     return IntrinsicsFit(cam, float(rms), sigma, {n: float(e) for n, e in zip(names, per_view.ravel(), strict=True)},
                          tuple(names), skipped)
 

@@ -6,16 +6,27 @@ simulation protocol; every assumption is a field of ``SimOptions``.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from calib_core.data.camera import Camera
 from calib_core.data.observations import BoardObservation, Observations
 from calib_core.geometry.transforms import invert_T
 
-from .camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners, observe_board, render_board_image
-from .lidar import beam_bearings, cast_scan
-from .options import SimOptions, contamination_hash, hashed_settings, settings_hash
+from .camera import (
+    BoardSpec,
+    CameraError,
+    camera_matrix,
+    checkerboard_corners,
+    observe_board,
+    pose_from_corners,
+    render_board_image,
+)
+from .lidar import beam_bearings, board_ranges, cast_scan
+from .options import SimOptions, contamination_hash, contamination_on, settings_hash
 from .outliers import contaminate, contamination_rng
+from .rig import draw_margin, erroneous_camera, file_outline, margins_on, physical_outline, rig_rngs
 from .scene import Scene, SceneError, sample_scene
 
 GENERATOR = "lidarcam.simulate/1"
@@ -30,9 +41,13 @@ def trial_rngs(options: SimOptions, seed: int, trial: int, stream: int | None = 
     ``stream`` (common random numbers) ``stream`` replaces the settings hash, so trial ``t`` draws the same
     random numbers under every setting and differences between settings are not sampling noise.
     """
-    key = settings_hash(options) if stream is None else int(stream)
-    ss = np.random.SeedSequence(entropy=int(seed), spawn_key=(key, int(trial)))
+    ss = np.random.SeedSequence(entropy=int(seed), spawn_key=(trial_key(options, stream), int(trial)))
     return tuple(np.random.default_rng(s) for s in ss.spawn(3))
+
+
+def trial_key(options: SimOptions, stream: int | None = None) -> int:
+    """The first spawn key of a trial's ``SeedSequence``: ``stream`` when given, else ``settings_hash(options)``."""
+    return settings_hash(options) if stream is None else int(stream)
 
 
 def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | None = None
@@ -47,31 +62,59 @@ def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0, stream: i
     """
     o = options
     rng_geo, rng_lidar, rng_cam = trial_rngs(o, seed, trial, stream)
+    rng_margin, rng_intrinsics = rig_rngs(o, seed, trial, stream)
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     spec = BoardSpec.of(o)
+    user_cam = erroneous_camera(o, rng_intrinsics) if o.intrinsics_error_on else None
+    bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
+    P = checkerboard_corners(o)
     cam_poses: list[np.ndarray] = []
     corners: list[np.ndarray | None] = []
+    margins: list[float] = []
 
     def observe(T_lidar_cam, T_lidar_board) -> bool:
+        if margins_on(o):  # the physical board drawn for this candidate must give the lidar enough points
+            m = draw_margin(o, rng_margin)
+            hits = np.isfinite(board_ranges(bearings, T_lidar_board[None], physical_outline(o, m))[0]).sum()
+            if hits < o.min_points_per_board:
+                return False
         try:
             T, uv = observe_board(K, invert_T(T_lidar_cam) @ T_lidar_board, spec, o.pose_mode, o.cam_width,
                                    o.cam_height, rng_cam, o.pixel_noise_px, o.image_noise_std,
                                    o.render_supersample)
+            if user_cam is not None:  # the user's pose: PnP with the intrinsics they have
+                T = pose_from_corners(user_cam.K, P, uv, user_cam.dist)
         except CameraError:
             return False
         cam_poses.append(T)
         corners.append(uv)
+        if margins_on(o):
+            margins.append(m)
         return True
 
     scene = sample_scene(o, rng_geo, accept=observe)
-    bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
     sigma = o.noise_mm / 1000.0
     if o.shared_scan:
         scans = cast_scan(bearings, scene.T_lidar_board, scene.outline, o.lidar_max_range_m, sigma, rng_lidar)
+    elif margins_on(o):
+        scene = replace(scene, margins_m=np.array(margins))
+        scans = [cast_scan(bearings, T[None], physical_outline(o, m), o.lidar_max_range_m, sigma, rng_lidar)[0]
+                 for T, m in zip(scene.T_lidar_board, margins, strict=True)]
     else:
         scans = [cast_scan(bearings, T[None], scene.outline, o.lidar_max_range_m, sigma, rng_lidar)[0]
                  for T in scene.T_lidar_board]
     return scene, scans, cam_poses, corners
+
+
+def file_camera(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | None = None) -> Camera | None:
+    """The camera a trial's file states: None in ``exact`` mode, the erroneous one (``simulate.rig``) with an
+    intrinsics error, else the true pinhole (no distortion)."""
+    o = options
+    if o.pose_mode == "exact":
+        return None
+    if o.intrinsics_error_on:
+        return erroneous_camera(o, rig_rngs(o, seed, trial, stream)[1])
+    return Camera(camera_matrix(o.focal_px, o.cam_width, o.cam_height), [], o.cam_width, o.cam_height)
 
 
 def generate(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | None = None) -> Observations:
@@ -87,15 +130,22 @@ def generate(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | N
     o = options
     scene, scans, cam_poses, corners = simulate_trial(o, seed, trial, stream)
     wrong: list[int] = []
-    if hashed_settings(o.to_dict()) != o.to_dict():  # some contamination is on
+    if contamination_on(o):
         scans, wrong = contaminate(scans, o, contamination_rng(seed, contamination_hash(o), trial))
     P = checkerboard_corners(o)
-    boards = tuple(BoardObservation(T, scene.outline, s, uv, None if uv is None else P)
-                   for T, s, uv in zip(cam_poses, scans, corners, strict=True))
-    camera = None if o.pose_mode == "exact" else \
-        Camera(camera_matrix(o.focal_px, o.cam_width, o.cam_height), [], o.cam_width, o.cam_height)
+    if scene.margins_m is None:
+        outlines = [(scene.outline, "exact")] * len(cam_poses)
+    else:
+        outlines = [file_outline(o, m) for m in scene.margins_m]
+    boards = tuple(BoardObservation(T, ol, s, uv, None if uv is None else P, outline_kind=kind)
+                   for T, s, uv, (ol, kind) in zip(cam_poses, scans, corners, outlines, strict=True))
+    camera = file_camera(o, seed, trial, stream)
     meta = {"generator": GENERATOR, "options": options.to_dict(), "seed": int(seed), "trial": int(trial),
             "settings_hash": settings_hash(options)}
+    if scene.margins_m is not None:
+        meta["board_margin_m"] = scene.margins_m.tolist()
+    if o.intrinsics_error_on:
+        meta["K_true"] = camera_matrix(o.focal_px, o.cam_width, o.cam_height).tolist()
     if stream is not None:
         meta["stream"] = int(stream)
     if wrong:
@@ -109,25 +159,34 @@ def observe_poses(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board: n
                   trial: int = 0) -> Observations:
     """Fresh measurements of given board poses ``T_lidar_board`` (N,4,4) under ``T_lidar_cam``: each board's own
     scan with range noise and its camera pose (and corners) under ``options.pose_mode`` (the camera and lidar
-    streams of ``trial_rngs(options, seed, trial)``), as ``generate`` would give them for that scene.
+    streams of ``trial_rngs(options, seed, trial)``), as ``generate`` would give them for that scene, rig
+    conditions included (a margin drawn per board, the trial's erroneous camera: ``simulate.rig``).
 
     Raises CameraError when a board's pose cannot be estimated (e.g. no detection in ``image`` mode)."""
     o = options
     _, rng_lidar, rng_cam = trial_rngs(o, seed, trial)
+    rng_margin, _ = rig_rngs(o, seed, trial)
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     spec = BoardSpec.of(o)
-    outline = spec.outline()
+    camera = file_camera(o, seed, trial)
     bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
     T_cam = invert_T(np.asarray(T_lidar_cam, float))
     P = checkerboard_corners(o)
-    boards = []
+    boards, margins = [], []
     for T in np.asarray(T_lidar_board, float).reshape(-1, 4, 4):
-        scan = cast_scan(bearings, T[None], outline, o.lidar_max_range_m, o.noise_mm / 1000.0, rng_lidar)[0]
+        m = draw_margin(o, rng_margin) if margins_on(o) else None
+        outline, kind = (spec.outline(), "exact") if m is None else file_outline(o, m)
+        seen = spec.outline() if m is None else physical_outline(o, m)
+        scan = cast_scan(bearings, T[None], seen, o.lidar_max_range_m, o.noise_mm / 1000.0, rng_lidar)[0]
         T_cb, uv = observe_board(K, T_cam @ T, spec, o.pose_mode, o.cam_width, o.cam_height, rng_cam,
                                  o.pixel_noise_px, o.image_noise_std, o.render_supersample)
-        boards.append(BoardObservation(T_cb, outline, scan, uv, None if uv is None else P))
-    camera = None if o.pose_mode == "exact" else Camera(K, [], o.cam_width, o.cam_height)
+        if o.intrinsics_error_on:
+            T_cb = pose_from_corners(camera.K, P, uv, camera.dist)
+        boards.append(BoardObservation(T_cb, outline, scan, uv, None if uv is None else P, outline_kind=kind))
+        margins.append(m)
     meta = {"generator": GENERATOR, "options": o.to_dict(), "seed": int(seed), "trial": int(trial)}
+    if margins_on(o):
+        meta["board_margin_m"] = margins
     if o.pose_mode != "exact":
         meta["T_cam_board_true"] = (T_cam[None] @ np.asarray(T_lidar_board, float)).tolist()
     return Observations(tuple(boards), np.asarray(T_lidar_cam, float), meta, camera)
@@ -135,6 +194,6 @@ def observe_poses(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board: n
 
 __all__ = [
     "BoardSpec", "CameraError", "GENERATOR", "Scene", "SceneError", "SimOptions", "camera_matrix",
-    "checkerboard_corners", "generate", "observe_poses", "render_board_image", "settings_hash", "simulate_trial",
-    "trial_rngs",
+    "checkerboard_corners", "file_camera", "generate", "observe_poses", "render_board_image", "settings_hash",
+    "simulate_trial", "trial_key", "trial_rngs",
 ]

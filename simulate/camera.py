@@ -145,10 +145,12 @@ def detect_corners(image: np.ndarray, spec) -> np.ndarray | None:
     return pts.reshape(-1, 2).astype(float)
 
 
-def pose_from_corners(K: np.ndarray, corners_board: np.ndarray, corners_px: np.ndarray) -> np.ndarray:
-    """``T_cam_board`` (4x4) from board-frame points (N,3) on z = 0 and their pixels (N,2): solvePnP IPPE."""
+def pose_from_corners(K: np.ndarray, corners_board: np.ndarray, corners_px: np.ndarray, dist=None) -> np.ndarray:
+    """``T_cam_board`` (4x4) from board-frame points (N,3) on z = 0 and their pixels (N,2): solvePnP IPPE with
+    camera matrix ``K`` and OpenCV distortion ``dist`` (None: none)."""
+    d = None if dist is None else np.asarray(dist, np.float64)
     ok, rvec, tvec = cv2.solvePnP(np.asarray(corners_board, np.float64), np.asarray(corners_px, np.float64),
-                                  np.asarray(K, np.float64), None, flags=cv2.SOLVEPNP_IPPE)
+                                  np.asarray(K, np.float64), d, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
         raise CameraError("solvePnP (IPPE) failed")
     return make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())

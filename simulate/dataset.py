@@ -21,6 +21,7 @@ from . import trial_rngs
 from .camera import BACKGROUND, BoardSpec, camera_matrix, checkerboard_corners, render_board_image
 from .lidar import beam_bearings, board_ranges, scan_chords
 from .options import SimOptions
+from .rig import refuse_rig_conditions
 from .scene import sample_scene
 
 
@@ -150,6 +151,7 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
     The ground truth (T_lidar_cam, T_cam_board per pose in the dataset's board frame) is in ground_truth.yaml.
     """
     o = options
+    refuse_rig_conditions(o, "write_dataset")
     room = room or RoomOptions()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -52,6 +52,19 @@ class SimOptions:
     a cabinet next to the board); ``gross_outlier_frac`` adds that share of each board's point count as spurious
     returns at 1-30 m on beams within the board's bearing span; ``mixed_pixel_frac`` adds that share as
     mixed pixels on the beams just beyond the board's ends, between the board and a background 0.2-3 m behind.
+
+    Rig conditions (all off by default; see ``simulate.rig``): with ``board_margin_max_m > 0`` the physical board
+    of each view is the printed checkerboard's extent (``board_squares_x`` x ``board_squares_y`` squares of
+    ``checker_square_m``) grown on every side by a margin drawn per board, uniform in
+    [``board_margin_min_m``, ``board_margin_max_m``] metres; ``board_size_m`` then only bounds it (the square in
+    which the scene places and checks a board; the margin must fit in it), the lidar sees the physical board and the
+    file's outline is the printed pattern's with ``outline_kind: lower_bound`` (what a user without the board's
+    size has, as the importers write), or the exact physical one with ``outline_known``. Intrinsics error (``pose_mode``
+    pixel or image only; ``exact`` has no camera): once per trial, fx and fy are each scaled by
+    ``1 + N(0, focal_error_rel)``, cx and cy moved by ``N(0, principal_point_error_px)`` pixels and, with
+    ``distortion_error > 0``, k1, k2, p1, p2 drawn from ``N(0, distortion_error)`` (the true camera has none); the
+    file's camera is that erroneous one, every ``T_cam_board`` is the PnP pose with it, and with
+    ``std_intrinsics_known`` the file states the drawing's 1-sigma as ``camera.std_intrinsics``.
     """
 
     n_boards: int = 6
@@ -88,6 +101,13 @@ class SimOptions:
     wrong_segments: int = 0
     gross_outlier_frac: float = 0.0
     mixed_pixel_frac: float = 0.0
+    board_margin_min_m: float = 0.0
+    board_margin_max_m: float = 0.0
+    outline_known: bool = False
+    focal_error_rel: float = 0.0
+    principal_point_error_px: float = 0.0
+    distortion_error: float = 0.0
+    std_intrinsics_known: bool = True
 
     def __post_init__(self) -> None:
         def need(cond: bool, msg: str) -> None:
@@ -143,6 +163,24 @@ class SimOptions:
              f"wrong_segments must be in [0, n_boards], got {self.wrong_segments}")
         need(0 <= self.gross_outlier_frac <= 1, f"gross_outlier_frac must be in [0, 1], got {self.gross_outlier_frac}")
         need(0 <= self.mixed_pixel_frac <= 1, f"mixed_pixel_frac must be in [0, 1], got {self.mixed_pixel_frac}")
+        need(0 <= self.board_margin_min_m <= self.board_margin_max_m,
+             f"need 0 <= board_margin_min_m <= board_margin_max_m, got {self.board_margin_min_m}, "
+             f"{self.board_margin_max_m}")
+        pattern = max(self.board_squares_x, self.board_squares_y) * self.checker_square_m
+        need(pattern + 2 * self.board_margin_max_m <= self.board_size_m + 1e-12,
+             f"the pattern ({pattern:g} m) with a margin of {self.board_margin_max_m:g} m per side does not fit in "
+             f"board_size_m = {self.board_size_m:g} m")
+        need(not (self.board_margin_max_m > 0 and self.shared_scan), "board margins need shared_scan false")
+        for name in ("focal_error_rel", "principal_point_error_px", "distortion_error"):
+            need(getattr(self, name) >= 0, f"{name} must be >= 0, got {getattr(self, name)}")
+        need(self.focal_error_rel < 0.1, f"focal_error_rel must be < 0.1, got {self.focal_error_rel}")
+        need(self.pose_mode != "exact" or not self.intrinsics_error_on,
+             "an intrinsics error needs pose_mode pixel or image (exact poses come from no camera)")
+
+    @property
+    def intrinsics_error_on(self) -> bool:
+        """True when some intrinsics error is drawn."""
+        return self.focal_error_rel > 0 or self.principal_point_error_px > 0 or self.distortion_error > 0
 
     def to_dict(self) -> dict:
         """The options as a plain JSON-able dict."""
@@ -165,15 +203,35 @@ without contamination keep the random streams they had before these options exis
 include them only when on (``hashed_settings``)."""
 
 
+RIG_DEFAULTS = {"board_margin_min_m": 0.0, "board_margin_max_m": 0.0, "outline_known": False, "focal_error_rel": 0.0,
+                "principal_point_error_px": 0.0, "distortion_error": 0.0, "std_intrinsics_known": True}
+"""The rig-condition options and their (off) defaults. At these defaults they are left out of ``settings_hash`` and
+``hashed_settings``, so settings that leave them off keep the random streams and result-folder keys they had
+before these options existed; when on they are part of both."""
+
+
+def _at_default(k: str, v) -> bool:
+    for defaults in (CONTAMINATION_DEFAULTS, RIG_DEFAULTS):
+        if k in defaults and v == defaults[k]:
+            return True
+    return False
+
+
 def hashed_settings(d: dict) -> dict:
-    """``d`` (SimOptions fields) without the contamination options that are at their off defaults."""
-    return {k: v for k, v in d.items() if not (k in CONTAMINATION_DEFAULTS and v == CONTAMINATION_DEFAULTS[k])}
+    """``d`` (SimOptions fields) without the contamination and rig options that are at their off defaults."""
+    return {k: v for k, v in d.items() if not _at_default(k, v)}
+
+
+def contamination_on(options: SimOptions) -> bool:
+    """True when some contamination option is not at its off default."""
+    return any(getattr(options, k) != v for k, v in CONTAMINATION_DEFAULTS.items())
 
 
 def settings_hash(options: SimOptions) -> int:
     """Stable 32-bit hash of the options: CRC32 of their canonical JSON (sorted keys, repr floats), without the
-    contamination options (``CONTAMINATION_DEFAULTS``)."""
-    d = {k: v for k, v in options.to_dict().items() if k not in CONTAMINATION_DEFAULTS}
+    contamination options (``CONTAMINATION_DEFAULTS``) and without the rig options at their off defaults
+    (``RIG_DEFAULTS``)."""
+    d = {k: v for k, v in options.to_dict().items() if k not in CONTAMINATION_DEFAULTS and not _at_default(k, v)}
     text = json.dumps(d, sort_keys=True, separators=(",", ":"))
     return zlib.crc32(text.encode("utf-8"))
 

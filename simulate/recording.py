@@ -27,6 +27,7 @@ from .camera import BoardSpec, CameraError, camera_matrix, render_board_image
 from .dataset import RoomOptions, room_ranges, write_board_yaml
 from .lidar import beam_bearings, board_ranges
 from .options import SimOptions
+from .rig import refuse_rig_conditions
 from .scene import sample_scene
 
 
@@ -203,6 +204,7 @@ def write_recording_bag(options: SimOptions, seed: int, path, rec: RecordingOpti
     folder for ROS 2) and ``board.yaml`` beside it; return its truth. ``options.n_boards`` still poses."""
     rec = rec or RecordingOptions()
     o = options
+    refuse_rig_conditions(o, "write_recording_bag")
     path = Path(path)
     rng_geo, rng_lidar, rng_cam = trial_rngs(o, seed, trial)
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)

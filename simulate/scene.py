@@ -42,11 +42,14 @@ class Scene:
         T_lidar_cam: 4x4, maps camera points into the lidar frame.
         T_lidar_board: (N,4,4) board poses in the lidar frame.
         outline: (4,2) board outline in its own frame, metres.
+        margins_m: (N,) per board, the margin of the physical board beyond its printed pattern (metres) when the
+            options draw one (``simulate.rig``; the board's outline is then ``rig.physical_outline``), else None.
     """
 
     T_lidar_cam: np.ndarray
     T_lidar_board: np.ndarray
     outline: np.ndarray
+    margins_m: np.ndarray | None = None
 
     @property
     def T_cam_board(self) -> np.ndarray:

@@ -116,3 +116,23 @@ def test_ctrl_c_is_one_line_and_exit_130(obs_file, capsys, monkeypatch):
     assert main(["calibrate", str(obs_file)]) == 130
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "interrupted" in err
+
+
+@pytest.mark.parametrize("flag, expect", [("0.3%,2px", [2.4, 2.4, 2.0, 2.0]), ("1,1.5,2,2", [1, 1.5, 2, 2])])
+def test_std_intrinsics_flag_makes_the_joint_model_hold_the_intrinsics(tmp_path, capsys, flag, expect):
+    from calib_core.data.io import save_observations
+    from lidarcam_cli.intrinsics_flag import parse_std_intrinsics
+    from simulate import SimOptions, generate
+
+    path = tmp_path / "obs.json"
+    save_observations(generate(SimOptions(n_boards=6, pose_mode="pixel", dist_min_m=1.0, dist_max_m=4.0), 2, 0), path)
+    np.testing.assert_allclose(parse_std_intrinsics(flag, np.diag([800.0, 800.0, 1.0])), expect)
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(path), "--std-intrinsics", flag, "--out", str(out)]) == 0
+    assert "camera intrinsics: estimated" in capsys.readouterr().out
+    assert load_result(out)["covariance_model"] == "joint, intrinsics uncertain"
+    assert main(["calibrate", str(path), "--out", str(out)]) == 0
+    assert "camera intrinsics: taken as exact" in capsys.readouterr().out
+    assert main(["calibrate", str(path), "--std-intrinsics", "1,2,3"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--std-intrinsics" in err and "3 values" in err and "\n" not in err

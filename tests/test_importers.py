@@ -187,3 +187,22 @@ def test_camera_files_ros_opencv_kalibr(tmp_path):
     assert "camchain.yaml: field cam0.distortion_model: 'equidistant' is not supported" in _one_line(err)
     with pytest.raises(DatasetError, match="no camera 'cam1'"):
         read_camera_file(kal, cam="cam1")
+
+
+def test_bouguet_errors_are_three_sigma_and_give_std_intrinsics(tmp_path):
+    from scipy.io import loadmat, savemat
+
+    p = tmp_path / "Calib_Results.mat"
+    _bouguet_mat(p, np.eye(3), [0, 0, 500])
+    c = read_bouguet(p)
+    assert c.camera.std_intrinsics is None  # fc_error alone: no principal point error, nothing stated
+    d = {k: v for k, v in loadmat(str(p)).items() if not k.startswith("__")}
+    d.update(cc_error=[[1.5], [2.4]], kc_error=[[0.03], [0.06], [0.003], [0.0015], [0.0]])
+    savemat(p, d)
+    c = read_bouguet(p)
+    np.testing.assert_allclose(c.camera.std_intrinsics, np.r_[3.0, 4.0, 1.5, 2.4, 0.03, 0.06, 0.003, 0.0015, 0] / 3)
+    d["kc_error"] = [[0.03], [-0.06], [0.003], [0.0015], [0.0]]
+    savemat(p, d)
+    with pytest.raises(DatasetError) as err:
+        read_bouguet(p)
+    assert "Calib_Results.mat: field kc_error: expected 5 finite non-negative values" in _one_line(err)

@@ -120,6 +120,9 @@ def test_intrinsics_from_the_images_recover_the_camera(sim_rig):
     for j, (i, k) in enumerate([(0, 0), (1, 1), (0, 2), (1, 2)]):
         assert abs(fit.camera.K[i, k] - K[i, k]) < max(4 * fit.sigma[PARAM_NAMES[j]], 2.0)
     assert all(np.isfinite(v) and v >= 0 for v in fit.sigma.values())
+    # the fit's 1-sigma travels with the camera (camera.std_intrinsics of the observations), k3 fixed: exact
+    np.testing.assert_array_equal(fit.camera.std_intrinsics, [fit.sigma[n] for n in PARAM_NAMES])
+    assert len(fit.camera.std_intrinsics) == 4 + len(fit.camera.dist) and fit.camera.std_intrinsics[-1] == 0
     assert "reprojection RMS" in format_intrinsics(fit)[0]
     with pytest.raises(DatasetError, match="at least 3 detected boards"):
         calibrate_intrinsics({p.name: p.read_image() for p in ds.poses[:2]}, ds.board,

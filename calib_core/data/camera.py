@@ -35,12 +35,17 @@ class Camera:
         K: 3x3 camera matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (pixels; no skew: OpenCV's model has none).
         dist: distortion coefficients in OpenCV order (length 0, 4, 5, 8, 12 or 14), stored padded to 12.
         width, height: image size (pixels).
+        std_intrinsics: optional 1-sigma of the intrinsics in OpenCV's order (``stdDeviationsIntrinsics`` of
+            ``cv2.calibrateCameraExtended``): fx, fy, cx, cy (pixels), then the first coefficients of ``dist``
+            (unitless); length 4 (distortion taken as exact) or 4 + the length of ``dist`` as given. None: the
+            intrinsics are taken as exact.
     """
 
     K: np.ndarray
     dist: np.ndarray
     width: int
     height: int
+    std_intrinsics: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         try:
@@ -76,15 +81,79 @@ class Camera:
             raise _fail("tilted-sensor terms (tx, ty) are not supported; they must be 0", "dist")
         d12 = np.zeros(12)
         d12[:min(len(dist), 12)] = dist[:12]
+        if self.std_intrinsics is not None:
+            object.__setattr__(self, "std_intrinsics", _checked_std(self.std_intrinsics, len(dist)))
         K.setflags(write=False)
         d12.setflags(write=False)
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "dist", d12)
 
     def to_dict(self) -> dict:
-        """Plain-JSON form: ``K``, ``dist`` (trailing zeros beyond the 5th coefficient dropped), width, height."""
+        """Plain-JSON form: ``K``, ``dist`` (trailing zeros beyond the 5th coefficient dropped, or as long as
+        ``std_intrinsics`` says), width, height, and ``std_intrinsics`` when given."""
         n = 5 if not np.any(self.dist[5:]) else (8 if not np.any(self.dist[8:]) else 12)
-        return {"K": self.K.tolist(), "dist": self.dist[:n].tolist(), "width": self.width, "height": self.height}
+        d = {"K": self.K.tolist(), "dist": self.dist[:n].tolist(), "width": self.width, "height": self.height}
+        if self.std_intrinsics is not None:
+            n_std = len(self.std_intrinsics) - 4  # the dist length it was given with (validated on creation)
+            d["dist"] = self.dist[:n_std].tolist() if n_std > 0 else d["dist"]
+            d["std_intrinsics"] = self.std_intrinsics.tolist()
+        return d
+
+    @property
+    def intrinsics(self) -> np.ndarray:
+        """(4 + 12,) fx, fy, cx, cy (pixels) then the 12 distortion coefficients: ``std_intrinsics``' order."""
+        return np.r_[self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2], self.dist]
+
+    def with_intrinsics(self, k: np.ndarray) -> Camera:
+        """This camera with intrinsics ``k`` (``intrinsics`` order; a shorter vector leaves the rest as they are),
+        without ``std_intrinsics`` (the 1-sigma of other values)."""
+        v = self.intrinsics
+        v[:len(k)] = k
+        K = np.array([[v[0], 0.0, v[2]], [0.0, v[1], v[3]], [0.0, 0.0, 1.0]])
+        return Camera(K, v[4:], self.width, self.height)
+
+
+def _checked_std(std, n_dist: int) -> np.ndarray:
+    """``std_intrinsics`` as a read-only float array; ObservationError naming the field when it is not a list of
+    4 or 4 + ``n_dist`` finite non-negative numbers."""
+    try:
+        s = np.array(std, dtype=float).ravel()
+    except (TypeError, ValueError) as exc:
+        raise _fail(f"not a numeric array ({exc})", "std_intrinsics") from None
+    if len(s) not in (4, 4 + n_dist):
+        raise _fail(f"length {len(s)}: expected 4 (fx fy cx cy) or {4 + n_dist} (with the {n_dist} coefficients "
+                    "of dist)", "std_intrinsics")
+    if not np.all(np.isfinite(s)):
+        raise _fail("contains NaN or inf", "std_intrinsics")
+    if np.any(s < 0):
+        raise _fail(f"negative standard deviation {s.min():g}", "std_intrinsics")
+    s.setflags(write=False)
+    return s
+
+
+def intrinsics_jacobian(camera: Camera, P_cam: np.ndarray) -> np.ndarray:
+    """d(u, v)/d(fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4) (...,2,16) of ``project`` at
+    camera-frame points ``P_cam`` (...,3) (metres): pixels per pixel for K, pixels per unit for the coefficients."""
+    P = np.asarray(P_cam, float)
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = camera.dist
+    fx, fy = camera.K[0, 0], camera.K[1, 1]
+    x, y = P[..., 0] / P[..., 2], P[..., 1] / P[..., 2]
+    r2 = x * x + y * y
+    a = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    b = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    rad = a / b
+    xd = x * rad + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + r2 * (s1 + s2 * r2)
+    yd = y * rad + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + r2 * (s3 + s4 * r2)
+    z, one = np.zeros_like(x), np.ones_like(x)
+    pw = np.stack([r2, r2**2, r2**3])                        # r^2, r^4, r^6
+    drad = np.concatenate([pw / b, -pw * a / b**2])          # d rad / d(k1, k2, k3, k4, k5, k6)
+    dx = [x * drad[0], x * drad[1], 2 * x * y, r2 + 2 * x * x, x * drad[2], x * drad[3], x * drad[4], x * drad[5],
+          r2, r2**2, z, z]
+    dy = [y * drad[0], y * drad[1], r2 + 2 * y * y, 2 * x * y, y * drad[2], y * drad[3], y * drad[4], y * drad[5],
+          z, z, r2, r2**2]
+    ru = [xd, z, one, z] + [fx * v for v in dx]
+    rv = [z, yd, z, one] + [fy * v for v in dy]
+    return np.stack([np.stack(ru, axis=-1), np.stack(rv, axis=-1)], axis=-2)
 
 
 def project(camera: Camera, P_cam: np.ndarray, jacobian: bool = False):

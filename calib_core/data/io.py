@@ -75,13 +75,14 @@ def _corners_dict(b: BoardObservation) -> dict:
 
 
 def camera_from_dict(raw) -> Camera:
-    """The optional file-level ``camera`` object: ``K`` (3x3), ``dist`` (OpenCV order), ``width``, ``height``."""
+    """The optional file-level ``camera`` object: ``K`` (3x3), ``dist`` (OpenCV order), ``width``, ``height`` and
+    the optional ``std_intrinsics`` (1-sigma of fx, fy, cx, cy[, dist], ``Camera``)."""
     if not isinstance(raw, dict):
         raise ObservationError("must be an object", field="camera")
     for key in ("K", "width", "height"):
         if key not in raw:
             raise ObservationError("missing key", field=f"camera.{key}")
-    return Camera(raw["K"], raw.get("dist") or [], raw["width"], raw["height"])
+    return Camera(raw["K"], raw.get("dist") or [], raw["width"], raw["height"], raw.get("std_intrinsics"))
 
 
 def observations_from_dict(data, source: str | None = None) -> Observations:

@@ -14,12 +14,14 @@ from ..geometry.transforms import invert_T
 
 RESULT_SCHEMA = "lidarcam.result/1"
 
-JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior")
+JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior",
+             "intrinsics")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
 answers a refused tie could not decide between (``alternatives``: each ``{"T_lidar_cam": 4x4, "cost": the negative
-log-likelihood, "mounting": its parameters}``, best first) and the mounting prior given (``prior``)."""
+log-likelihood, "mounting": its parameters}``, best first), the mounting prior given (``prior``), and how the joint
+model treated the camera's intrinsics (``calib_core.refine.joint_intrinsics``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,6 +133,8 @@ class CalibrationResult:
             model = self.info.get("covariance_model")
             out.append(f"1-sigma: rotation {self.sigma_rot_deg:.3f} deg, translation {self.sigma_trans_mm:.1f} mm"
                        + (f" (covariance model: {model})" if model else ""))
+            if "intrinsics" in self.info:
+                out.append(f"camera intrinsics: {self.info['intrinsics']}")
         if "mounting" in self.info:
             out.append("mounting (camera pose in the lidar frame; degrees and metres):")
             for k, v in self.info["mounting"].items():

@@ -19,6 +19,7 @@ from ..data.observations import Observations
 from ..errors import CalibrationError, SolveFailure
 from ..geometry.mounting import params_from_T, with_units
 from ..refine.joint import RANGE_ONLY_MODEL
+from ..refine.joint_intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.uncertainty import conditioning
 from ..registry import Method
 from ..robust.choose import TIE_LOG_LIKELIHOOD, WEAK_LOG_LIKELIHOOD, Choice, choose_and_refine
@@ -166,7 +167,7 @@ def finish(found: Found, opts: LidarcamOptions):
         T, cov = best.T, range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given)
         if prior is not None:  # the refinement held the prior already: its information only
             T, cov = with_prior(T, cov, prior, step=False)
-        jinfo = {"covariance_model": RANGE_ONLY_MODEL}
+        jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS}
         if why is not None and why != NO_CORNERS:
             jinfo["warnings"] = [f"{why}; covariance of the range model only"]
     weak, alts = runner_up_warning(found.first) if not tests.changed else ([], {})

@@ -11,6 +11,7 @@ from ..data.lines import scan_noise_estimate
 from ..data.observations import Observations
 from ..errors import SolveFailure
 from ..refine.joint import RANGE_ONLY_MODEL, JointOptions
+from ..refine.joint_intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.refine import F_SCALE_SIGMAS, refine
 from ..refine.uncertainty import conditioning
 from ..registry import Method, derived
@@ -36,7 +37,8 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
     cov = range_covariance(obs, r.T_lidar_cam, T0[None], "refinement", residual, range_sigma_m)
     info = {"refine_cost": r.cost, "refine_initial_cost": r.initial_cost, "refine_nfev": r.nfev,
             "refine_residual": residual, "refine_loss": str(loss), "covariance": cov,
-            "covariance_model": RANGE_ONLY_MODEL, "conditioning": conditioning(obs, r.T_lidar_cam)}
+            "covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS,
+            "conditioning": conditioning(obs, r.T_lidar_cam)}
     if len(deg.directions):
         info["warnings"] = [deg.message()]
     return r, cov, info

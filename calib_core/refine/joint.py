@@ -10,7 +10,10 @@ detection, divided by the corner noise std ``corner_sigma_px`` (pixels, per coor
 range residual (``calib_core.data.residuals.range_residuals`` against its board's current plane) divided by the range
 noise std ``range_sigma_m``. Each board's residuals touch only its own pose and the extrinsic, so the Jacobian is
 block sparse: the Levenberg-Marquardt steps and the covariance both eliminate the board poses by the Schur
-complement, so the cost of an iteration is linear in the number of boards.
+complement, so the cost of an iteration is linear in the number of boards. When the camera states
+``std_intrinsics``, its free intrinsics join the extrinsic in the shared block with that Gaussian prior
+(``calib_core.refine.joint_intrinsics``); otherwise they are taken as exact. The residuals and their Jacobians are
+in ``calib_core.refine.joint_residuals``.
 """
 
 from __future__ import annotations
@@ -19,19 +22,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..data.camera import project
+from ..data.camera import Camera
 from ..data.lines import residual_sigma, scan_noise_estimate
-from ..data.observations import Observations, ScanData
-from ..data.residuals import MIN_BEAM_INCIDENCE, perturb, range_residuals
-from ..errors import JointError, UncertaintyError
+from ..data.observations import Observations
+from ..data.residuals import perturb, range_residuals
+from ..errors import JointError, ObservationError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
-from ..geometry.transforms import rotvec_to_matrix, skew
+from ..geometry.transforms import rotvec_to_matrix
+from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS, IntrinsicsPrior, augmented_blocks
+from .joint_residuals import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 from .refine import F_SCALE_SIGMAS, robust_cost
 from .uncertainty import Crlb, _inverse_information
 
 JOINT_MODEL = "joint"
+JOINT_INTRINSICS_MODEL = "joint, intrinsics uncertain"
 RANGE_ONLY_MODEL = "range-only, ignores camera noise"
-"""The two values of a result's ``info["covariance_model"]``: which likelihood produced its covariance."""
+"""The values of a result's ``info["covariance_model"]``: which likelihood produced its covariance."""
 
 CORNER_SIGMA_FLOOR_PX = 1e-3
 """Least corner noise std (pixels) an estimate may return (noise-free corners would weigh infinitely)."""
@@ -66,81 +72,22 @@ class JointOptions:
     max_iter: int = MAX_ITER
 
 
-def _corner_arrays(obs: Observations):
-    if not obs.has_corners:
-        raise JointError("the joint model needs image corners on every board and the camera intrinsics")
-    P = np.concatenate([b.corners_board for b in obs.boards])
-    uv = np.concatenate([b.corners_px for b in obs.boards])
-    idx = np.concatenate([np.full(len(b.corners_px), i) for i, b in enumerate(obs.boards)])
-    return P, uv, idx
-
-
-def board_poses(obs: Observations, x_boards: np.ndarray | None = None, T0: np.ndarray | None = None) -> np.ndarray:
-    """(N,4,4) board poses ``T_cam_board`` at parameters ``x_boards`` (N,6) around ``T0`` (default: the observed)."""
-    T0 = np.array([b.T_cam_board for b in obs.boards]) if T0 is None else np.asarray(T0, float)
-    if x_boards is None:
-        return T0.copy()
-    T = T0.copy()
-    T[:, :3, :3] = rotvec_to_matrix(x_boards[:, :3]) @ T0[:, :3, :3]
-    T[:, :3, 3] += x_boards[:, 3:]
-    return T
-
-
-def corner_residuals(obs: Observations, T_cam_board: np.ndarray, jacobian: bool = False):
-    """Reprojection errors (J,2) in pixels of every corner under board poses ``T_cam_board`` (N,4,4); with
-    ``jacobian`` also (J,2,6) d e/d(phi, d) of each corner's own board."""
-    P, uv, idx = _corner_arrays(obs)
-    RP = np.einsum("jab,jb->ja", T_cam_board[idx, :3, :3], P)
-    X = RP + T_cam_board[idx, :3, 3]
-    if np.any(X[:, 2] <= 0):
-        bad = int(idx[np.argmax(X[:, 2] <= 0)])
-        raise JointError(f"board {bad}: a corner lies behind the camera under the current pose")
-    if not jacobian:
-        return project(obs.camera, X) - uv
-    proj, Jp = project(obs.camera, X, jacobian=True)
-    J = np.concatenate([Jp @ -skew(RP), Jp], axis=2)
-    return proj - uv, J
-
-
-def scan_data_at(obs: Observations, T_cam_board: np.ndarray) -> ScanData:
-    """The problem's scan points with the planes of the board poses ``T_cam_board`` (N,4,4)."""
-    base = obs.scan_data
-    n = T_cam_board[:, :3, 2]
-    return ScanData(base.points, base.board, n, np.einsum("na,na->n", n, T_cam_board[:, :3, 3]))
-
-
-def joint_range_residuals(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray,
-                          jacobian: bool = False):
-    """Range residuals (K,) in metres under both the extrinsic and the board poses; with ``jacobian`` also
-    (K,6) d e/d(w, dt) and (K,6) d e/d(phi, d) of each point's own board."""
-    data = scan_data_at(obs, T_cam_board)
-    if not jacobian:
-        return range_residuals(T_lidar_cam, data)
-    e, J_e = range_residuals(T_lidar_cam, data, jacobian=True)
-    R, t = T_lidar_cam[:3, :3], T_lidar_cam[:3, 3]
-    n = data.normals[data.board]
-    Delta = T_cam_board[data.board, :3, 3]
-    m = n @ R.T
-    b = data.points / np.linalg.norm(data.points, axis=1, keepdims=True)
-    mb = np.einsum("kj,kj->k", m, b)
-    mb = np.where(np.abs(mb) < MIN_BEAM_INCIDENCE, np.copysign(MIN_BEAM_INCIDENCE, mb), mb)
-    num = data.offsets[data.board] + m @ t
-    g = -((t[None] * mb[:, None] - b * num[:, None]) / (mb**2)[:, None]) @ R   # de/dn (camera frame)
-    de_dd = -1.0 / mb                                                          # de/d(plane offset)
-    # dn = phi x n, d(offset) = phi . (n x Delta) + n . d
-    J_b = np.concatenate([np.cross(n, g) + de_dd[:, None] * np.cross(n, Delta), de_dd[:, None] * n], axis=1)
-    return e, J_e, J_b
-
-
-def _weighted(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sc: float, sr: float, jacobian: bool):
+def _weighted(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sc: float, sr: float, jacobian: bool,
+              prior: IntrinsicsPrior | None = None, k: np.ndarray | None = None):
     """Normalised residuals (corners (2J) then ranges (K)); with ``jacobian`` also the corner rows' board
-    Jacobian (2J,6), the range rows' extrinsic (K,6) and board (K,6) Jacobians, at the current poses."""
+    Jacobian (2J,6), the range rows' extrinsic (K,6) and board (K,6) Jacobians, at the current poses. With an
+    intrinsics ``prior`` the corners go through the camera at its free intrinsics ``k``, and with ``jacobian``
+    the corner rows' intrinsics Jacobian (2J,m) comes last."""
+    cam = None if prior is None else prior.camera_at(k)
     if not jacobian:
-        ec = corner_residuals(obs, T_b)
+        ec = corner_residuals(obs, T_b, camera=cam)
         return np.r_[ec.ravel() / sc, joint_range_residuals(obs, T_e, T_b) / sr]
-    ec, Jc = corner_residuals(obs, T_b, jacobian=True)
     er, Je, Jb = joint_range_residuals(obs, T_e, T_b, jacobian=True)
-    return np.r_[ec.ravel() / sc, er / sr], Jc.reshape(-1, 6) / sc, Je / sr, Jb / sr
+    if prior is None:
+        ec, Jc = corner_residuals(obs, T_b, jacobian=True)
+        return np.r_[ec.ravel() / sc, er / sr], Jc.reshape(-1, 6) / sc, Je / sr, Jb / sr
+    ec, Jc, Jk = corner_residuals(obs, T_b, jacobian=True, camera=cam, free=prior.free)
+    return np.r_[ec.ravel() / sc, er / sr], Jc.reshape(-1, 6) / sc, Je / sr, Jb / sr, Jk.reshape(-1, prior.size) / sc
 
 
 _DRHO = {"linear": lambda z: np.ones_like(z), "huber": lambda z: np.where(z <= 1, 1.0, 1 / np.sqrt(np.maximum(z, 1))),
@@ -167,13 +114,15 @@ def _normal_equations(obs, offsets, e, Jc, Je, Jb):
 
 
 def _schur_step(g_e, g_b, H_ee, H_eb, H_bb, lam):
-    """The damped Gauss-Newton step (extrinsic (6,), boards (N,6)) by the Schur complement on the board blocks."""
+    """The damped Gauss-Newton step (global (G,): the extrinsic, then any free intrinsics; boards (N,6)) by the
+    Schur complement on the board blocks."""
+    G = len(g_e)
     Dbb = H_bb + lam * np.einsum("nii->ni", H_bb)[:, :, None] * np.eye(6)
     Dee = H_ee + lam * np.diag(np.diag(H_ee))
     X = np.linalg.solve(Dbb, np.concatenate([np.swapaxes(H_eb, 1, 2), g_b[:, :, None]], axis=2))
-    S = Dee - np.einsum("nab,nbc->ac", H_eb, X[:, :, :6])
-    de = np.linalg.solve(S, -g_e + np.einsum("nab,nb->a", H_eb, X[:, :, 6]))
-    db = -X[:, :, 6] - np.einsum("nab,b->na", X[:, :, :6], de)
+    S = Dee - np.einsum("nab,nbc->ac", H_eb, X[:, :, :G])
+    de = np.linalg.solve(S, -g_e + np.einsum("nab,nb->a", H_eb, X[:, :, G]))
+    db = -X[:, :, G] - np.einsum("nab,b->na", X[:, :, :G], de)
     return de, db
 
 
@@ -181,41 +130,55 @@ def _apply(T_e, T_b, de, db):
     Tb = T_b.copy()
     Tb[:, :3, :3] = rotvec_to_matrix(db[:, :3]) @ T_b[:, :3, :3]
     Tb[:, :3, 3] += db[:, 3:]
-    return perturb(T_e, de), Tb
+    return perturb(T_e, de[:6]), Tb
 
 
-def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL):
+def _blocks(obs, offsets, weighted, w, prior, k):
+    """The (IRLS-weighted) Gauss-Newton blocks of the linearisation ``weighted`` (``_weighted``'s output), with
+    the free intrinsics appended to the global block when there is a ``prior``."""
+    e, Jc, Je, Jb = weighted[:4]
+    nc = len(Jc)
+    blocks = _normal_equations(obs, offsets, e * w, Jc * w[:nc, None], Je * w[nc:, None], Jb * w[nc:, None])
+    if prior is None:
+        return blocks
+    return augmented_blocks(blocks, offsets[0], (e * w)[:nc], Jc * w[:nc, None], weighted[4] * w[:nc, None],
+                            prior.residuals(k), prior.std)
+
+
+def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL, prior=None, k=None):
     """Levenberg-Marquardt on the joint cost, each step by the Schur complement (linear in the boards); robust
-    losses by iteratively reweighted least squares. Returns (T_e, T_b, cost, iterations, converged)."""
+    losses by iteratively reweighted least squares (the intrinsics prior's rows are Gaussian, never reweighted).
+    Returns (T_e, T_b, cost, iterations, converged, k) (``k`` the free intrinsics; None without a prior)."""
     drho = _DRHO[loss]
     offsets = _row_offsets(obs)
 
-    def cost_of(Te, Tb):
-        return robust_cost(_weighted(obs, Te, Tb, sc, sr, False), loss, f_scale_sigmas)
+    def cost_of(Te, Tb, kk):
+        c = robust_cost(_weighted(obs, Te, Tb, sc, sr, False, prior, kk), loss, f_scale_sigmas)
+        return c if prior is None else c + 0.5 * float(np.sum(prior.residuals(kk) ** 2))
 
-    cost, lam, it = cost_of(T_e, T_b), INITIAL_LAMBDA, 0
+    cost, lam, it = cost_of(T_e, T_b, k), INITIAL_LAMBDA, 0
     for it in range(1, max_iter + 1):
-        e, Jc, Je, Jb = _weighted(obs, T_e, T_b, sc, sr, True)
-        w = np.sqrt(drho((e / f_scale_sigmas) ** 2))
-        nc = len(Jc)
-        blocks = _normal_equations(obs, offsets, e * w, Jc * w[:nc, None], Je * w[nc:, None], Jb * w[nc:, None])
+        lin = _weighted(obs, T_e, T_b, sc, sr, True, prior, k)
+        w = np.sqrt(drho((lin[0] / f_scale_sigmas) ** 2))
+        blocks = _blocks(obs, offsets, lin, w, prior, k)
         while True:
             de, db = _schur_step(*blocks, lam)
             Te, Tb = _apply(T_e, T_b, de, db)
+            kn = None if prior is None else k + de[6:]
             try:
-                new = cost_of(Te, Tb)
-            except JointError:
+                new = cost_of(Te, Tb, kn)
+            except (JointError, ObservationError):  # a corner behind the camera, or implausible intrinsics
                 new = np.inf
             if new <= cost:
                 break
             lam *= LAMBDA_FACTOR
             if lam > MAX_LAMBDA:
-                return T_e, T_b, cost, it, True
-        T_e, T_b, old, cost = Te, Tb, cost, new
+                return T_e, T_b, cost, it, True, k
+        T_e, T_b, k, old, cost = Te, Tb, kn, cost, new
         lam = max(lam / LAMBDA_FACTOR, MIN_LAMBDA)
         if old - cost <= tol * max(cost, 1e-300) or max(np.abs(de).max(), np.abs(db).max()) < STEP_TOL:
-            return T_e, T_b, cost, it, True
-    return T_e, T_b, cost, it, False
+            return T_e, T_b, cost, it, True, k
+    return T_e, T_b, cost, it, False, k
 
 
 @dataclass(frozen=True, eq=False)
@@ -227,7 +190,8 @@ class JointResult:
         (rotation rad then translation m, board poses marginalised); corner_sigma_px, range_sigma_m: the noise
         stds used (given or estimated); corner_rms_px, range_rms_m: RMS of the final residuals; cost: final
         ``0.5 sum rho`` of the normalised residuals; iterations: of the last solve; converged: whether it met the
-        tolerance within ``max_iter``.
+        tolerance within ``max_iter``; camera: the camera at the estimated intrinsics when they were unknowns
+        (``camera.std_intrinsics``), else None (taken as exact).
     """
 
     T_lidar_cam: np.ndarray
@@ -240,10 +204,11 @@ class JointResult:
     cost: float
     iterations: int
     converged: bool
+    camera: Camera | None = None
 
 
-def _estimate_sigmas(obs, T_e, T_b, n_params_boards: int):
-    ec = corner_residuals(obs, T_b)
+def _estimate_sigmas(obs, T_e, T_b, n_params_boards: int, camera=None):
+    ec = corner_residuals(obs, T_b, camera=camera)
     er = joint_range_residuals(obs, T_e, T_b)
     return (max(residual_sigma(ec, n_params_boards), CORNER_SIGMA_FLOOR_PX),
             max(residual_sigma(er, 6), RANGE_SIGMA_FLOOR_M))
@@ -251,7 +216,8 @@ def _estimate_sigmas(obs, T_e, T_b, n_params_boards: int):
 
 def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                  range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
-                 max_iter: int = MAX_ITER, sigma_iters: int = 3, sigma_rtol: float = 0.05) -> JointResult:
+                 max_iter: int = MAX_ITER, sigma_iters: int = 3, sigma_rtol: float = 0.05,
+                 intrinsics: bool = True) -> JointResult:
     """Maximise the joint likelihood from the extrinsic ``T0`` and the observed board poses.
 
     Args:
@@ -260,6 +226,8 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
             ``sigma_rtol`` (at most ``sigma_iters`` solves). Start values: the corner RMS at the observed poses,
             the scan-line estimate of ``data.lines.scan_noise_estimate`` (floored by ``START_*``).
         loss, f_scale_sigmas: robust loss (``refine.Loss``) on the normalised residuals, its scale in noise stds.
+        intrinsics: when the camera states ``std_intrinsics``, estimate the intrinsics too, with that Gaussian
+            prior (``refine.joint_intrinsics``), so the covariance holds their error; False takes them as exact.
     Raises:
         JointError: no corners or camera; UncertaintyError: the joint information is singular.
     """
@@ -268,21 +236,49 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
     # start weights from each sensor alone, floored so that neither sensor swamps the other before the solve
     sc = corner_sigma_px if corner_sigma_px is not None else max(est_c, START_CORNER_SIGMA_PX)
     sr = range_sigma_m if range_sigma_m is not None else max(scan_noise_estimate(obs), START_RANGE_SIGMA_M)
+    prior = IntrinsicsPrior.of(obs.camera) if intrinsics else None
+    k = None if prior is None else prior.k0.copy()
     for _ in range(max(1, sigma_iters)):
-        T_e, T_b, _, nit, converged = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter)
-        new_c, new_r = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards)
+        T_e, T_b, _, nit, converged, k = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter,
+                                                prior=prior, k=k)
+        cam = None if prior is None else prior.camera_at(k)
+        new_c, new_r = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards, cam)
         new_c = corner_sigma_px if corner_sigma_px is not None else new_c
         new_r = range_sigma_m if range_sigma_m is not None else new_r
         done = abs(new_c / sc - 1) < sigma_rtol and abs(new_r / sr - 1) < sigma_rtol
         sc, sr = new_c, new_r
         if done:
             break
-    cov = marginal_covariance(obs, T_e, T_b, sc, sr)
-    ec = corner_residuals(obs, T_b)
+    if prior is None:
+        cov = marginal_covariance(obs, T_e, T_b, sc, sr)
+    else:
+        cov = intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k)[:6, :6]
+    ec = corner_residuals(obs, T_b, camera=cam)
     er = joint_range_residuals(obs, T_e, T_b)
     cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale_sigmas)
+    if prior is not None:
+        cost += 0.5 * float(np.sum(prior.residuals(k) ** 2))
     return JointResult(T_e, T_b, cov, sc, sr, float(np.sqrt(np.mean(np.sum(ec**2, axis=1)))),
-                       float(np.sqrt(np.mean(er**2))), cost, nit, converged)
+                       float(np.sqrt(np.mean(er**2))), cost, nit, converged, cam)
+
+
+def intrinsics_marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray,
+                                   corner_sigma_px: float, range_sigma_m: float, prior: IntrinsicsPrior,
+                                   k: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
+    """Covariance (6+m, 6+m) of the extrinsic (rotation rad, translation m) and the free intrinsics ``k`` of
+    ``prior`` (their units), board poses marginalised by the Schur complement: the inverse of
+    ``H_gg - sum_i H_gi H_ii^-1 H_ig`` with the prior's information in ``H_gg``. Linear in the boards.
+
+    UncertaintyError when a board's pose or the extrinsic is not determined.
+    """
+    lin = _weighted(obs, np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float), float(corner_sigma_px),
+                    float(range_sigma_m), True, prior, k)
+    _, _, H_gg, H_gb, H_bb = _blocks(obs, _row_offsets(obs), lin, np.ones(len(lin[0])), prior, k)
+    try:
+        X = np.linalg.solve(H_bb, np.swapaxes(H_gb, 1, 2))
+    except np.linalg.LinAlgError:
+        raise UncertaintyError("a board's pose is not determined by its corners") from None
+    return _inverse_information(H_gg - np.einsum("nab,nbc->ac", H_gb, X), rcond)
 
 
 def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
@@ -342,14 +338,19 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
                range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                max_iter: int = MAX_ITER) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
-    (T_lidar_cam, covariance, info) with ``info["covariance_model"] = JOINT_MODEL`` and the noise figures.
+    (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
+    ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
+    ``info["intrinsics"]`` (``EXACT_INTRINSICS`` or ``ESTIMATED_INTRINSICS``) and the noise figures.
 
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
                      f_scale_sigmas=f_scale_sigmas, max_iter=max_iter)
-    info = {"covariance_model": JOINT_MODEL, "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m,
-            "corner_rms_px": j.corner_rms_px, "range_rms_m": j.range_rms_m, "joint_cost": j.cost,
+    exact = j.camera is None
+    info = {"covariance_model": JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
+            "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
+            "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m, "corner_rms_px": j.corner_rms_px,
+            "range_rms_m": j.range_rms_m, "joint_cost": j.cost,
             "joint_iterations": j.iterations, "joint_converged": j.converged}
     if not j.converged:
         info["warnings"] = [f"joint refinement stopped after {max_iter} iterations without converging"]

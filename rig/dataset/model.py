@@ -30,13 +30,16 @@ class CameraModel:
     """Pinhole camera with OpenCV distortion.
 
     Attributes: ``width``, ``height`` (pixels); ``K`` 3x3 camera matrix; ``dist`` (D,) OpenCV distortion
-    coefficients (k1, k2, p1, p2[, k3, ...]); may be empty.
+    coefficients (k1, k2, p1, p2[, k3, ...]); may be empty; ``std_intrinsics`` the optional 1-sigma of fx, fy, cx,
+    cy (pixels) and then of ``dist`` (OpenCV's ``stdDeviationsIntrinsics`` order, ``calib_core.data.camera.Camera``),
+    None when the source states none.
     """
 
     width: int
     height: int
     K: np.ndarray
     dist: np.ndarray
+    std_intrinsics: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -31,7 +31,8 @@ class BouguetView:
 @dataclass(frozen=True, eq=False)
 class BouguetCalibration:
     """A ``Calib_Results.mat``: ``camera``, ``views`` (active images in order), ``square_m`` (dX, when stored),
-    ``sigma`` (standard errors by name: fc, cc, kc, in pixels / unitless), ``err_std_px``."""
+    ``sigma`` (the toolbox's errors by name: fc, cc, kc, alpha_c, in pixels / unitless, three standard deviations
+    each: ``BOUGUET_ERROR_SIGMAS``), ``err_std_px``; ``camera.std_intrinsics`` holds the 1-sigma."""
 
     camera: CameraModel
     views: tuple[BouguetView, ...]
@@ -100,10 +101,37 @@ def read_bouguet(path) -> BouguetCalibration:
             views.append(v)
     sigma = {key: _get(mat, f"{key}_error", path, required=False) for key in ("fc", "cc", "kc", "alpha_c")}
     dX = _get(mat, "dX", path, 1, required=False)
-    return BouguetCalibration(CameraModel(w, h, K, kc.copy()), tuple(views),
+    return BouguetCalibration(CameraModel(w, h, K, kc.copy(), bouguet_std(sigma, kc.size, path)), tuple(views),
                               None if dX is None else float(dX[0]) / 1000.0,
                               {k: v for k, v in sigma.items() if v is not None},
                               _get(mat, "err_std", path, required=False))
+
+
+BOUGUET_ERROR_SIGMAS = 3.0
+"""Bouguet's ``fc_error``, ``cc_error``, ``kc_error`` are three standard deviations, not one: the toolbox computes
+them in ``go_calib_optim_iter.m`` as ``param_error = 3*sqrt(full(diag(JJ2_inv)))*sigma_x`` and its documentation
+("Camera Calibration Toolbox for Matlab", first calibration example) says "the numerical errors are approximately
+three times the standard deviations". Divide by this for a 1-sigma."""
+
+
+def bouguet_std(sigma: dict, n_kc: int, path) -> np.ndarray | None:
+    """The 1-sigma of fx, fy, cx, cy, k1.. (``CameraModel.std_intrinsics``) from a calibration's errors ``sigma``
+    (``fc``, ``cc``, ``kc``: three standard deviations each, ``BOUGUET_ERROR_SIGMAS``); None when ``fc`` or ``cc``
+    is missing. ``alpha_c``'s error is ignored (the OpenCV model has no skew); without ``kc_error`` the distortion
+    is taken as exact. DatasetError naming the file and field when one is malformed."""
+    if sigma.get("fc") is None or sigma.get("cc") is None:
+        return None
+    parts = [("fc", sigma["fc"], 2), ("cc", sigma["cc"], 2)]
+    if sigma.get("kc") is not None:
+        parts.append(("kc", sigma["kc"], n_kc))
+    out = []
+    for name, v, n in parts:
+        v = np.asarray(v, float).ravel()
+        if v.size != n or not np.all(np.isfinite(v)) or np.any(v < 0):
+            raise DatasetError(f"field {name}_error: expected {n} finite non-negative values, got {v.tolist()}",
+                               file=path)
+        out.append(v)
+    return np.concatenate(out) / BOUGUET_ERROR_SIGMAS
 
 
 def grid_outline(grid_m: np.ndarray, square_m: float) -> np.ndarray:
