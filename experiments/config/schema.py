@@ -24,7 +24,8 @@ from simulate import SimOptions
 from ..engine.catalog import PAPER_METHODS
 
 SIM_GROUPS = ("scene", "lidar", "camera", "noise")
-_CAMERA_PREFIXES = ("cam_", "focal_", "image_", "render_", "pose_", "pixel_", "min_depth")
+_CAMERA_PREFIXES = ("cam_", "focal_", "image_", "render_", "pose_", "pixel_", "min_depth", "principal_", "distortion_",
+                    "std_intrinsics")
 
 
 
