@@ -10,6 +10,7 @@ import sys
 from calib_core.errors import LidarcamError
 
 from . import bag, demo, importer, plan, rig, simulate
+from .outputs import writable_file
 
 
 def _cmd_methods(args) -> int:
@@ -50,6 +51,8 @@ def _cmd_calibrate(args) -> int:
     from calib_core.data.io import extrinsic_yaml, load_observations
 
     frames = _frames(args)
+    writable_file(args.out, "--out")
+    writable_file(args.yaml, "--yaml")
     obs = load_observations(args.observations)
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
     res = calibrate(obs, method=get_method(args.method).name, **options)
@@ -176,6 +179,10 @@ def main(argv=None) -> int:
         return args.func(args)
     except LidarcamError as err:
         print(f"lidarcam {args.verb}: error: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:  # a write the checks before the work could not foresee (disk full, a race)
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"lidarcam {args.verb}: error: {where}{err.strerror or err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"lidarcam {args.verb}: interrupted; nothing half-written is kept, run the same command again",

@@ -115,8 +115,12 @@ def cmd_plan(args) -> int:
     from calib_core.errors import CalibrationError
     from calib_core.planning.capture import plan_capture, plan_to_dict
 
+    from .outputs import writable_file
+
     if args.next < 1:
         raise CalibrationError(f"--next must be at least 1, got {args.next}")
+    writable_file(args.json, "--json")
+    writable_file(args.figure, "--figure")
     rig, obs, info = _current(args)
     criterion = "z" if args.criterion == "height" else args.criterion
     plan = plan_capture(rig, args.next, current=obs, current_info=info, target=parse_target(args.target),

@@ -63,6 +63,10 @@ def cmd_extract(args) -> int:
     from rig.extract import extract, format_diagnostics
     from rig.report import capture_verdict
 
+    from .outputs import writable_file
+
+    writable_file(args.out, "--out")
+    writable_file(args.diagnostics, "--diagnostics")
     ds = _dataset(args)
     obs, diags = extract(ds, _options(args))
     print(format_diagnostics(diags))
@@ -86,6 +90,9 @@ def cmd_report(args) -> int:
     from rig.extract import extract
     from rig.report import write_report
 
+    from .outputs import writable_folder
+
+    writable_folder(args.out, "--out")
     res = load_result(args.result)
     if Path(args.dataset).is_file():  # observations without images (imported board poses and points)
         ds, obs = None, load_observations(args.dataset)

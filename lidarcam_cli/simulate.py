@@ -46,6 +46,9 @@ def run(args: argparse.Namespace) -> int:
     from simulate import generate
     from simulate.scene import SceneError
 
+    from .outputs import writable_file
+
+    writable_file(args.out, "--out")
     try:
         options = SimOptions(**{f.name: getattr(args, f.name) for f in fields(SimOptions)})
         obs = generate(options, seed=args.seed, trial=args.trial)
