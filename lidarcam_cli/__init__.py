@@ -11,6 +11,7 @@ from calib_core.errors import LidarcamError
 
 from . import bag, demo, importer, plan, rig, simulate
 from .outputs import writable_file
+from .wording import cli_hint
 
 
 def _cmd_methods(args) -> int:
@@ -56,7 +57,7 @@ def _cmd_calibrate(args) -> int:
     obs = load_observations(args.observations)
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
     res = calibrate(obs, method=get_method(args.method).name, **options)
-    print("\n".join(res.summary_lines(obs.n_boards, obs.T_lidar_cam_true)))
+    print(cli_hint("\n".join(res.summary_lines(obs.n_boards, obs.T_lidar_cam_true))))
     ros = frame_export(res.T_lidar_cam, *frames) if res.ok and frames else None
     if ros is not None:
         _print_ros(ros)

@@ -107,8 +107,10 @@ def cmd_report(args) -> int:
             c = obs.camera
             ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist))
     summary = write_report(ds, obs, res, args.out)
+    from .wording import cli_hint
+
     for w in summary.warnings:
-        print(f"warning: {w}")
+        print(f"warning: {cli_hint(w)}")
     print(f"wrote {summary.markdown} ({len(summary.overlays)} overlays, {len(summary.residual_plots)} residual plots)")
     return 0 if res.get("ok") else 1
 

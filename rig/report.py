@@ -363,7 +363,8 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     clim = float(math.ceil(clim / 10.0) * 10.0)
     links = _board_plots(dataset, observations, res, Ti, out, summary, rms_mm, clim)
     md += _boards_md(observations, res, Ti, rms_mm, mean_mm, links) + skipped_md
-    summary.warnings = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
+    every = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
+    summary.warnings = list(dict.fromkeys(every))  # the method's own board-set warnings are the library's too
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
     md += ["## Capture plan", "", capture_verdict(observations, T), ""]
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
