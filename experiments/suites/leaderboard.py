@@ -35,6 +35,7 @@ from calib_core.data.io import OBS_SCHEMA
 from calib_core.plugins import load_plugins
 from calib_core.registry import METHODS, get_method
 
+from ..config.overrides import check_overrides
 from ..config.schema import register_configs
 from ..config.sweeps import CONF_DIR, experiment_cells
 from ..engine.cell import Cell, resolve_methods
@@ -77,6 +78,7 @@ def chosen_methods(overrides: Sequence[str]) -> tuple[tuple[str, ...], tuple[str
     methods a ``methods.names`` / ``methods=`` override chooses, or every registered method."""
     register_configs()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        check_overrides(overrides, lambda choices: compose(config_name="config", overrides=choices), CONF_DIR)
         cfg = compose(config_name="config", overrides=list(overrides))
     plugins = tuple(str(p) for p in cfg.methods.get("plugins", None) or ())
     load_plugins(plugins)
