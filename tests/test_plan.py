@@ -5,6 +5,7 @@ singular sets, the greedy design against random designs, the vertical-boards ver
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -167,7 +168,7 @@ def test_plan_predicts_the_joint_bound_of_the_simulated_boards():
     d = plan_to_dict(plan)
     assert set(d["current"]) == {"rot_sigma_deg", "trans_sigma_mm", "sigma", "undetermined"}
     assert len(d["next"]) == 5 and d["next"][-1]["rot_sigma_deg"] == pytest.approx(plan.after[-1].rot_sigma_deg)
-    assert "add 2 boards" in verdict(plan)
+    assert f"add {n} boards" in verdict(plan)  # no boards yet: the count to the target is n
 
 
 def test_rig_yaml_reads_and_bad_fields_are_one_line_errors(tmp_path):
@@ -232,7 +233,9 @@ def test_the_calibration_report_ends_with_the_planners_verdict(tmp_path):
     obs = generate(SimOptions(n_boards=5, pose_mode="pixel"), 4, 0)
     md = write_report(None, obs, calibrate(obs), tmp_path).markdown.read_text()
     tail = md[md.index("## Capture plan"):]
-    assert "5 boards give 1-sigma" in tail and "the weakest is" in tail and "add 2 boards" in tail
+    assert "5 boards give 1-sigma" in tail and "the weakest is" in tail
+    m = re.search(r"add (\d+) boards?[^(]*\((\d+) boards in all", tail)
+    assert (m and int(m.group(2)) == 5 + int(m.group(1))) or "is not reached within" in tail, tail
 
 
 def test_plan_check_removes_cells_of_other_code_and_keys_on_the_code(tmp_path, monkeypatch):
@@ -253,3 +256,35 @@ def test_plan_check_removes_cells_of_other_code_and_keys_on_the_code(tmp_path, m
     assert key != plan_check._key({**task, "boards": 8})
     monkeypatch.setattr(plan_check, "_code", lambda: "edited+code")
     assert plan_check._key(task) != key  # the same settings under other code: another cell
+
+
+@pytest.mark.parametrize("k", [1, 2, 6])
+@pytest.mark.parametrize("given", [0, 12])
+@pytest.mark.parametrize("target", [(0.1, 5.0), (0.5, 20.0), (0.01, 0.5)])
+def test_the_verdict_adds_as_many_boards_as_the_plan_needs(k, given, target):
+    """"add N boards" is the plan's own count to the target, "M boards in all" is the current boards plus N, and
+    the poses named are the plan's first ones."""
+    from calib_core.planning.capture import boards_to_add, describe_pose
+
+    rig = load_plan_rig(Path(__file__).resolve().parents[1] / "conf" / "plan" / "rig.yaml")
+    from calib_core.planning.capture import set_informations
+
+    current = generate(SimOptions(n_boards=given), seed=2) if given else None
+    info = set_informations(current, rig.T_lidar_cam, rig.range_sigma_m, 0.0) if given else None
+    plan = plan_capture(rig, k, current=current, current_info=info, target=target)
+    if plan.current.meets(target):
+        pytest.skip("the given boards meet this target")
+    text = verdict(plan)
+    need = boards_to_add(plan)
+    if need is None:  # out of reach: the sentence says so and names the proposed poses, adding no count
+        assert "is not reached within" in text and "add " not in text, text
+        assert all(describe_pose(q) in text for q in plan.poses)
+        return
+    m = re.search(r"add (\d+) boards?", text)
+    assert m and need >= 1 and int(m.group(1)) == need, text
+    assert f"({plan.current_n + need} boards in all" in text
+    named = [describe_pose(q) for q in plan.poses[:need]]
+    assert all(d in text for d in named) and len(named) == min(k, need)
+    ahead = [p.meets(target) for p in plan.after]
+    if need <= k:  # the table shows it: the need-th proposed board is the first that meets the target
+        assert ahead.index(True) == need - 1

@@ -280,10 +280,15 @@ def weakest_axis(p: Prediction, target: tuple[float, float]) -> tuple[str, str]:
     return AXES[j], value
 
 
+def boards_to_add(plan: Plan) -> int | None:
+    """How many boards beyond the current ones reach the plan's target (0: met now; None: not within
+    ``MAX_PLAN_BOARDS``)."""
+    return None if plan.to_target is None else plan.to_target - plan.current_n
+
+
 def verdict(plan: Plan) -> str:
-    """One sentence on what the current boards give and what to add (the next poses of the plan)."""
-    add = "; ".join(describe_pose(q) for q in plan.poses[:2])
-    n_add = min(2, len(plan.poses))
+    """One sentence on what the current boards give and what to add: as many boards as reach the target (the
+    plan's first poses named), or the proposed poses where the target is out of reach."""
     if plan.undetermined:
         what = ", ".join(AXIS_WORDS[a] for a in plan.undetermined)
         head = f"{what} {'is' if len(plan.undetermined) == 1 else 'are'} not determined or weak"
@@ -293,11 +298,19 @@ def verdict(plan: Plan) -> str:
                 f"{plan.current.trans_sigma_mm:.0f} mm; the weakest is {AXIS_WORDS[axis]} ({value})")
         if plan.current.meets(plan.target):
             return head + f": the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm) is met"
-    tail = "" if plan.to_target is None else f" ({plan.to_target} boards in all reach {plan.target[0]:g} deg, " \
-        f"{plan.target[1]:g} mm)"
-    return f"{head}: add {n_add} board{'s' if n_add > 1 else ''}: {add}{tail}"
+    need = boards_to_add(plan)
+    if need is None:
+        return (f"{head}: the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm) is not reached within "
+                f"{MAX_PLAN_BOARDS} boards; the most informative next: "
+                + "; ".join(describe_pose(q) for q in plan.poses))
+    n_add = max(need, 1)
+    named = plan.poses[:n_add]
+    first = "" if len(named) == n_add else f", the first {len(named)}"
+    return (f"{head}: add {n_add} board{'s' if n_add > 1 else ''}{first}: "
+            + "; ".join(describe_pose(q) for q in named)
+            + f" ({plan.to_target} boards in all reach {plan.target[0]:g} deg, {plan.target[1]:g} mm)")
 
 
-__all__ = ["CRITERIA", "POSE_FIELDS", "Plan", "PlanError", "PlanRig", "Prediction", "SIGMA_NAMES", "describe_pose",
-           "greedy", "name_undetermined", "plan_capture", "plan_to_dict", "pool", "predict", "set_informations",
-           "verdict"]
+__all__ = ["CRITERIA", "POSE_FIELDS", "Plan", "PlanError", "PlanRig", "Prediction", "SIGMA_NAMES", "boards_to_add",
+           "describe_pose", "greedy", "name_undetermined", "plan_capture", "plan_to_dict", "pool", "predict",
+           "set_informations", "verdict"]
