@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,7 @@ from rig.intrinsics import format_intrinsics, refit_camera
 from rig.report import capture_verdict, save_overlay
 
 from ..engine.fingerprint import write_stamped
+from ..engine.paths import repo_relative
 from . import real_subsets as sub
 from .real_eval import (
     degeneracy_verdict,
@@ -203,7 +205,8 @@ def run_set(name: str, folder: Path, out: Path, n_subsets: int, n_jobs: int) -> 
     rs = LOADERS[name](folder)
     obs, extraction_md, intrinsics_md = _observations(rs)
     (out / "obs").mkdir(exist_ok=True)
-    save_observations(obs, out / "obs" / f"{SHORT[name]}.json")
+    shown = replace(obs, meta={**obs.meta, "dataset": repo_relative(folder)}) if obs.meta else obs
+    save_observations(shown, out / "obs" / f"{SHORT[name]}.json")
     sigma = range_noise_m(obs)
     rows = leaderboard(obs, METHODS, sigma, rs.published)
     best = _best(rows)
@@ -276,19 +279,19 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     md = ["# lidarcam on real data", "", "Written by `make real-data` (`python -m experiments real-data`) from "
-          f"`{args.data}`; each data set's SOURCE.md gives its repository, licence and formats; "
+          f"`{repo_relative(data)}`; each data set's SOURCE.md gives its repository, licence and formats; "
           "[docs/real-rigs.md](../../docs/real-rigs.md) has the commands that give the same boards.", ""]
     from joblib import Parallel, delayed
 
     for n in LOADERS:
         if n not in present:
-            print(f"skipped {n}: {data / n} not found", flush=True)
+            print(f"skipped {n}: {repo_relative(data / n)} not found", flush=True)
     done = dict(zip(present, Parallel(n_jobs=args.jobs)(delayed(_timed_set)(n, data / n, out, args.subsets)
                                                          for n in present), strict=True))
     summary = {}
     for name in LOADERS:
         if name not in done:
-            md += [f"## {name}", "", f"Skipped: `{data / name}` not found.", ""]
+            md += [f"## {name}", "", f"Skipped: `{repo_relative(data / name)}` not found.", ""]
             continue
         section, summary[name] = done[name]
         md += section + [f"({name}: {summary[name]['seconds']:.0f} s in one worker)", ""]
