@@ -4,7 +4,8 @@ interval, mean/median errors, the share of trials with the truth among the candi
     python -m experiments aggregate [--results results] [--out results/paper] [boards noise ...]
 
 Writes ``<out>/summary_<sweep>.csv`` (one row per setting x method) and ``<out>/trials_<sweep>.csv`` (the
-trial rows with the columns the figures and the notebook read). A method that returned nothing counts as
+trial rows with the columns the figures and the notebook read; their wall times apart in ``timings_*.csv``, not
+committed). A method that returned nothing counts as
 invalid (it stays in ``n_trials``); error means and medians are over the trials where it returned a result.
 """
 
@@ -19,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from ..engine.catalog import method_order
-from ..engine.cell import RESULT_COLUMNS
+from ..engine.cell import RESULT_COLUMNS, TIMING_COLUMNS
 from ..engine.store import load_sweep, read_table
 
 Z95 = 1.959963984540054
@@ -142,14 +143,29 @@ def constant_settings(df: pd.DataFrame) -> dict:
     return {c: (v.item() if hasattr(v, "item") else v) for c, v in df[cols].iloc[0].items()}
 
 
+SUMMARY_TIMING_COLUMNS = ("median_seconds",)
+"""Summary columns of wall time: like ``TIMING_COLUMNS`` of the rows, they differ between two runs of the same code."""
+TIMING_KEYS = ("sweep", "setting_key", "trial", "method")
+"""The columns that name a row in ``timings_<sweep>.csv``."""
+
+
 def write_tables(df: pd.DataFrame, sweep: str, out_dir: str | Path) -> tuple[Path, Path]:
     """Write ``summary_<sweep>.csv``, ``trials_<sweep>.csv`` and ``settings_<sweep>.json`` (the fixed
-    settings) of the trial rows ``df`` into ``out_dir``; returns the two tables' paths."""
+    settings) of the trial rows ``df`` into ``out_dir``; returns the two tables' paths. The wall times
+    (``TIMING_COLUMNS``, ``SUMMARY_TIMING_COLUMNS``) go to ``timings_<sweep>.csv`` and ``timings_summary_<sweep>.csv``
+    instead (not committed: a rerun of the same code rewrites the other tables byte for byte)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary_path, trials_path = out / f"summary_{sweep}.csv", out / f"trials_{sweep}.csv"
-    summarise(df).to_csv(summary_path, index=False, float_format="%.6g")
-    trial_table(df).to_csv(trials_path, index=False, float_format="%.6g")
+    summary, trials = summarise(df), trial_table(df)
+    s_time = [c for c in SUMMARY_TIMING_COLUMNS if c in summary.columns]
+    t_time = [c for c in TIMING_COLUMNS if c in trials.columns]
+    summary.drop(columns=s_time).to_csv(summary_path, index=False, float_format="%.6g")
+    trials.drop(columns=t_time).to_csv(trials_path, index=False, float_format="%.6g")
+    keys = [c for c in TIMING_KEYS if c in trials.columns]
+    s_keys = [c for c in ("setting_key", "method") if c in summary.columns]
+    trials[keys + t_time].to_csv(out / f"timings_{sweep}.csv", index=False, float_format="%.6g")
+    summary[s_keys + s_time].to_csv(out / f"timings_summary_{sweep}.csv", index=False, float_format="%.6g")
     (out / f"settings_{sweep}.json").write_text(json.dumps(constant_settings(df), indent=1, sort_keys=True) + "\n")
     return summary_path, trials_path
 
