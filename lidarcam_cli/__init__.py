@@ -10,6 +10,7 @@ import sys
 from calib_core.errors import LidarcamError
 
 from . import bag, demo, importer, plan, rig, simulate
+from .extras import add_optional, missing_extra
 from .outputs import writable_file
 from .wording import cli_hint
 
@@ -159,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--parent-sensor", choices=("lidar", "camera"), default="lidar",
                     help="which sensor --parent-frame names (default: %(default)s, publishing T_lidar_cam)")
     sp.set_defaults(func=_cmd_calibrate)
-    simulate.add_parsers(sub)
+    add_optional(sub, "simulate", simulate.add_parsers)
     rig.add_parsers(sub)
     importer.add_parsers(sub)
     bag.add_parsers(sub)
@@ -180,6 +181,12 @@ def main(argv=None) -> int:
         return args.func(args)
     except LidarcamError as err:
         print(f"lidarcam {args.verb}: error: {err}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as err:  # a verb of an extra that is not installed: one line naming it
+        error = missing_extra(err)
+        if error is None:
+            raise
+        print(f"lidarcam {args.verb}: error: {error}", file=sys.stderr)
         return 2
     except OSError as err:  # a write the checks before the work could not foresee (disk full, a race)
         where = f"{err.filename}: " if err.filename else ""

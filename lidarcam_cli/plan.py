@@ -35,9 +35,12 @@ def _current(args):
     from calib_core.errors import CalibrationError
     from calib_core.planning.capture import set_informations
     from calib_core.planning.views import rig_from_observations
-    from rig.plan_rig import load_plan_rig
 
-    base = load_plan_rig(args.rig) if args.rig else None
+    base = None
+    if args.rig:
+        from rig.plan_rig import load_plan_rig  # YAML: lidarcam[rig]
+
+        base = load_plan_rig(args.rig)
     if not args.from_obs:
         if base is None:
             raise CalibrationError("give a rig description (RIG.yaml) or --from OBS.json")
