@@ -46,3 +46,12 @@ def test_repo_relative_never_writes_an_absolute_path(tmp_path):
 
 def test_no_wheel_or_other_build_artefact_is_tracked():
     assert not [f for f in _tracked() if f.suffix == ".whl"]
+
+
+def test_the_docs_commands_write_only_where_git_ignores():
+    """docs/real-rigs.md's commands leave no untracked folder in the checkout: their outputs are ignored."""
+    text = (ROOT / "docs" / "real-rigs.md").read_text()
+    outs = sorted(set(re.findall(r"--(?:out|yaml) (work/[\w./-]+)", text)))
+    assert outs, "no --out under work/ in docs/real-rigs.md"
+    r = subprocess.run(["git", "check-ignore", "--no-index", *outs], cwd=ROOT, capture_output=True, text=True)
+    assert sorted(r.stdout.split()) == outs, set(outs) - set(r.stdout.split())
