@@ -288,3 +288,20 @@ def test_the_verdict_adds_as_many_boards_as_the_plan_needs(k, given, target):
     ahead = [p.meets(target) for p in plan.after]
     if need <= k:  # the table shows it: the need-th proposed board is the first that meets the target
         assert ahead.index(True) == need - 1
+
+
+def test_plan_figure_labels_do_not_overlap():
+    """Boards proposed at one place with different tilts share one label; every board is numbered once."""
+    from rig.plan_figure import LABEL_MERGE_M, _board_xy, label_groups
+
+    rig = load_plan_rig(Path(__file__).resolve().parents[1] / "conf" / "plan" / "rig.yaml")
+    plan = plan_capture(rig, 6)
+    centres = _board_xy(plan.T_lidar_board, rig.outline)[:, :-1].mean(axis=1)
+    d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)[np.triu_indices(len(centres), 1)]
+    assert d.min() < LABEL_MERGE_M  # this plan has boards at one place: one label each would overlap
+    labels = label_groups(centres)
+    numbers = [int(n) for _, text in labels for n in text.split(", ")]
+    assert sorted(numbers) == list(range(1, len(centres) + 1))
+    pos = np.array([p for p, _ in labels])
+    apart = np.linalg.norm(pos[:, None] - pos[None], axis=-1)[np.triu_indices(len(pos), 1)]
+    assert (apart >= LABEL_MERGE_M).all()
