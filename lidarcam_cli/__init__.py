@@ -50,7 +50,7 @@ def _print_ros(ros) -> None:
 def _cmd_calibrate(args) -> int:
     from calib_core import calibrate, get_method
     from calib_core.data.exports import frame_export
-    from calib_core.data.io import extrinsic_yaml, load_observations
+    from calib_core.data.io import load_observations
 
     frames = _frames(args)
     writable_file(args.out, "--out")
@@ -69,15 +69,8 @@ def _cmd_calibrate(args) -> int:
         if not res.ok:
             print(f"no YAML written: {args.method} failed", file=sys.stderr)
         else:
-            extra = {"method": res.method}
-            if res.covariance is not None:
-                extra.update(sigma_rot_deg=res.sigma_rot_deg, sigma_trans_mm=res.sigma_trans_mm)
-                if "covariance_model" in res.info:
-                    extra["covariance_model"] = f"'{res.info['covariance_model']}'"
-            if "conditioning" in res.info:
-                extra["conditioning"] = float(res.info["conditioning"])
             with open(args.yaml, "w") as f:
-                f.write(extrinsic_yaml(res.T_lidar_cam, extra, covariance=res.covariance, ros=ros))
+                f.write(res.to_yaml(ros))
             print(f"wrote {args.yaml}")
     return 0 if res.ok else 1
 

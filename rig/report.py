@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from calib_core.checks.degeneracy import degeneracy_warnings, pair_angle_deg
-from calib_core.data.io import extrinsic_yaml
 from calib_core.data.observations import Observations
 from calib_core.data.result import JSON_INFO, CalibrationResult
 from calib_core.errors import LidarcamError
@@ -37,6 +36,13 @@ class ReportSummary:
     residual_plots: list[Path] = field(default_factory=list)
     board_rms_mm: list[float] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+
+
+def _result_object(result) -> CalibrationResult:
+    """A CalibrationResult, a ``load_result`` dict or a path -> the CalibrationResult."""
+    if isinstance(result, CalibrationResult):
+        return result
+    return CalibrationResult.load(result) if isinstance(result, (str, Path)) else CalibrationResult.from_dict(result)
 
 
 def _as_result(result) -> dict:
@@ -251,7 +257,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
 
     T = np.asarray(res["T_lidar_cam"], float)
     Ti = invert_T(T)
-    (out / "extrinsic.yaml").write_text(extrinsic_yaml(T, {"method": res["method"]}, covariance=res.get("covariance")))
+    (out / "extrinsic.yaml").write_text(_result_object(result).to_yaml())  # as lidarcam calibrate --yaml
     md += _extrinsic_md(res, T, Ti) + _mounting_md(res)
     if observations.T_lidar_cam_true is not None:
         e_R, e_t = pose_errors(T, observations.T_lidar_cam_true)
