@@ -77,35 +77,25 @@ def report_warnings(observations: Observations, rms_mm: list[float], T_lidar_cam
     return out
 
 
-DEFAULT_CORNER_SIGMA_PX = 0.5
-"""Corner noise the capture verdict assumes when the extraction recorded no reprojection RMS."""
-
-
 def capture_verdict(observations: Observations, T_lidar_cam: np.ndarray | None = None) -> str:
-    """The capture planner's verdict on the boards captured (``calib_core.planning.capture.verdict``) at ``T_lidar_cam``
-    (None: the ``lidarcam`` calibration of the boards), with the noise it assumed: range noise from the scan
-    lines, corner noise the extraction's median reprojection RMS (else ``DEFAULT_CORNER_SIGMA_PX``)."""
+    """The capture planner's verdict on the boards captured (``calib_core.planning.observed``) at ``T_lidar_cam``
+    (None: the ``lidarcam`` calibration of the boards), with the noise it assumed."""
     from calib_core import calibrate
-    from calib_core.data.lines import scan_noise_estimate
-    from calib_core.planning.capture import plan_capture, set_informations, verdict
-    from calib_core.planning.views import rig_from_observations
+    from calib_core.planning.capture import verdict
+    from calib_core.planning.observed import plan_from_observations
 
+    info = None
     try:
         if T_lidar_cam is None:
             res = calibrate(observations)
             if not res.ok:
                 return f"no plan: the calibration failed ({res.reason})"
-            T_lidar_cam = res.T_lidar_cam
-        sr = scan_noise_estimate(observations)
-        rp = [v for v in (observations.meta or {}).get("reproj_rms_px") or [] if v is not None]
-        sc = (float(np.median(rp)) if rp else DEFAULT_CORNER_SIGMA_PX) if observations.has_corners else 0.0
-        rig = rig_from_observations(observations, T_lidar_cam, sr, sc)
-        plan = plan_capture(rig, 2, current=observations,
-                            current_info=set_informations(observations, T_lidar_cam, sr, sc))
+            T_lidar_cam, info = res.T_lidar_cam, res.info
+        p = plan_from_observations(observations, T_lidar_cam, 2, info=info)
     except (LidarcamError, ValueError) as err:
         return f"no plan: {err}"
-    return (f"{verdict(plan)}. (Assumed noise: range {1000 * sr:.1f} mm, corners {sc:.2g} px; `lidarcam plan "
-            "--from OBS.json` gives the whole plan.)")
+    return (f"{verdict(p.plan)}. (Assumed noise: range {1000 * p.range_sigma_m:.1f} mm, corners "
+            f"{p.corner_sigma_px:.2g} px; `lidarcam plan --from OBS.json` gives the whole plan.)")
 
 
 def _mounting_md(res: dict) -> list[str]:

@@ -305,3 +305,39 @@ def test_plan_figure_labels_do_not_overlap():
     pos = np.array([p for p, _ in labels])
     apart = np.linalg.norm(pos[:, None] - pos[None], axis=-1)[np.triu_indices(len(pos), 1)]
     assert (apart >= LABEL_MERGE_M).all()
+
+
+def test_one_noise_rule_for_the_cli_plan_and_the_capture_verdict(tmp_path, capsys):
+    """``lidarcam plan --from`` and the capture verdict of extract/bag/report assume the same noise
+    (``calib_core.planning.observed.observation_noise``) and give the same verdict."""
+    from calib_core import calibrate
+    from calib_core.planning.observed import DEFAULT_CORNER_SIGMA_PX, observation_noise
+    from lidarcam_cli import main
+    from rig.report import capture_verdict
+
+    obs = generate(SimOptions(n_boards=6, pose_mode="pixel"), 1, 0)
+    res = calibrate(obs)
+    assert res.ok and res.info.get("corner_sigma_px")
+    sr, sc, source = observation_noise(obs, res.info)
+    assert sc == pytest.approx(res.info["corner_sigma_px"]) and "calibration" in source
+    save_observations(obs, tmp_path / "obs.json")
+    assert main(["plan", "--from", str(tmp_path / "obs.json"), "--next", "2"]) == 0
+    text = capsys.readouterr().out
+    cli = re.search(r"range noise ([\d.]+) mm, corner noise ([\d.]+) px", text)
+    rig = re.search(r"Assumed noise: range ([\d.]+) mm, corners ([\d.]+) px", capture_verdict(obs))
+    assert cli and rig and cli.groups() == rig.groups(), (cli.groups(), rig.groups())
+    assert capture_verdict(obs).split(". (Assumed")[0] in text  # the same verdict
+    bare = type(obs)(obs.boards, obs.T_lidar_cam_true, {}, obs.camera)  # no calibration, no reprojection RMS
+    assert observation_noise(bare)[1] == DEFAULT_CORNER_SIGMA_PX
+
+
+def test_summary_lines_have_a_row_per_proposed_pose_and_the_verdict():
+    from calib_core.planning.capture import describe_pose
+
+    rig = load_plan_rig(Path(__file__).resolve().parents[1] / "conf" / "plan" / "rig.yaml")
+    plan = plan_capture(rig, 3)
+    lines = plan.summary_lines(rig)
+    rows = [ln for ln in lines if re.match(r"^\s*\d+\s+[\d.]+\s+-?[\d.]+", ln)]
+    assert len(rows) == 3
+    assert lines[-1] == f"verdict: {verdict(plan)}"
+    assert all(any(describe_pose(q) in ln for ln in lines) for q in plan.poses)
