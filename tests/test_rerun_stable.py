@@ -34,12 +34,13 @@ def test_tables_of_the_same_rows_with_other_wall_times_are_the_same_files(tmp_pa
     write_tables(_rows(3.7), "fake", b)
     for name in ("summary_fake.csv", "trials_fake.csv", "settings_fake.json"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
-    assert (a / "timings_fake.csv").read_bytes() != (b / "timings_fake.csv").read_bytes()
-    assert "seconds" in (a / "timings_fake.csv").read_text().splitlines()[0]
+    assert (a / "timings_trials_fake.csv").read_bytes() != (b / "timings_trials_fake.csv").read_bytes()
+    assert "seconds" in (a / "timings_trials_fake.csv").read_text().splitlines()[0]
+    assert "median_seconds" in (a / "timings_summary_fake.csv").read_text().splitlines()[0]
 
 
 def test_timings_files_are_not_tracked():
-    out = subprocess.run(["git", "check-ignore", "-q", "results/paper/timings_boards.csv"], cwd=ROOT)
+    out = subprocess.run(["git", "check-ignore", "-q", "results/paper/timings_trials_boards.csv"], cwd=ROOT)
     assert out.returncode == 0
 
 

@@ -40,10 +40,11 @@ from ..config.schema import register_configs
 from ..config.sweeps import CONF_DIR, experiment_cells
 from ..engine.cell import Cell, resolve_methods
 from ..engine.fingerprint import write_stamped
+from ..engine.paths import repo_relative
 from ..engine.runner import run_cells
 from ..engine.store import load_cell
 from ..engine.trial import evaluate
-from ..summary.aggregate import summarise
+from ..summary.aggregate import summarise, write_summary
 from .leaderboard_table import figure, leaderboard_table, markdown_table, real_table
 
 DEFAULT_SUITE = CONF_DIR / "leaderboard" / "v1.yaml"
@@ -153,12 +154,6 @@ def plan(suites: Sequence[Suite], methods, plugins, overrides, results_dir: str,
     return cells, skipped
 
 
-def _shown(path: str | Path) -> str:
-    """``path`` relative to the working directory when inside it (reports name no machine's folders)."""
-    p = Path(path).resolve()
-    return str(p.relative_to(Path.cwd())) if p.is_relative_to(Path.cwd()) else str(path)
-
-
 def _rows(cells: list[Cell]) -> pd.DataFrame:
     frames = [f for f in (load_cell(c) for c in cells) if not f.empty]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
@@ -190,11 +185,11 @@ def run_leaderboard(suite_file: str | Path = DEFAULT_SUITE, *, full: bool = Fals
     table = leaderboard_table(sim_rows, crlb, origins)
     real_rows = {k: v for k, v in rows.items() if k not in sim_rows}
     for name, df in sim_rows.items():
-        summarise(df).to_csv(out / f"summary_{name}.csv", index=False, float_format="%.6g")
+        write_summary(summarise(df), out / f"summary_{name}.csv")
     table.to_csv(out / "leaderboard.csv", index=False, float_format="%.6g")
     if len(table):
         figure(table, list(sim_rows), out)
-    info = {"version": version, "suite_file": _shown(suite_file), "methods": methods, "plugins": plugins,
+    info = {"version": version, "suite_file": repo_relative(suite_file), "methods": methods, "plugins": plugins,
             "skipped": skipped, "cells": {k: len(v) for k, v in cells.items()},
             "trials": {k: sorted({c.n_trials for c in v}) for k, v in cells.items()},
             "rows_computed": after - before, "rows": after, "run_s": t_run, "cores": os.cpu_count(),

@@ -149,23 +149,32 @@ TIMING_KEYS = ("sweep", "setting_key", "trial", "method")
 """The columns that name a row in ``timings_<sweep>.csv``."""
 
 
+def write_summary(summary: pd.DataFrame, path: Path) -> Path:
+    """Write a ``summarise`` table to ``path`` without its wall-time columns (``SUMMARY_TIMING_COLUMNS``), which go
+    to ``timings_<name>`` beside it (not committed: a rerun of the same code rewrites ``path`` byte for byte)."""
+    path = Path(path)
+    timing = [c for c in SUMMARY_TIMING_COLUMNS if c in summary.columns]
+    summary.drop(columns=timing).to_csv(path, index=False, float_format="%.6g")
+    keys = [c for c in ("setting_key", "method") if c in summary.columns]
+    summary[keys + timing].to_csv(path.with_name(f"timings_{path.name}"), index=False, float_format="%.6g")
+    return path
+
+
 def write_tables(df: pd.DataFrame, sweep: str, out_dir: str | Path) -> tuple[Path, Path]:
     """Write ``summary_<sweep>.csv``, ``trials_<sweep>.csv`` and ``settings_<sweep>.json`` (the fixed
     settings) of the trial rows ``df`` into ``out_dir``; returns the two tables' paths. The wall times
-    (``TIMING_COLUMNS``, ``SUMMARY_TIMING_COLUMNS``) go to ``timings_<sweep>.csv`` and ``timings_summary_<sweep>.csv``
-    instead (not committed: a rerun of the same code rewrites the other tables byte for byte)."""
+    (``TIMING_COLUMNS``, ``SUMMARY_TIMING_COLUMNS``) go to ``timings_trials_<sweep>.csv`` and
+    ``timings_summary_<sweep>.csv`` instead (not committed: a rerun of the same code rewrites the others byte for
+    byte)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary_path, trials_path = out / f"summary_{sweep}.csv", out / f"trials_{sweep}.csv"
-    summary, trials = summarise(df), trial_table(df)
-    s_time = [c for c in SUMMARY_TIMING_COLUMNS if c in summary.columns]
+    write_summary(summarise(df), summary_path)
+    trials = trial_table(df)
     t_time = [c for c in TIMING_COLUMNS if c in trials.columns]
-    summary.drop(columns=s_time).to_csv(summary_path, index=False, float_format="%.6g")
     trials.drop(columns=t_time).to_csv(trials_path, index=False, float_format="%.6g")
     keys = [c for c in TIMING_KEYS if c in trials.columns]
-    s_keys = [c for c in ("setting_key", "method") if c in summary.columns]
-    trials[keys + t_time].to_csv(out / f"timings_{sweep}.csv", index=False, float_format="%.6g")
-    summary[s_keys + s_time].to_csv(out / f"timings_summary_{sweep}.csv", index=False, float_format="%.6g")
+    trials[keys + t_time].to_csv(out / f"timings_{trials_path.name}", index=False, float_format="%.6g")
     (out / f"settings_{sweep}.json").write_text(json.dumps(constant_settings(df), indent=1, sort_keys=True) + "\n")
     return summary_path, trials_path
 
