@@ -64,3 +64,20 @@ def test_the_paper_report_keeps_its_link_to_the_explain_report(tmp_path, monkeyp
     first = report.write_paper_report(tmp_path / "paper").read_text()
     assert "[explain/REPORT.md](../explain/REPORT.md)" in first and "commit" not in first
     assert report.write_paper_report(tmp_path / "paper").read_text() == first
+
+
+def test_the_leaderboard_report_of_a_rerun_differs_only_in_its_timing_line():
+    import pandas as pd
+
+    from experiments.suites.leaderboard import build_leaderboard_report
+
+    info = {"suite_file": "conf/leaderboard/v1.yaml", "version": "1", "full": False, "cells": {}, "real": set(),
+            "trials": {}, "suite_overrides": {}, "skipped": [], "methods": ["lidarcam"], "plugins": (),
+            "overrides": ["scene.noise_mm=10"], "rows": 100, "rows_computed": 100, "run_s": 300.0, "cores": 2,
+            "load": 5.0}
+    rerun = {**info, "rows_computed": 0, "run_s": 8.0, "load": 1.2}
+    a, b = (build_leaderboard_report(pd.DataFrame(), None, i, set()).splitlines() for i in (info, rerun))
+    assert len(a) == len(b)
+    changed = [x for x, y in zip(a, b, strict=True) if x != y]
+    assert changed and all(x.startswith("- Timing of this run") for x in changed), changed
+    assert any("scene.noise_mm=10" in x for x in a if not x.startswith("- Timing"))

@@ -219,10 +219,11 @@ def build_leaderboard_report(table: pd.DataFrame, real: pd.DataFrame | None, inf
              *(f"- Suite {line}." for line in info["skipped"]),
              f"- Methods: {len(info['methods'])}"
              + (f"; plugins: {', '.join(f'`{p}`' for p in info['plugins'])}" if info["plugins"] else "") + ".",
-             f"- Run: {info['rows']} (trial, method) rows, {info['rows_computed']} computed now and the rest read "
-             f"back from the store; {info['run_s']:.0f} s wall on {info['cores']} cores (5-minute load average at the "
-             f"end {info['load']:.1f}: times grow when other processes share the cores)"
-             + (f"; overrides: `{' '.join(info['overrides'])}`" if info["overrides"] else "") + ".", "",
+             *([f"- Overrides: `{' '.join(info['overrides'])}`."] if info["overrides"] else []),
+             f"- Timing of this run (differs between runs): {info['rows']} (trial, method) rows, "
+             f"{info['rows_computed']} computed now and the rest read back from the store; {info['run_s']:.0f} s wall "
+             f"on {info['cores']} cores (5-minute load average at the end {info['load']:.1f}: times grow when other "
+             "processes share the cores).", "",
              "## One table over every simulated suite", "",
              "Ranked by valid rate, then median rotation error. *Valid*: e_R < 8 deg and e_t < 0.8 m; a method that "
              "returned nothing counts as invalid; [95% Wilson interval]. Medians are over the solutions returned, "
