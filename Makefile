@@ -22,7 +22,7 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP) ## Create .venv and install lidarcam with its dev tools (~1.5 min, fresh)
 
-test: $(STAMP) ## Run the fast test suite (~1.5 min; SHUFFLE=seed: random order)
+test: $(STAMP) ## Run the fast test suite (~2 min; SHUFFLE=seed: random order)
 	$(PY) -m pytest -n 2 $(if $(SHUFFLE),--shuffle $(SHUFFLE))
 
 test-slow: $(STAMP) ## Run only the slow, opt-in tests (not measured as a whole; 100-board peng2022 ~2 min)
@@ -42,7 +42,7 @@ bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughp
 
 PRESET ?=
 TRIALS ?= 500
-reproduce-paper: $(STAMP) ## Paper's sweeps -> results/paper/ (~1 min); PRESET=paper-matched [TRIALS=500]: -> results/paper-matched/ (~3 min)
+reproduce-paper: $(STAMP) ## Paper's sweeps -> results/paper/ (~2 min; ~30 s when the store holds the rows); PRESET=paper-matched [TRIALS=500]: -> results/paper-matched/ (~3 min)
 ifeq ($(strip $(PRESET)),)
 	$(PY) -m experiments reproduce
 else
@@ -62,7 +62,7 @@ REAL_DATA ?= ../shared/real-data
 real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; ~1.5 min)
 	$(PY) -m experiments real-data --data $(REAL_DATA)
 
-leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v2.yaml -> results/leaderboard/ (~3 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
+leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v2.yaml -> results/leaderboard/ (~5 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
 	$(PY) -m experiments leaderboard $(if $(FULL),--full) $(ARGS)
 
 verify-results: $(STAMP) ## Check every stored trial chunk under results/ parses in full; list reports stale against the code (~3 s)

@@ -10,7 +10,10 @@ import sys
 from calib_core.errors import LidarcamError
 
 from . import bag, demo, importer, plan, rig, simulate
+from .extras import add_optional, missing_extra
 from .intrinsics_flag import STD_INTRINSICS_HELP, with_std_intrinsics
+from .outputs import writable_file
+from .wording import cli_hint
 
 
 def _cmd_methods(args) -> int:
@@ -48,9 +51,11 @@ def _print_ros(ros) -> None:
 def _cmd_calibrate(args) -> int:
     from calib_core import calibrate, get_method
     from calib_core.data.exports import frame_export
-    from calib_core.data.io import extrinsic_yaml, load_observations
+    from calib_core.data.io import load_observations
 
     frames = _frames(args)
+    writable_file(args.out, "--out")
+    writable_file(args.yaml, "--yaml")
     obs = load_observations(args.observations)
     if args.std_intrinsics:
         obs = with_std_intrinsics(obs, args.std_intrinsics)
@@ -58,7 +63,7 @@ def _cmd_calibrate(args) -> int:
     if args.prior or args.prior_sigma:
         options["prior"] = parse_prior(args.prior, args.prior_sigma)
     res = calibrate(obs, method=get_method(args.method).name, **options)
-    print("\n".join(res.summary_lines(obs.n_boards, obs.T_lidar_cam_true)))
+    print(cli_hint("\n".join(res.summary_lines(obs.n_boards, obs.T_lidar_cam_true))))
     ros = frame_export(res.T_lidar_cam, *frames) if res.ok and frames else None
     if ros is not None:
         _print_ros(ros)
@@ -69,15 +74,8 @@ def _cmd_calibrate(args) -> int:
         if not res.ok:
             print(f"no YAML written: {args.method} failed", file=sys.stderr)
         else:
-            extra = {"method": res.method}
-            if res.covariance is not None:
-                extra.update(sigma_rot_deg=res.sigma_rot_deg, sigma_trans_mm=res.sigma_trans_mm)
-                if "covariance_model" in res.info:
-                    extra["covariance_model"] = f"'{res.info['covariance_model']}'"
-            if "conditioning" in res.info:
-                extra["conditioning"] = float(res.info["conditioning"])
             with open(args.yaml, "w") as f:
-                f.write(extrinsic_yaml(res.T_lidar_cam, extra, covariance=res.covariance, ros=ros))
+                f.write(res.to_yaml(ros))
             print(f"wrote {args.yaml}")
     return 0 if res.ok else 1
 
@@ -200,7 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--parent-sensor", choices=("lidar", "camera"), default="lidar",
                     help="which sensor --parent-frame names (default: %(default)s, publishing T_lidar_cam)")
     sp.set_defaults(func=_cmd_calibrate)
-    simulate.add_parsers(sub)
+    add_optional(sub, "simulate", simulate.add_parsers)
     rig.add_parsers(sub)
     importer.add_parsers(sub)
     bag.add_parsers(sub)
@@ -221,6 +219,16 @@ def main(argv=None) -> int:
         return args.func(args)
     except LidarcamError as err:
         print(f"lidarcam {args.verb}: error: {err}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as err:  # a verb of an extra that is not installed: one line naming it
+        error = missing_extra(err)
+        if error is None:
+            raise
+        print(f"lidarcam {args.verb}: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as err:  # a write the checks before the work could not foresee (disk full, a race)
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"lidarcam {args.verb}: error: {where}{err.strerror or err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"lidarcam {args.verb}: interrupted; nothing half-written is kept, run the same command again",

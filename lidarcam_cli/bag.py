@@ -16,6 +16,8 @@ def cmd_bag(args) -> int:
     from rig.frombag import bag_to_dataset
     from rig.stills import PickOptions
 
+    from .outputs import writable_folder
+
     opts = PickOptions(max_poses=args.max_poses, still_px=args.still_px, quiet_grey=args.quiet_grey,
                        min_run=args.min_run, scan_still_m=args.scan_still, min_angle_deg=args.min_angle,
                        min_move_m=args.min_move, sync_tol_s=args.sync_tol, time_offset_s=args.time_offset,
@@ -28,6 +30,7 @@ def cmd_bag(args) -> int:
                            ("--board", args.board), ("--out", args.out)) if v is None]
     if need:
         raise DatasetError(f"{', '.join(need)} required (or --list-topics to see the bag's topics)", file=args.bag)
+    writable_folder(args.out, "--out")
     eo = ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma)
     conv = bag_to_dataset(args.bag, args.out, args.image_topic, args.scan_topic, args.board,
                           camera_info_topic=args.camera_info_topic, camera_path=args.camera, opts=opts,

@@ -57,7 +57,9 @@ def write_demo(out, seed: int = 1) -> dict:
 
 def cmd_demo(args) -> int:
     """``lidarcam demo OUT``: write the sample data and print the commands that calibrate it."""
-    out = Path(args.out)
+    from .outputs import writable_folder
+
+    out = writable_folder(args.out, "OUT")
     write_demo(out, args.seed)
     print(f"wrote {out}/dataset (a dataset folder: camera.yaml, board.yaml, NNN.png + NNN.csv), {out}/recording "
           f"(a ROS 2 bag) and {out}/truth.json (the simulated extrinsics)")

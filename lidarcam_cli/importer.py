@@ -94,8 +94,11 @@ def cmd_import(args) -> int:
     from calib_core.data.io import save_observations
     from rig import importing
 
+    from .outputs import writable_file, writable_folder
+
     if args.format in DATASET_FORMATS:
         _need(args, "images", "board_grid", "square")
+        writable_folder(args.out, "--out")
         poses = _source_poses(args)
         size = importing.image_size(poses[0].image)
         camera = importing.source_camera(args.camera, _numbers(args.intrinsics, "--intrinsics", 4),
@@ -104,6 +107,7 @@ def cmd_import(args) -> int:
         print(f"wrote {out}/ ({len(poses)} poses: {', '.join(p.name for p in poses)}); next: lidarcam extract "
               f"{out} --outline-kind {args.outline_kind} --out obs.json")
         return 0
+    writable_file(args.out, "--out", parents=True)
     if args.format == "bouguet":
         _need(args, "points")
         obs = importing.observations_from_bouguet(args.src, args.points, args.outline_kind,

@@ -63,6 +63,10 @@ def cmd_extract(args) -> int:
     from rig.extract import extract, format_diagnostics
     from rig.report import capture_verdict
 
+    from .outputs import writable_file
+
+    writable_file(args.out, "--out")
+    writable_file(args.diagnostics, "--diagnostics")
     ds = _dataset(args)
     obs, diags = extract(ds, _options(args))
     print(format_diagnostics(diags))
@@ -86,6 +90,9 @@ def cmd_report(args) -> int:
     from rig.extract import extract
     from rig.report import write_report
 
+    from .outputs import writable_folder
+
+    writable_folder(args.out, "--out")
     res = load_result(args.result)
     if Path(args.dataset).is_file():  # observations without images (imported board poses and points)
         ds, obs = None, load_observations(args.dataset)
@@ -100,8 +107,10 @@ def cmd_report(args) -> int:
             c = obs.camera
             ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist))
     summary = write_report(ds, obs, res, args.out)
+    from .wording import cli_hint
+
     for w in summary.warnings:
-        print(f"warning: {w}")
+        print(f"warning: {cli_hint(w)}")
     print(f"wrote {summary.markdown} ({len(summary.overlays)} overlays, {len(summary.residual_plots)} residual plots)")
     return 0 if res.get("ok") else 1
 

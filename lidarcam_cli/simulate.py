@@ -6,8 +6,6 @@ import argparse
 import sys
 from dataclasses import MISSING, fields
 
-from simulate.options import SimOptions
-
 # Short spellings kept next to the generated one-flag-per-field names.
 ALIASES = {"n_boards": ["--boards"]}
 
@@ -19,6 +17,8 @@ def _flag(name: str) -> str:
 def add_parsers(subparsers) -> argparse.ArgumentParser:
     """Register ``simulate`` on an argparse ``subparsers``; one flag per SimOptions field, plus
     ``--seed``, ``--trial`` and ``--out``. Sets ``func`` to ``run``."""
+    from simulate.options import SimOptions  # the simulator needs lidarcam[rig] (OpenCV)
+
     p = subparsers.add_parser(
         "simulate", help="write one simulated lidar-camera calibration problem (observations JSON)",
         description="Simulate boards seen by a 2D lidar and a camera (docs/METHOD.md) and write them "
@@ -44,8 +44,12 @@ def run(args: argparse.Namespace) -> int:
     """Generate and save; errors in the options or the sampling go to stderr with exit status 2."""
     from calib_core.data.io import save_observations
     from simulate import generate
+    from simulate.options import SimOptions
     from simulate.scene import SceneError
 
+    from .outputs import writable_file
+
+    writable_file(args.out, "--out")
     try:
         options = SimOptions(**{f.name: getattr(args, f.name) for f in fields(SimOptions)})
         obs = generate(options, seed=args.seed, trial=args.trial)

@@ -13,6 +13,21 @@ from calib_core.planning.views import PlanRig
 
 FRUSTUM_M = 7.0
 """Length (metres) of the camera's frustum edges in the top view."""
+LABEL_MERGE_M = 0.4
+"""Proposed boards whose centres lie closer than this (metres, top view) share one label ("1, 3, 5")."""
+
+
+def label_groups(centres: np.ndarray, merge_m: float = LABEL_MERGE_M) -> list[tuple[np.ndarray, str]]:
+    """One (position, text) per group of board centres (K,2) closer than ``merge_m``: the boards' 1-based numbers
+    in order, at the group's first centre; every number once, no two labels closer than ``merge_m``."""
+    groups: list[list[int]] = []
+    for i, c in enumerate(centres):
+        near = next((g for g in groups if np.linalg.norm(centres[g[0]] - c) < merge_m), None)
+        if near is None:
+            groups.append([i])
+        else:
+            near.append(i)
+    return [(centres[g[0]], ", ".join(str(i + 1) for i in g)) for g in groups]
 
 
 def _board_xy(T_lidar_board: np.ndarray, outline: np.ndarray) -> np.ndarray:
@@ -46,10 +61,12 @@ def save_plan_figure(path, rig: PlanRig, plan: Plan, current: Observations | Non
         T_lb = rig.T_lidar_cam[None] @ np.array([b.T_cam_board for b in current.boards])
         for i, xy in enumerate(_board_xy(T_lb, rig.outline)):
             ax.plot(xy[:, 0], xy[:, 1], color="tab:blue", lw=1.5, label="captured" if i == 0 else None)
-    for i, xy in enumerate(_board_xy(plan.T_lidar_board, rig.outline)):
+    outlines = _board_xy(plan.T_lidar_board, rig.outline)
+    for i, xy in enumerate(outlines):
         ax.plot(xy[:, 0], xy[:, 1], color="tab:red", lw=1.5, label="proposed" if i == 0 else None)
-        c = xy[:-1].mean(axis=0)
-        ax.annotate(str(i + 1), c, textcoords="offset points", xytext=(6, 6), color="tab:red", fontsize=9)
+    for c, text in label_groups(outlines[:, :-1].mean(axis=1) if len(outlines) else np.zeros((0, 2))):
+        ax.annotate(text, c, textcoords="offset points", xytext=(8, 8), color="tab:red", fontsize=9,
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
     ax.set_aspect("equal")
     ax.set_xlabel("lidar x (m)")
     ax.set_ylabel("lidar y (m)")

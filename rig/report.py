@@ -1,8 +1,7 @@
-"""Calibration report of a real rig: scan-on-image overlays, residual plots per board and ``report.md``.
+"""Calibration report of a real rig: scan-on-image overlays (``rig.overlay``), residual plots per board and
+``report.md``.
 
-Plots use matplotlib's Agg canvas directly (no pyplot, no global backend change). The overlay PNG maps image
-pixel (u, v) to PNG pixel (u, v): the image fills the left part of the figure at one PNG pixel per image pixel,
-the colorbar sits to its right.
+Plots use matplotlib's Agg canvas directly (no pyplot, no global backend change).
 """
 
 from __future__ import annotations
@@ -14,20 +13,18 @@ from pathlib import Path
 import numpy as np
 
 from calib_core.checks.degeneracy import degeneracy_warnings, pair_angle_deg
-from calib_core.data.io import extrinsic_yaml
-from calib_core.data.observations import Observations, ScanData
-from calib_core.data.residuals import plane_residuals
+from calib_core.data.observations import Observations
 from calib_core.data.result import JSON_INFO, CalibrationResult
 from calib_core.errors import LidarcamError
 from calib_core.geometry.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
-from calib_core.geometry.transforms import invert_T, quaternion_xyzw, transform_points
+from calib_core.geometry.transforms import invert_T, quaternion_xyzw
 from calib_core.refine.uncertainty import normal_spread_deg
 
-from .dataset import CameraModel, Dataset
+from .dataset import Dataset
 from .markdown import md_table, num
+from .overlay import board_plane_distances, draw_overlay, overlay_clim_mm, project_scan, save_overlay
 
 OUTLIER_FACTOR = 3.0
-OVERLAY_CMAP = "turbo"  # saturated everywhere (a diverging map is grey at 0 mm: invisible on the board)
 
 
 @dataclass
@@ -39,6 +36,13 @@ class ReportSummary:
     residual_plots: list[Path] = field(default_factory=list)
     board_rms_mm: list[float] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+
+
+def _result_object(result) -> CalibrationResult:
+    """A CalibrationResult, a ``load_result`` dict or a path -> the CalibrationResult."""
+    if isinstance(result, CalibrationResult):
+        return result
+    return CalibrationResult.load(result) if isinstance(result, (str, Path)) else CalibrationResult.from_dict(result)
 
 
 def _as_result(result) -> dict:
@@ -58,42 +62,6 @@ def _as_result(result) -> dict:
             "boards_rejected": result.get("boards_rejected") or [], "warnings": result.get("warnings") or []}
 
 
-def board_plane_distances(T_cam_lidar: np.ndarray, T_cam_board: np.ndarray, scan: np.ndarray) -> np.ndarray:
-    """Signed distances (m) of lidar points ``scan`` (K,2) to the board plane, along the board's +z
-    (``calib_core.data.residuals.plane_residuals`` of one board)."""
-    n = T_cam_board[:3, 2]
-    data = ScanData(np.column_stack([scan, np.zeros(len(scan))]), np.zeros(len(scan), int), n[None],
-                    np.array([n @ T_cam_board[:3, 3]]))
-    return plane_residuals(invert_T(T_cam_lidar), data)
-
-
-def project_scan(camera: CameraModel, T_cam_lidar: np.ndarray, scan: np.ndarray, min_depth_m: float = 0.05
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (K,2) of lidar points ``scan`` (K,2) through the distorted camera, and a mask of the points that
-    are in front of the camera (depth > ``min_depth_m``), inside the image and within the field of view where
-    the distortion model holds (undistorted image bounds + 20 %)."""
-    import cv2
-
-    P = transform_points(T_cam_lidar, np.column_stack([scan, np.zeros(len(scan))]))
-    ok = P[:, 2] > min_depth_m
-    uv = np.full((len(P), 2), np.nan)
-    if ok.any():
-        w, h = camera.width, camera.height
-        edge = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1], [w / 2, 0], [w / 2, h - 1], [0, h / 2],
-                         [w - 1, h / 2]], float)
-        nb = cv2.undistortPoints(edge.reshape(-1, 1, 2), camera.K, camera.dist).reshape(-1, 2)
-        lim = 1.2 * np.abs(nb).max(axis=0)
-        xn = P[ok, :2] / P[ok, 2:3]
-        ok[np.flatnonzero(ok)] = np.all(np.abs(xn) <= lim, axis=1)
-    if ok.any():
-        proj, _ = cv2.projectPoints(P[ok], np.zeros(3), np.zeros(3), camera.K, camera.dist)
-        uv[ok] = proj.reshape(-1, 2)
-        inside = (uv[:, 0] >= -0.5) & (uv[:, 0] <= camera.width - 0.5) & (uv[:, 1] >= -0.5) & \
-                 (uv[:, 1] <= camera.height - 0.5)
-        ok &= inside
-    return uv, ok
-
-
 def report_warnings(observations: Observations, rms_mm: list[float], T_lidar_cam: np.ndarray | None = None
                     ) -> list[str]:
     """Warnings on a board set and its residuals: the library's board-set warnings
@@ -109,35 +77,25 @@ def report_warnings(observations: Observations, rms_mm: list[float], T_lidar_cam
     return out
 
 
-DEFAULT_CORNER_SIGMA_PX = 0.5
-"""Corner noise the capture verdict assumes when the extraction recorded no reprojection RMS."""
-
-
 def capture_verdict(observations: Observations, T_lidar_cam: np.ndarray | None = None) -> str:
-    """The capture planner's verdict on the boards captured (``calib_core.planning.capture.verdict``) at ``T_lidar_cam``
-    (None: the ``lidarcam`` calibration of the boards), with the noise it assumed: range noise from the scan
-    lines, corner noise the extraction's median reprojection RMS (else ``DEFAULT_CORNER_SIGMA_PX``)."""
+    """The capture planner's verdict on the boards captured (``calib_core.planning.observed``) at ``T_lidar_cam``
+    (None: the ``lidarcam`` calibration of the boards), with the noise it assumed."""
     from calib_core import calibrate
-    from calib_core.data.lines import scan_noise_estimate
-    from calib_core.planning.capture import plan_capture, set_informations, verdict
-    from calib_core.planning.views import rig_from_observations
+    from calib_core.planning.capture import verdict
+    from calib_core.planning.observed import plan_from_observations
 
+    info = None
     try:
         if T_lidar_cam is None:
             res = calibrate(observations)
             if not res.ok:
                 return f"no plan: the calibration failed ({res.reason})"
-            T_lidar_cam = res.T_lidar_cam
-        sr = scan_noise_estimate(observations)
-        rp = [v for v in (observations.meta or {}).get("reproj_rms_px") or [] if v is not None]
-        sc = (float(np.median(rp)) if rp else DEFAULT_CORNER_SIGMA_PX) if observations.has_corners else 0.0
-        rig = rig_from_observations(observations, T_lidar_cam, sr, sc)
-        plan = plan_capture(rig, 2, current=observations,
-                            current_info=set_informations(observations, T_lidar_cam, sr, sc))
+            T_lidar_cam, info = res.T_lidar_cam, res.info
+        p = plan_from_observations(observations, T_lidar_cam, 2, info=info)
     except (LidarcamError, ValueError) as err:
         return f"no plan: {err}"
-    return (f"{verdict(plan)}. (Assumed noise: range {1000 * sr:.1f} mm, corners {sc:.2g} px; `lidarcam plan "
-            "--from OBS.json` gives the whole plan.)")
+    return (f"{verdict(p.plan)}. (Assumed noise: range {1000 * p.range_sigma_m:.1f} mm, corners "
+            f"{p.corner_sigma_px:.2g} px; `lidarcam plan --from OBS.json` gives the whole plan.)")
 
 
 def _mounting_md(res: dict) -> list[str]:
@@ -155,65 +113,6 @@ def _mounting_md(res: dict) -> list[str]:
 def _pose_name(observations: Observations, i: int) -> str:
     names = observations.meta.get("poses") if observations.meta else None
     return str(names[i]) if names and i < len(names) else f"{i:03d}"
-
-
-def _overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_cam_board, outline, full_scan,
-             board_scan, clim_mm: float, title: str, rejected: str | None = None) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.colors import Normalize
-    from matplotlib.figure import Figure
-
-    h, w = gray.shape[:2]
-    dpi = 100.0
-    extra = 120
-    W = w + extra
-    fig = Figure(figsize=(W / dpi, h / dpi), dpi=dpi)
-    FigureCanvasAgg(fig)
-    ax = fig.add_axes((0, 0, w / W, 1))
-    ax.imshow(gray, cmap="gray", vmin=0, vmax=255, extent=(-0.5, w - 0.5, h - 0.5, -0.5), interpolation="nearest")
-    ax.set_xlim(-0.5, w - 0.5)
-    ax.set_ylim(h - 0.5, -0.5)
-    ax.set_axis_off()
-    import cv2
-
-    ring = np.zeros((0, 3)) if outline is None else np.column_stack([outline, np.zeros(len(outline))])
-    ring = transform_points(T_cam_board, np.vstack([ring, ring[:1]]))
-    if len(ring) and np.all(ring[:, 2] > 0):  # no outline (outline_kind 'none'): nothing to draw
-        uvb, _ = cv2.projectPoints(ring, np.zeros(3), np.zeros(3), camera.K, camera.dist)
-        uvb = uvb.reshape(-1, 2)
-        ax.plot(uvb[:, 0], uvb[:, 1], "-", color="yellow", lw=1.0, alpha=0.8)
-    norm = Normalize(-clim_mm, clim_mm)
-    sc = None
-    for pts, size, edge in ((full_scan, 6, "none"), (board_scan, 18, "black")):
-        if pts is None or len(pts) == 0:
-            continue
-        uv, ok = project_scan(camera, T_cam_lidar, pts)
-        if not ok.any():
-            continue
-        dist = 1000 * board_plane_distances(T_cam_lidar, T_cam_board, pts[ok])
-        sc = ax.scatter(uv[ok, 0], uv[ok, 1], c=np.clip(dist, -clim_mm, clim_mm), cmap=OVERLAY_CMAP, norm=norm,
-                        s=size, edgecolors=edge, linewidths=0.4)
-    ax.text(4, 4, title, color="white", fontsize=8, va="top", ha="left",
-            bbox={"facecolor": "black", "alpha": 0.5, "pad": 2, "edgecolor": "none"})
-    if rejected:  # the calibration left this pose out: a red frame and the reason
-        ax.add_patch(_frame(w, h))
-        ax.text(4, h - 6, "REJECTED by the calibration: " + rejected, color="white", fontsize=8, va="bottom",
-                ha="left", wrap=True, bbox={"facecolor": "red", "alpha": 0.75, "pad": 2, "edgecolor": "none"})
-    cax = fig.add_axes(((w + 15) / W, 0.08, 14 / W, 0.84))
-    if sc is None:
-        from matplotlib.cm import ScalarMappable
-
-        sc = ScalarMappable(norm=norm, cmap=OVERLAY_CMAP)
-    cb = fig.colorbar(sc, cax=cax)
-    cb.set_label("distance to board plane (mm)", fontsize=8)
-    cb.ax.tick_params(labelsize=7)
-    fig.savefig(path, dpi=dpi, pil_kwargs={"compress_level": 1})
-
-
-def _frame(w: int, h: int):
-    from matplotlib.patches import Rectangle
-
-    return Rectangle((-0.5, -0.5), w, h, fill=False, edgecolor="red", linewidth=6)
 
 
 def _residual_plot(path: Path, bearing_deg: np.ndarray, dist_mm: np.ndarray, title: str) -> None:
@@ -284,7 +183,7 @@ def _board_plots(dataset: Dataset | None, observations: Observations, res: dict,
                 gray = pose.read_image()
                 full = pose.scan.points if pose.scan is not None else None
                 op = out / f"overlay_{name}.png"
-                _overlay(op, gray, dataset.camera, Ti, b.T_cam_board, b.outline, full, b.scan, clim,
+                draw_overlay(op, gray, dataset.camera, Ti, b.T_cam_board, b.outline, full, b.scan, clim,
                          f"pose {name}: {len(b.scan)} board points, RMS {rms_mm[i]:.1f} mm",
                          rejected[i]["reason"] if i in rejected else None)
                 summary.overlays.append(op)
@@ -348,7 +247,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
 
     T = np.asarray(res["T_lidar_cam"], float)
     Ti = invert_T(T)
-    (out / "extrinsic.yaml").write_text(extrinsic_yaml(T, {"method": res["method"]}, covariance=res.get("covariance")))
+    (out / "extrinsic.yaml").write_text(_result_object(result).to_yaml())  # as lidarcam calibrate --yaml
     md += _extrinsic_md(res, T, Ti) + _mounting_md(res)
     if observations.T_lidar_cam_true is not None:
         e_R, e_t = pose_errors(T, observations.T_lidar_cam_true)
@@ -358,12 +257,11 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     rms_mm = [float(np.sqrt(np.mean(d ** 2))) for d in d_mm]
     mean_mm = [float(np.mean(d)) for d in d_mm]
     summary.board_rms_mm = rms_mm
-    finite = [r for r in rms_mm if math.isfinite(r)]
-    clim = float(max(20.0, 3.0 * float(np.median(finite)) if finite else 20.0))
-    clim = float(math.ceil(clim / 10.0) * 10.0)
+    clim = overlay_clim_mm(np.concatenate(d_mm) if d_mm else [])  # one colour range for every board's overlay
     links = _board_plots(dataset, observations, res, Ti, out, summary, rms_mm, clim)
     md += _boards_md(observations, res, Ti, rms_mm, mean_mm, links) + skipped_md
-    summary.warnings = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
+    every = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
+    summary.warnings = list(dict.fromkeys(every))  # the method's own board-set warnings are the library's too
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
     md += ["## Capture plan", "", capture_verdict(observations, T), ""]
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
@@ -371,16 +269,5 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     return summary
 
 
-def save_overlay(path, gray: np.ndarray, camera: CameraModel, T_cam_lidar, T_cam_board, outline, full_scan,
-                 board_scan, title: str, clim_mm: float = 50.0, colours: int = 128) -> Path:
-    """One scan-on-image overlay (as in ``write_report``) saved as a small palette PNG (``colours`` colours):
-    the whole scan through ``T_cam_lidar`` coloured by its distance to the board plane (mm), the board's own
-    points larger, the board outline from the camera in yellow."""
-    from PIL import Image
-
-    path = Path(path)
-    _overlay(path, gray, camera, T_cam_lidar, T_cam_board, outline, full_scan, board_scan, clim_mm, title)
-    with Image.open(path) as im:
-        small = im.convert("RGB").quantize(colours, method=Image.Quantize.MEDIANCUT)
-    small.save(path, optimize=True)
-    return path
+__all__ = ["ReportSummary", "board_plane_distances", "capture_verdict", "project_scan", "report_warnings",
+           "save_overlay", "write_report"]

@@ -94,11 +94,11 @@ def test_a_calib_core_change_recomputes_every_method(tmp_path, capsys, monkeypat
     assert "4 rows reused, 0 recomputed" in capsys.readouterr().err
 
 
-def test_reports_state_their_fingerprint_and_commit_and_are_found_stale(tmp_path, monkeypatch):
+def test_reports_state_their_fingerprint_not_the_commit_and_are_found_stale(tmp_path, monkeypatch):
     path = fingerprint.write_stamped(tmp_path / "REPORT.md", "# A report\n")
     line = path.read_text().splitlines()[-1]
     assert line.startswith(fingerprint.REPORT_MARK) and f"calib_core {fingerprint.package_hash('calib_core')}" in line
-    assert "(commit " in line and fingerprint.report_staleness(path) is None
+    assert "commit" not in line and fingerprint.report_staleness(path) is None  # the same code, the same line
     real = fingerprint.package_hash
     monkeypatch.setattr(fingerprint, "package_hash", lambda p: "0123456789" if p == "simulate" else real(p))
     assert fingerprint.report_staleness(path) == "code changed since it was written: simulate"

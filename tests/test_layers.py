@@ -16,7 +16,7 @@ ABOVE = {"calib_core": {"rig", "simulate", "lidarcam_cli", "experiments"},
          "rig": {"simulate", "lidarcam_cli", "experiments"},
          "lidarcam_cli": {"experiments"},
          "experiments": {"lidarcam_cli"}}
-HEAVY = ("hydra", "cv2", "yaml", "matplotlib", "pandas", "joblib")
+HEAVY = ("hydra", "omegaconf", "cv2", "yaml", "matplotlib", "PIL", "pandas", "joblib", "rosbags")
 
 
 def _modules(pkg: str) -> dict[str, Path]:

@@ -124,3 +124,16 @@ def test_real_files_without_a_reference_are_stored_and_read_back(tmp_path):
           "progress": False}
     assert run_leaderboard(suite, **kw)["rows_computed"] == 2       # no valid rate: the rows are not "damaged"
     assert run_leaderboard(suite, **kw)["rows_computed"] == 0
+
+
+def test_a_mistyped_override_is_one_line_with_the_closest_key():
+    """``make leaderboard ARGS=scene.n_board=3``: one line naming ``scene.n_boards``, exit 2, no Hydra traceback."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    r = subprocess.run([sys.executable, "-m", "experiments", "leaderboard", "scene.n_board=3"],
+                       cwd=Path(__file__).resolve().parents[1], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr[-500:]
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr[-500:]
+    assert "did you mean 'scene.n_boards'" in r.stderr

@@ -76,3 +76,25 @@ def test_jackknife_covariance_of_known_folds_and_against_the_reported_one():
     jk = jackknife_covariance(res.T_lidar_cam, cv.T_lidar_cam)
     ratio = sigma_trans_m(jk) / sigma_trans_m(res.covariance)
     assert 0.4 < ratio < 2.5, ratio
+
+
+def test_fig8_title_fits_inside_the_figure(tmp_path):
+    """A title longer than the image is wide wraps above the image: every text of Fig. 8 lies inside the figure."""
+    from experiments.real.real_subsets import fig8
+    from rig.dataset import CameraModel
+
+    obs = generate(SimOptions(n_boards=3), seed=0)
+    K = np.array([[800.0, 0, 399.5], [0, 800.0, 299.5], [0, 0, 1]])
+    title = "hokuyo-utm30lx-lifecam-nowicki pose 000: boards 0 5 7 12 (4), laser points through peng2022 (red) " \
+            "and lidarcam (cyan) " * 2
+    fig = fig8(np.full((480, 640), 128, np.uint8), CameraModel(800, 600, K, np.zeros(5)), obs.boards[0],
+               {"peng2022": obs.T_lidar_cam_true, "lidarcam": obs.T_lidar_cam_true}, tmp_path / "f.png", title)
+    renderer = fig.canvas.get_renderer()
+    box = fig.bbox
+    texts = fig.texts
+    assert texts and "cyan" in "".join(t.get_text() for t in texts)
+    for t in texts:
+        e = t.get_window_extent(renderer)
+        assert e.x0 >= box.x0 - 0.5 and e.x1 <= box.x1 + 0.5 and e.y0 >= box.y0 - 0.5 and e.y1 <= box.y1 + 0.5, e
+    ax = fig.axes[0].get_window_extent(renderer)
+    assert all(t.get_window_extent(renderer).y0 >= ax.y1 - 0.5 for t in texts)  # above the image, not over it

@@ -207,7 +207,7 @@ def test_report_marks_rejected_boards(tmp_path):
 
 def test_overlay_of_a_rejected_pose_is_drawn(tmp_path):
     from rig.dataset import CameraModel
-    from rig.report import _overlay
+    from rig.overlay import draw_overlay as _overlay
 
     obs = generate(SimOptions(n_boards=3), seed=2, trial=0)
     cam = CameraModel(800, 600, np.array([[800.0, 0, 399.5], [0, 800.0, 299.5], [0, 0, 1]]), np.zeros(5))

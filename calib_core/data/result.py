@@ -56,6 +56,9 @@ class CalibrationResult:
 
     @property
     def n_candidates(self) -> int:
+        """How many candidates the method considered (a loaded result keeps the count, not the matrices)."""
+        if not len(self.candidates) and "n_candidates" in self.info:
+            return int(self.info["n_candidates"])
         return int(len(self.candidates))
 
     @property
@@ -104,6 +107,8 @@ class CalibrationResult:
         d["warnings"] = self.warnings
         if self.info.get("verdict") is not None:
             d["verdict"] = self.info["verdict"]
+        if self.info.get("conditioning") is not None:
+            d["conditioning"] = float(self.info["conditioning"])
         if self.boards_used is not None:
             d["boards_used"] = self.boards_used
             d["boards_rejected"] = [{"index": int(r["index"]), "reason": str(r["reason"]),
@@ -117,6 +122,40 @@ class CalibrationResult:
 
     def save(self, path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+
+    def to_yaml(self, ros=None) -> str:
+        """The extrinsic as YAML (``calib_core.data.io.extrinsic_yaml``): method, 1-sigma (deg, mm) and covariance
+        model, conditioning, both 4x4 directions (metres), and ``ros`` (a ``FrameExport``) when given; the one
+        content of ``lidarcam calibrate --yaml`` and the report's ``extrinsic.yaml``. ValueError when not ok."""
+        from .io import extrinsic_yaml
+
+        if not self.ok or self.T_lidar_cam is None:
+            raise ValueError(f"{self.method} failed: no extrinsic to write ({self.reason})")
+        extra: dict[str, Any] = {"method": self.method}
+        if self.covariance is not None:
+            extra.update(sigma_rot_deg=self.sigma_rot_deg, sigma_trans_mm=self.sigma_trans_mm)
+            if self.info.get("covariance_model"):
+                extra["covariance_model"] = f"'{self.info['covariance_model']}'"
+        if self.info.get("conditioning") is not None:
+            extra["conditioning"] = float(self.info["conditioning"])
+        return extrinsic_yaml(self.T_lidar_cam, extra, covariance=self.covariance, ros=ros)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> CalibrationResult:
+        """The result of a ``lidarcam.result/1`` dict (``to_dict``'s, or ``load_result``'s); candidate matrices are
+        not stored, their count is (``n_candidates``)."""
+        info = {k: d[k] for k in (*JSON_INFO, "covariance_model", "verdict", "conditioning", "boards_used",
+                                  "boards_rejected", "n_candidates") if d.get(k) is not None}
+        T, cov = d.get("T_lidar_cam"), d.get("covariance")
+        return cls(method=str(d.get("method", "?")), ok=bool(d.get("ok")), reason=d.get("reason"),
+                   T_lidar_cam=None if T is None else np.asarray(T, float), seconds=float(d.get("seconds") or 0.0),
+                   covariance=None if cov is None else np.asarray(cov, float), info=info)
+
+    @classmethod
+    def load(cls, path) -> CalibrationResult:
+        """Read a ``lidarcam.result/1`` file (``save``'s); ObservationError naming the file and field if it is not
+        one."""
+        return cls.from_dict(load_result(path))
 
     def summary_lines(self, n_boards: int | None = None, T_true: np.ndarray | None = None) -> list[str]:
         """The result for a reader, one line each: the warnings, ok or the reason, ``T_lidar_cam`` (metres), the

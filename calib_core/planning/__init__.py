@@ -1,2 +1,2 @@
-"""Capture planning: which board poses to add, predicted from the information each would bring (``capture``), and the
-rig and workspace they are drawn in (``views``)."""
+"""Capture planning: which board poses to add, predicted from the information each would bring (``capture``), the
+rig and workspace they are drawn in (``views``), and a plan from the boards captured so far (``observed``)."""

@@ -40,6 +40,8 @@ judged (the typical range of a board; the degeneracy analysis uses the set's own
 
 MAX_PLAN_BOARDS = 200
 """The most boards a plan (current + proposed) is extended to while it looks for the target."""
+DEFAULT_TARGET = (0.1, 5.0)
+"""The 1-sigma target of a plan: rotation (deg), translation (mm)."""
 
 
 class PlanError(LidarcamError):
@@ -184,6 +186,12 @@ class Plan:
     plan_message: str
     T_lidar_board: np.ndarray
 
+    def summary_lines(self, rig: PlanRig) -> list[str]:
+        """The plan for a reader, one line each (as ``lidarcam plan`` prints it): the current prediction (deg,
+        mm), the table of proposed poses with the predicted 1-sigma after each, the boards to the target, the
+        operator's checklist at ``rig`` and the verdict."""
+        return _summary_lines(self, rig)
+
 
 def name_undetermined(obs: Observations | None, T_lidar_cam: np.ndarray, range_sigma_m: float
                       ) -> tuple[tuple[str, ...], str]:
@@ -196,7 +204,7 @@ def name_undetermined(obs: Observations | None, T_lidar_cam: np.ndarray, range_s
 
 
 def plan_capture(rig: PlanRig, k: int, *, current: Observations | None = None, current_info: np.ndarray | None = None,
-                 target: tuple[float, float] = (0.1, 5.0), criterion: str = "D") -> Plan:
+                 target: tuple[float, float] = DEFAULT_TARGET, criterion: str = "D") -> Plan:
     """The next ``k`` board poses for ``rig`` after the boards ``current`` (their per-board information
     ``current_info`` (N,6,6) at the rig's mounting and noise, e.g. from ``set_informations``), and how many boards
     reach ``target`` = (rotation deg, translation mm) of ``rot_sigma_deg`` and ``trans_sigma_mm``."""
@@ -280,10 +288,50 @@ def weakest_axis(p: Prediction, target: tuple[float, float]) -> tuple[str, str]:
     return AXES[j], value
 
 
+def _fmt(v, unit: str) -> str:
+    return "   undet." if v is None or not np.isfinite(v) else f"{v:8.3f}" if unit == "deg" else f"{v:8.1f}"
+
+
+def _summary_lines(plan: Plan, rig: PlanRig) -> list[str]:
+    cur = plan.current
+    und = "undetermined"
+    out = [f"current: {plan.current_n} boards; range noise {1000 * rig.range_sigma_m:.1f} mm, corner noise "
+           f"{rig.corner_sigma_px:.2g} px",
+           "  1-sigma: rotation " + (und if not np.isfinite(cur.rot_sigma_deg) else f"{cur.rot_sigma_deg:.3f} deg")
+           + ", translation " + (und if not np.isfinite(cur.trans_sigma_mm) else f"{cur.trans_sigma_mm:.1f} mm"),
+           "  per axis (rotations about the lidar axes; translation of T_lidar_cam): "
+           + ", ".join(f"{k} {'undet.' if v is None else f'{v:.3g}'}" for k, v in cur.sigma_dict().items()),
+           f"  {plan.message}", "",
+           f"next {len(plan.poses)} boards ({plan.criterion}-optimal), predicted 1-sigma after each:",
+           " #  dist_m  bear_deg  height_m  turn_deg  lean_deg  roll_deg |  rot_deg  trans_mm |"
+           + "".join(f" {k:>9}" for k in SIGMA_NAMES)]
+    for i, (q, p) in enumerate(zip(plan.poses, plan.after, strict=True)):
+        sd = p.sigma_dict()
+        out.append(f"{i + 1:2d}  {q[0]:6.2f}  {q[1]:8.1f}  {q[2]:8.2f}  {q[3]:8.1f}  {q[4]:8.1f}  {q[5]:8.1f} |"
+                   f" {_fmt(p.rot_sigma_deg, 'deg')}  {_fmt(p.trans_sigma_mm, 'mm')} |"
+                   + "".join(f" {_fmt(sd[k], 'deg' if k.endswith('deg') else 'mm'):>9}" for k in SIGMA_NAMES))
+    if plan.plan_undetermined:
+        out.append(f"after these boards: {plan.plan_message}")
+    out.append(f"to reach the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm): "
+               + (f"{plan.to_target} boards in all" if plan.to_target is not None else
+                  "not within the planner's limit of boards; lower the noise or widen the workspace"))
+    _, ranges, _ = feasibility(rig, plan.T_lidar_board)
+    out += ["", "checklist at the rig:"]
+    out += [f"  [ ] {i + 1}. board {describe_pose(q)}; check: the whole board in the image with "
+            f"{rig.image_margin_px:g} px to spare, the scan line across it (about {int(np.isfinite(r).sum())} points)"
+            for i, (q, r) in enumerate(zip(plan.poses, ranges, strict=True))]
+    return out + ["", f"verdict: {verdict(plan)}"]
+
+
+def boards_to_add(plan: Plan) -> int | None:
+    """How many boards beyond the current ones reach the plan's target (0: met now; None: not within
+    ``MAX_PLAN_BOARDS``)."""
+    return None if plan.to_target is None else plan.to_target - plan.current_n
+
+
 def verdict(plan: Plan) -> str:
-    """One sentence on what the current boards give and what to add (the next poses of the plan)."""
-    add = "; ".join(describe_pose(q) for q in plan.poses[:2])
-    n_add = min(2, len(plan.poses))
+    """One sentence on what the current boards give and what to add: as many boards as reach the target (the
+    plan's first poses named), or the proposed poses where the target is out of reach."""
     if plan.undetermined:
         what = ", ".join(AXIS_WORDS[a] for a in plan.undetermined)
         head = f"{what} {'is' if len(plan.undetermined) == 1 else 'are'} not determined or weak"
@@ -293,11 +341,19 @@ def verdict(plan: Plan) -> str:
                 f"{plan.current.trans_sigma_mm:.0f} mm; the weakest is {AXIS_WORDS[axis]} ({value})")
         if plan.current.meets(plan.target):
             return head + f": the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm) is met"
-    tail = "" if plan.to_target is None else f" ({plan.to_target} boards in all reach {plan.target[0]:g} deg, " \
-        f"{plan.target[1]:g} mm)"
-    return f"{head}: add {n_add} board{'s' if n_add > 1 else ''}: {add}{tail}"
+    need = boards_to_add(plan)
+    if need is None:
+        return (f"{head}: the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm) is not reached within "
+                f"{MAX_PLAN_BOARDS} boards; the most informative next: "
+                + "; ".join(describe_pose(q) for q in plan.poses))
+    n_add = max(need, 1)
+    named = plan.poses[:n_add]
+    first = "" if len(named) == n_add else f", the first {len(named)}"
+    return (f"{head}: add {n_add} board{'s' if n_add > 1 else ''}{first}: "
+            + "; ".join(describe_pose(q) for q in named)
+            + f" ({plan.to_target} boards in all reach {plan.target[0]:g} deg, {plan.target[1]:g} mm)")
 
 
-__all__ = ["CRITERIA", "POSE_FIELDS", "Plan", "PlanError", "PlanRig", "Prediction", "SIGMA_NAMES", "describe_pose",
-           "greedy", "name_undetermined", "plan_capture", "plan_to_dict", "pool", "predict", "set_informations",
-           "verdict"]
+__all__ = ["CRITERIA", "POSE_FIELDS", "Plan", "PlanError", "PlanRig", "Prediction", "SIGMA_NAMES", "boards_to_add",
+           "describe_pose", "greedy", "name_undetermined", "plan_capture", "plan_to_dict", "pool", "predict",
+           "set_informations", "verdict"]

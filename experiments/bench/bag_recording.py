@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..engine.paths import repo_relative
+
 
 def _recording(args, work: Path):
     """Write the bag into ``work`` (or reuse the one there): (bag path, truth dict, write seconds)."""
@@ -104,5 +106,6 @@ def main(argv=None) -> int:
     for k, v in fig.items():
         print(f"{k:>32}: {v:.3f}" if isinstance(v, float) else f"{k:>32}: {v}")
     Path(args.out).mkdir(parents=True, exist_ok=True)
-    (Path(args.out) / "recording.json").write_text(json.dumps({"args": vars(args), **fig}, indent=1) + "\n")
+    shown = {**vars(args), **{k: repo_relative(v) for k in ("out", "work") if (v := getattr(args, k))}}
+    (Path(args.out) / "recording.json").write_text(json.dumps({"args": shown, **fig}, indent=1) + "\n")
     return 0 if fig["ok"] and fig["poses_all_still"] else 1

@@ -13,10 +13,9 @@ sweep runs, and stores, the new code.
 from __future__ import annotations
 
 import hashlib
-import subprocess
 import sys
 from collections.abc import Iterable, Mapping, Sequence
-from functools import cache, lru_cache
+from functools import cache
 from pathlib import Path
 
 from calib_core import CalibrationError, get_method
@@ -131,22 +130,12 @@ def rerun_message(reused: int, stale: Mapping[str, int], why: Mapping[str, set],
     return text + (f", {new} new" if new else "")
 
 
-@lru_cache(maxsize=1)
-def commit() -> str:
-    """``git rev-parse --short HEAD`` of the repository, or ``unknown`` (no git, not a checkout)."""
-    try:
-        out = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "unknown"
-
-
 def provenance(methods: Sequence[str] = ()) -> str:
-    """The report's provenance line: the code fingerprint (packages, plugins of ``methods``) and the commit."""
+    """The report's provenance line: the code fingerprint (packages, plugins of ``methods``). No commit: a rerun of
+    the same code at a later commit writes the same line."""
     parts = [f"{p} {package_hash(p)}" for p in PACKAGES]
     parts += sorted({f"{m} {_PLUGIN_SEEN.get(m, 'unknown')}" for m in filter(None, map(_plugin_module, methods))})
-    return f"{REPORT_MARK} {', '.join(parts)} (commit {commit()})."
+    return f"{REPORT_MARK} {', '.join(parts)}."
 
 
 def write_stamped(path: str | Path, text: str, methods: Sequence[str] = ()) -> Path:

@@ -36,6 +36,7 @@ from ..engine.store import load_cell  # noqa: E402
 from ..summary.aggregate import summarise, write_tables  # noqa: E402
 from ..summary.figures import save_figure  # noqa: E402
 from ..summary.intervals import paired_half_width  # noqa: E402
+from .report import EXPLAIN_LINK  # noqa: E402
 
 SENSITIVITY = {  # experiment -> (swept column, axis label)
     "sens_tilt": ("max_tilt_deg", "largest board tilt (deg)"),
@@ -209,8 +210,6 @@ def fit_section(fit: pd.DataFrame) -> list[str]:
 
 # ------------------------------------------------------------------------------------------------ driver
 
-LINK = ("\n\nWhy our numbers differ from the paper's (ablations, unstated settings): "
-        "[explain/REPORT.md](../explain/REPORT.md)\n")
 
 
 def explain(ablation_trials: int = 1000, sens_trials: int = 40, results_dir: str = "results", n_jobs: int = -1,
@@ -249,7 +248,7 @@ def explain(ablation_trials: int = 1000, sens_trials: int = 40, results_dir: str
     paper = Path(results_dir) / "paper" / "REPORT.md"
     if paper.exists() and "explain/REPORT.md" not in paper.read_text():
         with paper.open("a") as f:
-            f.write(LINK)
+            f.write(f"\n\n{EXPLAIN_LINK}\n")
     return {"out": out, "report": report, "run_s": t_run, "total_s": time.perf_counter() - t0,
             "cells": sum(len(c) for c in cells.values())}
 

@@ -285,9 +285,18 @@ def build_paper_report(tables: str | Path) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
+EXPLAIN_LINK = ("Why our numbers differ from the paper's (ablations, unstated settings): "
+                "[explain/REPORT.md](../explain/REPORT.md)")
+"""The paper report's link to the explain study's report (``make explain-paper``), kept on every rewrite."""
+
+
 def write_paper_report(tables: str | Path) -> Path:
+    """``<tables>/REPORT.md``, with the link to ``../explain/REPORT.md`` where that report exists."""
     path = Path(tables) / "REPORT.md"
-    write_stamped(path, build_paper_report(tables))
+    text = build_paper_report(tables)
+    if (Path(tables).parent / "explain" / "REPORT.md").exists():
+        text = text.rstrip("\n") + "\n\n" + EXPLAIN_LINK + "\n"
+    write_stamped(path, text)
     return path
 
 

@@ -10,7 +10,8 @@ suite reads them; those of the sets without a licence are not committed, see .gi
 
     python -m experiments real-data [--data ../shared/real-data] [--out results/real] [--subsets 50]
 
-A missing data-set folder is reported as skipped (one line), never an error.
+A missing data-set folder under an existing data root is reported as skipped (one line); a missing data root, or
+one holding none of the sets, is an error (one line, exit 2) and nothing is written.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +35,7 @@ from rig.markdown import md_table
 from rig.report import capture_verdict, save_overlay
 
 from ..engine.fingerprint import write_stamped
+from ..engine.paths import repo_relative
 from . import real_subsets as sub
 from .real_eval import (
     degeneracy_verdict,
@@ -229,7 +232,8 @@ def run_set(name: str, folder: Path, out: Path, n_subsets: int, n_jobs: int) -> 
     rs = LOADERS[name](folder)
     obs, extraction_md, intrinsics_md = _observations(rs)
     (out / "obs").mkdir(exist_ok=True)
-    save_observations(obs, out / "obs" / f"{SHORT[name]}.json")
+    shown = replace(obs, meta={**obs.meta, "dataset": repo_relative(folder)}) if obs.meta else obs
+    save_observations(shown, out / "obs" / f"{SHORT[name]}.json")
     sigma = range_noise_m(obs)
     rows = leaderboard(obs, METHODS, sigma, rs.published)
     best = _best(rows)
@@ -277,6 +281,19 @@ def _timed_set(name: str, folder: Path, out: Path, n_subsets: int) -> tuple[list
     return section, summary
 
 
+def present_sets(data: Path) -> list[str]:
+    """The data sets found under the root ``data``; DatasetError (one line) if the root is not a folder or holds
+    none of them, so a mistyped ``--data`` never overwrites the report with an empty one."""
+    if not data.is_dir():
+        raise DatasetError("data root not found (--data, or REAL_DATA= for make real-data); nothing written",
+                           file=str(data))
+    present = [n for n in LOADERS if (data / n).is_dir()]
+    if not present:
+        raise DatasetError(f"none of the data sets {', '.join(LOADERS)} under this root; nothing written",
+                           file=str(data))
+    return present
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "real-data"), help="folder of the data sets")
@@ -285,23 +302,23 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="parallel workers (one data set each at a time)")
     args = ap.parse_args(argv)
     data, out = Path(args.data), Path(args.out)
+    present = present_sets(data)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     md = ["# lidarcam on real data", "", "Written by `make real-data` (`python -m experiments real-data`) from "
-          f"`{args.data}`; each data set's SOURCE.md gives its repository, licence and formats; "
+          f"`{repo_relative(data)}`; each data set's SOURCE.md gives its repository, licence and formats; "
           "[docs/real-rigs.md](../../docs/real-rigs.md) has the commands that give the same boards.", ""]
     from joblib import Parallel, delayed
 
-    present = [n for n in LOADERS if (data / n).is_dir()]
     for n in LOADERS:
         if n not in present:
-            print(f"skipped {n}: {data / n} not found", flush=True)
+            print(f"skipped {n}: {repo_relative(data / n)} not found", flush=True)
     done = dict(zip(present, Parallel(n_jobs=args.jobs)(delayed(_timed_set)(n, data / n, out, args.subsets)
                                                          for n in present), strict=True))
     summary = {}
     for name in LOADERS:
         if name not in done:
-            md += [f"## {name}", "", f"Skipped: `{data / name}` not found.", ""]
+            md += [f"## {name}", "", f"Skipped: `{repo_relative(data / name)}` not found.", ""]
             continue
         section, summary[name] = done[name]
         md += section + [f"({name}: {summary[name]['seconds']:.0f} s in one worker)", ""]

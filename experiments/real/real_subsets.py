@@ -149,9 +149,16 @@ def fig9(df: pd.DataFrame, methods, path: Path, title: str) -> None:
     fig.savefig(path, dpi=110)
 
 
-def fig8(gray: np.ndarray, camera, board, answers: dict[str, np.ndarray], path: Path, title: str) -> None:
-    """Two methods' laser points (the board's scan) on one image through their extrinsics (the paper's Fig. 8).
-    ``board``: the ``BoardObservation`` of the pose shown; ``answers``: method -> ``T_lidar_cam``."""
+TITLE_PT = 8
+"""Font size (points) of Fig. 8's title, which wraps to the image's width above it."""
+
+
+def fig8(gray: np.ndarray, camera, board, answers: dict[str, np.ndarray], path: Path, title: str):
+    """Two methods' laser points (the board's scan) on one image through their extrinsics (the paper's Fig. 8),
+    the title wrapped above the image at its width; returns the figure. ``board``: the ``BoardObservation`` of the
+    pose shown; ``answers``: method -> ``T_lidar_cam``."""
+    import textwrap
+
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -159,14 +166,18 @@ def fig8(gray: np.ndarray, camera, board, answers: dict[str, np.ndarray], path: 
     from rig.report import project_scan
 
     h, w = gray.shape[:2]
-    fig = Figure(figsize=(w / 100, h / 100 + 0.3), dpi=100)
+    line_px = TITLE_PT * 100 / 72  # one text line at 100 dpi
+    lines = textwrap.wrap(title, width=max(20, int(w / (0.6 * line_px))))
+    head = int(math.ceil(1.4 * line_px * len(lines) + 8))
+    fig = Figure(figsize=(w / 100, (h + head) / 100), dpi=100)
     FigureCanvasAgg(fig)
-    ax = fig.add_axes((0, 0, 1, h / (h + 30)))
+    ax = fig.add_axes((0, 0, 1, h / (h + head)))
     ax.imshow(gray, cmap="gray", vmin=0, vmax=255)
     ax.set_axis_off()
     for (m, T), colour in zip(answers.items(), ("red", "cyan", "yellow"), strict=False):
         uv, ok = project_scan(camera, invert_T(T), board.scan)
         ax.scatter(uv[ok, 0], uv[ok, 1], s=6, c=colour, label=m)
     ax.legend(loc="lower right", fontsize=7)
-    fig.text(0.01, 0.99, title, fontsize=8, va="top")
+    fig.text(0.01, 1 - 4 / (h + head), "\n".join(lines), fontsize=TITLE_PT, va="top")
     fig.savefig(path)
+    return fig

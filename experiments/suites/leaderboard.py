@@ -35,14 +35,16 @@ from calib_core.data.io import OBS_SCHEMA
 from calib_core.plugins import load_plugins
 from calib_core.registry import METHODS, get_method
 
+from ..config.overrides import check_overrides
 from ..config.schema import register_configs
 from ..config.sweeps import CONF_DIR, experiment_cells
 from ..engine.cell import Cell, resolve_methods
 from ..engine.fingerprint import write_stamped
+from ..engine.paths import repo_relative
 from ..engine.runner import run_cells
 from ..engine.store import load_cell
 from ..engine.trial import evaluate
-from ..summary.aggregate import summarise
+from ..summary.aggregate import summarise, write_summary
 from .leaderboard_table import figure, leaderboard_table, markdown_table, real_table
 
 DEFAULT_SUITE = CONF_DIR / "leaderboard" / "v2.yaml"
@@ -77,6 +79,7 @@ def chosen_methods(overrides: Sequence[str]) -> tuple[tuple[str, ...], tuple[str
     methods a ``methods.names`` / ``methods=`` override chooses, or every registered method."""
     register_configs()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        check_overrides(overrides, lambda choices: compose(config_name="config", overrides=choices), CONF_DIR)
         cfg = compose(config_name="config", overrides=list(overrides))
     plugins = tuple(str(p) for p in cfg.methods.get("plugins", None) or ())
     load_plugins(plugins)
@@ -151,12 +154,6 @@ def plan(suites: Sequence[Suite], methods, plugins, overrides, results_dir: str,
     return cells, skipped
 
 
-def _shown(path: str | Path) -> str:
-    """``path`` relative to the working directory when inside it (reports name no machine's folders)."""
-    p = Path(path).resolve()
-    return str(p.relative_to(Path.cwd())) if p.is_relative_to(Path.cwd()) else str(path)
-
-
 def _rows(cells: list[Cell]) -> pd.DataFrame:
     frames = [f for f in (load_cell(c) for c in cells) if not f.empty]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
@@ -188,11 +185,11 @@ def run_leaderboard(suite_file: str | Path = DEFAULT_SUITE, *, full: bool = Fals
     table = leaderboard_table(sim_rows, crlb, origins)
     real_rows = {k: v for k, v in rows.items() if k not in sim_rows}
     for name, df in sim_rows.items():
-        summarise(df).to_csv(out / f"summary_{name}.csv", index=False, float_format="%.6g")
+        write_summary(summarise(df), out / f"summary_{name}.csv")
     table.to_csv(out / "leaderboard.csv", index=False, float_format="%.6g")
     if len(table):
         figure(table, list(sim_rows), out)
-    info = {"version": version, "suite_file": _shown(suite_file), "methods": methods, "plugins": plugins,
+    info = {"version": version, "suite_file": repo_relative(suite_file), "methods": methods, "plugins": plugins,
             "skipped": skipped, "cells": {k: len(v) for k, v in cells.items()},
             "trials": {k: sorted({c.n_trials for c in v}) for k, v in cells.items()},
             "rows_computed": after - before, "rows": after, "run_s": t_run, "cores": os.cpu_count(),
@@ -222,10 +219,11 @@ def build_leaderboard_report(table: pd.DataFrame, real: pd.DataFrame | None, inf
              *(f"- Suite {line}." for line in info["skipped"]),
              f"- Methods: {len(info['methods'])}"
              + (f"; plugins: {', '.join(f'`{p}`' for p in info['plugins'])}" if info["plugins"] else "") + ".",
-             f"- Run: {info['rows']} (trial, method) rows, {info['rows_computed']} computed now and the rest read "
-             f"back from the store; {info['run_s']:.0f} s wall on {info['cores']} cores (5-minute load average at the "
-             f"end {info['load']:.1f}: times grow when other processes share the cores)"
-             + (f"; overrides: `{' '.join(info['overrides'])}`" if info["overrides"] else "") + ".", "",
+             *([f"- Overrides: `{' '.join(info['overrides'])}`."] if info["overrides"] else []),
+             f"- Timing of this run (differs between runs): {info['rows']} (trial, method) rows, "
+             f"{info['rows_computed']} computed now and the rest read back from the store; {info['run_s']:.0f} s wall "
+             f"on {info['cores']} cores (5-minute load average at the end {info['load']:.1f}: times grow when other "
+             "processes share the cores).", "",
              "## One table over every simulated suite", "",
              "Ranked by valid rate, then median rotation error. *Valid*: e_R < 8 deg and e_t < 0.8 m; a method that "
              "returned nothing counts as invalid; [95% Wilson interval]. Medians are over the solutions returned, "

@@ -4,7 +4,8 @@ interval, mean/median errors, the share of trials with the truth among the candi
     python -m experiments aggregate [--results results] [--out results/paper] [boards noise ...]
 
 Writes ``<out>/summary_<sweep>.csv`` (one row per setting x method) and ``<out>/trials_<sweep>.csv`` (the
-trial rows with the columns the figures and the notebook read). A method that returned nothing counts as
+trial rows with the columns the figures and the notebook read; their wall times apart in ``timings_*.csv``, not
+committed). A method that returned nothing counts as
 invalid (it stays in ``n_trials``); error means and medians are over the trials where it returned a result.
 """
 
@@ -19,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from ..engine.catalog import method_order
-from ..engine.cell import RESULT_COLUMNS
+from ..engine.cell import RESULT_COLUMNS, TIMING_COLUMNS
 from ..engine.store import load_sweep, read_table
 from .intervals import wilson_interval
 
@@ -130,14 +131,38 @@ def constant_settings(df: pd.DataFrame) -> dict:
     return {c: (v.item() if hasattr(v, "item") else v) for c, v in df[cols].iloc[0].items()}
 
 
+SUMMARY_TIMING_COLUMNS = ("median_seconds",)
+"""Summary columns of wall time: like ``TIMING_COLUMNS`` of the rows, they differ between two runs of the same code."""
+TIMING_KEYS = ("sweep", "setting_key", "trial", "method")
+"""The columns that name a row in ``timings_<sweep>.csv``."""
+
+
+def write_summary(summary: pd.DataFrame, path: Path) -> Path:
+    """Write a ``summarise`` table to ``path`` without its wall-time columns (``SUMMARY_TIMING_COLUMNS``), which go
+    to ``timings_<name>`` beside it (not committed: a rerun of the same code rewrites ``path`` byte for byte)."""
+    path = Path(path)
+    timing = [c for c in SUMMARY_TIMING_COLUMNS if c in summary.columns]
+    summary.drop(columns=timing).to_csv(path, index=False, float_format="%.6g")
+    keys = [c for c in ("setting_key", "method") if c in summary.columns]
+    summary[keys + timing].to_csv(path.with_name(f"timings_{path.name}"), index=False, float_format="%.6g")
+    return path
+
+
 def write_tables(df: pd.DataFrame, sweep: str, out_dir: str | Path) -> tuple[Path, Path]:
     """Write ``summary_<sweep>.csv``, ``trials_<sweep>.csv`` and ``settings_<sweep>.json`` (the fixed
-    settings) of the trial rows ``df`` into ``out_dir``; returns the two tables' paths."""
+    settings) of the trial rows ``df`` into ``out_dir``; returns the two tables' paths. The wall times
+    (``TIMING_COLUMNS``, ``SUMMARY_TIMING_COLUMNS``) go to ``timings_trials_<sweep>.csv`` and
+    ``timings_summary_<sweep>.csv`` instead (not committed: a rerun of the same code rewrites the others byte for
+    byte)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     summary_path, trials_path = out / f"summary_{sweep}.csv", out / f"trials_{sweep}.csv"
-    summarise(df).to_csv(summary_path, index=False, float_format="%.6g")
-    trial_table(df).to_csv(trials_path, index=False, float_format="%.6g")
+    write_summary(summarise(df), summary_path)
+    trials = trial_table(df)
+    t_time = [c for c in TIMING_COLUMNS if c in trials.columns]
+    trials.drop(columns=t_time).to_csv(trials_path, index=False, float_format="%.6g")
+    keys = [c for c in TIMING_KEYS if c in trials.columns]
+    trials[keys + t_time].to_csv(out / f"timings_{trials_path.name}", index=False, float_format="%.6g")
     (out / f"settings_{sweep}.json").write_text(json.dumps(constant_settings(df), indent=1, sort_keys=True) + "\n")
     return summary_path, trials_path
 

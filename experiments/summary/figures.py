@@ -61,8 +61,9 @@ def save_figure(fig, out: Path, name: str, dpi: int = 150) -> list[Path]:
     needed; the figure is closed. The one figure saver of the experiments."""
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}.png", out / f"{name}.pdf"]
-    for p in paths:
-        fig.savefig(p, dpi=dpi if p.suffix == ".png" else None, bbox_inches="tight")
+    for p in paths:  # no creation date in the PDF: the same figure is the same file on a rerun
+        fig.savefig(p, dpi=dpi if p.suffix == ".png" else None, bbox_inches="tight",
+                    metadata={"CreationDate": None} if p.suffix == ".pdf" else None)
     plt.close(fig)
     return paths
 
