@@ -26,7 +26,7 @@ from calib_core.geometry.transforms import transform_points
 from .dataset import Dataset, DatasetError, Pose, Scan
 from .detect import BoardDetection, detect_board
 from .extract_options import CURVATURE_CHI2, AmbiguousSegment, ExtractionError, ExtractOptions, PoseDiagnostics
-from .segment import _describe, find_board_segment
+from .segment import describe_segment, find_board_segment
 
 __all__ = ["CURVATURE_CHI2", "AmbiguousSegment", "ExtractOptions", "ExtractionError", "PoseDiagnostics", "extract",
            "extract_pose", "format_diagnostics"]
@@ -99,7 +99,7 @@ def _detect_all(dataset: Dataset, opts: ExtractOptions) -> dict[str, BoardDetect
 
 
 def _board_finish(obs_scan: Scan, idx: np.ndarray, diag: PoseDiagnostics) -> None:
-    length, rmid, rms = _describe(obs_scan, idx)
+    length, rmid, rms = describe_segment(obs_scan, idx)
     diag.segment = (int(idx[0]), int(idx[-1]) + 1)
     diag.n_points = len(idx)
     diag.bearing_deg = (math.degrees(obs_scan.bearing[idx[0]]), math.degrees(obs_scan.bearing[idx[-1]]))

@@ -180,7 +180,7 @@ def curvature_statistic(P: np.ndarray, range_sigma_m: float) -> float:
     return gain / sigma_p**2
 
 
-def _describe(scan: Scan, idx: np.ndarray) -> tuple[float, float, float]:
+def describe_segment(scan: Scan, idx: np.ndarray) -> tuple[float, float, float]:
     P = scan.points[idx]
     c, u, res, _ = tls_line(P)
     s = (P - c) @ u
@@ -218,7 +218,7 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
     cands, rejected = [], []
     for i0, i1 in segs:
         idx = np.arange(i0, i1)
-        length, rmid, rms = _describe(scan, idx)
+        length, rmid, rms = describe_segment(scan, idx)
         r = scan.range[idx]
         inside = np.mean((r >= lo) & (r <= hi))
         why = None

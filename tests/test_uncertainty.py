@@ -6,7 +6,7 @@ from scenes import OUTLINE, make_observations, random_extrinsic
 
 from calib_core.checks.degeneracy import degeneracy_warnings
 from calib_core.data.io import extrinsic_yaml
-from calib_core.data.lines import scan_noise_estimate
+from calib_core.data.lines import range_sigma
 from calib_core.data.residuals import outside_outline, perturb, range_residuals
 from calib_core.errors import UncertaintyError
 from calib_core.geometry.transforms import make_T, matrix_to_rotvec, rotvec_to_matrix
@@ -148,10 +148,11 @@ def test_conditioning_is_scale_free(rng):
     assert conditioning(moved) == pytest.approx(c, rel=1e-6)
 
 
-def test_scan_noise_estimate(rng):
+def test_range_sigma_from_the_scan_lines_or_given(rng):
     obs = make_observations(rng, 8, 0.02)
-    assert scan_noise_estimate(obs) == pytest.approx(0.02, rel=0.2)
-    assert scan_noise_estimate(make_observations(rng, 4, 0.0)) < 1e-5
+    assert range_sigma(obs) == pytest.approx(0.02, rel=0.2)
+    assert range_sigma(obs, robust=True) == pytest.approx(0.02, rel=0.3)
+    assert range_sigma(make_observations(rng, 4, 0.0)) < 1e-5 and range_sigma(obs, 0.005) == 0.005
 
 
 def test_outside_outline_distances():

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from ..data.lines import MIN_SPREAD_M, scan_lines
+from ..data.lines import MIN_SPREAD_M, range_sigma
 from ..data.observations import MIN_RANGE_M, Observations, ScanData
 from ..data.residuals import outside_outline, points_in_boards, range_residuals
 
@@ -52,12 +52,6 @@ def _clipped_chi2_moments(c: float) -> tuple[float, float]:
 
 
 CHI2_MEAN, CHI2_VAR = _clipped_chi2_moments(CLIP_Z)
-
-
-def line_noise_estimate(obs: Observations) -> float:
-    """The robust range-noise std (metres) from the scan lines alone (``lines.ScanLines.robust_sigma_m``; NaN
-    when no board has enough points)."""
-    return scan_lines(obs).robust_sigma_m
 
 
 @dataclass(frozen=True)
@@ -89,7 +83,7 @@ class Verdict:
 def effective_sigma(obs: Observations, range_sigma_m: float | None = None) -> float:
     """The spread (metres) the residuals are tested against: the range noise (given, or estimated from the scan
     lines) and ``POSE_FLOOR_M`` in quadrature."""
-    s = line_noise_estimate(obs) if range_sigma_m is None else float(range_sigma_m)
+    s = range_sigma(obs, range_sigma_m, robust=True)
     return float(np.hypot(0.0 if not np.isfinite(s) else s, POSE_FLOOR_M))
 
 

@@ -131,19 +131,28 @@ def _checked_std(std, n_dist: int) -> np.ndarray:
     return s
 
 
-def intrinsics_jacobian(camera: Camera, P_cam: np.ndarray) -> np.ndarray:
-    """d(u, v)/d(fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4) (...,2,16) of ``project`` at
-    camera-frame points ``P_cam`` (...,3) (metres): pixels per pixel for K, pixels per unit for the coefficients."""
-    P = np.asarray(P_cam, float)
-    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = camera.dist
-    fx, fy = camera.K[0, 0], camera.K[1, 1]
-    x, y = P[..., 0] / P[..., 2], P[..., 1] / P[..., 2]
+def _distort(dist: np.ndarray, x: np.ndarray, y: np.ndarray):
+    """OpenCV's distortion (rational radial, tangential, thin prism) of normalised image points ``x``, ``y``:
+    ``(r2, a, b, rad, xd, yd)`` with ``r2 = x^2 + y^2``, the radial numerator ``a`` and denominator ``b``,
+    ``rad = a / b`` and the distorted normalised point ``(xd, yd)``."""
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = dist
     r2 = x * x + y * y
     a = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
     b = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
     rad = a / b
     xd = x * rad + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + r2 * (s1 + s2 * r2)
     yd = y * rad + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + r2 * (s3 + s4 * r2)
+    return r2, a, b, rad, xd, yd
+
+
+def intrinsics_jacobian(camera: Camera, P_cam: np.ndarray) -> np.ndarray:
+    """d(u, v)/d(fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4) (...,2,16) of ``project`` at
+    camera-frame points ``P_cam`` (...,3) (metres): pixels per pixel for K, pixels per unit for the coefficients."""
+    P = np.asarray(P_cam, float)
+    fx, fy = camera.K[0, 0], camera.K[1, 1]
+    iz = 1.0 / P[..., 2]
+    x, y = P[..., 0] * iz, P[..., 1] * iz
+    r2, a, b, rad, xd, yd = _distort(camera.dist, x, y)
     z, one = np.zeros_like(x), np.ones_like(x)
     pw = np.stack([r2, r2**2, r2**3])                        # r^2, r^4, r^6
     drad = np.concatenate([pw / b, -pw * a / b**2])          # d rad / d(k1, k2, k3, k4, k5, k6)
@@ -164,12 +173,7 @@ def project(camera: Camera, P_cam: np.ndarray, jacobian: bool = False):
     fx, fy = camera.K[0, 0], camera.K[1, 1]
     iz = 1.0 / P[..., 2]
     x, y = P[..., 0] * iz, P[..., 1] * iz
-    r2 = x * x + y * y
-    a = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    b = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
-    rad = a / b
-    xd = x * rad + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + r2 * (s1 + s2 * r2)
-    yd = y * rad + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + r2 * (s3 + s4 * r2)
+    r2, a, b, rad, xd, yd = _distort(camera.dist, x, y)
     uv = np.stack([fx * xd + camera.K[0, 2], fy * yd + camera.K[1, 2]], axis=-1)
     if not jacobian:
         return uv

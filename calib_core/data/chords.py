@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from .observations import Observations
-from .residuals import _frames, scan_endpoints
+from .residuals import given_frames, scan_endpoints
 
 MIN_CROSSING_SIN = 1e-9
 """An outline edge whose direction makes a sine below this with the scan line is not crossed (parallel)."""
@@ -49,7 +49,7 @@ def lower_bound_boards(obs: Observations) -> np.ndarray:
 
 def endpoints_2d(obs: Observations, candidates: np.ndarray, frames: tuple | None = None) -> np.ndarray:
     """(M,N,2,2) the (x, y) of every board's first and last scan point in its board frame, per candidate."""
-    A, c = _frames(obs, candidates, 2, frames)
+    A, c = given_frames(obs, candidates, 2, frames)
     return scan_endpoints(obs)[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]
 
 

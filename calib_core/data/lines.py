@@ -188,9 +188,14 @@ SCAN_LINES_KEY = "lines.scan_lines"
 """The ``Observations.derived`` key of the scan lines."""
 
 
-def scan_noise_estimate(obs: Observations) -> float:
-    """RMS range-noise std (metres) from the scan lines alone (``ScanLines.sigma_m``)."""
-    return scan_lines(obs).sigma_m
+def range_sigma(obs: Observations, given: float | None = None, *, robust: bool = False) -> float:
+    """The range-noise std (metres) a stage works with: ``given`` when the caller knows it, else estimated from the
+    scan lines alone, their RMS (``ScanLines.sigma_m``) or with ``robust`` their median absolute deviation
+    (``ScanLines.robust_sigma_m``)."""
+    if given is not None:
+        return float(given)
+    lines = scan_lines(obs)
+    return lines.robust_sigma_m if robust else lines.sigma_m
 
 
 def triple_inputs(obs: Observations, tri: np.ndarray, scans: np.ndarray | None = None):

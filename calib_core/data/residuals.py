@@ -142,7 +142,7 @@ def endpoints_in_board(obs: Observations, candidates: np.ndarray, frames: tuple 
     ``p_W = Phi_i^T (R_j^T (p_L - t_j) - Delta_i)`` (docs/METHOD.md eq. 7), metres (``board_frames``; ``frames``:
     theirs, when the caller has them).
     """
-    A, c = _frames(obs, candidates, 3, frames)
+    A, c = given_frames(obs, candidates, 3, frames)
     return scan_endpoints(obs)[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]
 
 
@@ -169,7 +169,7 @@ def board_frames(obs: Observations, candidates: np.ndarray, rows: int = 3) -> tu
     return A, -(A @ t[:, None, :, None])[..., 0] - PtD[None, :, :rows]
 
 
-def _frames(obs: Observations, candidates: np.ndarray, rows: int, frames: tuple | None) -> tuple:
+def given_frames(obs: Observations, candidates: np.ndarray, rows: int, frames: tuple | None) -> tuple:
     """``board_frames(obs, candidates, rows)``, or its first ``rows`` rows of ``frames`` when the caller has them."""
     if frames is None:
         return board_frames(obs, candidates, rows)
@@ -259,7 +259,7 @@ def scan_points_in_boards(obs: Observations, candidates: np.ndarray, rows: int =
     """(M,K,rows) every scan point (in ``obs.scan_data`` order) in its own board's frame under every candidate:
     ``p_W = Phi_i^T (R^T (p_L - t) - Delta_i)`` (metres; its first ``rows`` coordinates, ``board_frames``;
     ``frames``: theirs, of at least ``rows`` rows, when the caller has them)."""
-    A, c = _frames(obs, candidates, rows, frames)
+    A, c = given_frames(obs, candidates, rows, frames)
     points = obs.scan_data.points
     out = np.empty((len(candidates), len(points), rows))
     for i, sl in enumerate(obs.derived("residuals.board_slices", _board_slices)):
@@ -332,6 +332,6 @@ def board_frame_rows(obs: Observations, T: np.ndarray, points: np.ndarray, board
     coordinates, ``x = (w, dt)`` the module's left perturbation. With ``A = Phi^T R^T`` (``board_frames``; ``frames``:
     those of ``T[None]``, when the caller has them), ``d p_W / d x = A [[p_L - t]_x, -I]``, so the row is
     ``(v x (p_L - t), -v)`` with ``v = A^T g``."""
-    A = _frames(obs, T[None], g.shape[1], frames)[0][0][board]                 # (K,r,3)
+    A = given_frames(obs, T[None], g.shape[1], frames)[0][0][board]                 # (K,r,3)
     v = np.sum(g[..., None] * A, axis=1)
     return np.concatenate([_cross(v, points - T[:3, 3]), -v], axis=1)

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..data.lines import scan_noise_estimate
+from ..data.lines import range_sigma
 from ..data.observations import Observations
 from ..data.residuals import plane_residuals
 from ..entry import calibrate
@@ -143,10 +143,10 @@ def leave_one_out(obs: Observations, method: str = "lidarcam", *, range_sigma_m:
     for each pose i; e.g. ``fixed=...`` for a rig that does not determine every direction).
 
     ``range_sigma_m``: the range noise std that is the unit of ``rms_sigmas``; default
-    ``scan_noise_estimate(obs)`` (from the scan lines, no extrinsic). It is not passed to the method; give it
+    ``range_sigma(obs)`` (from the scan lines, no extrinsic). It is not passed to the method; give it
     in ``options`` too if the method should use it. A fold whose calibration fails is recorded with its reason.
     """
-    sigma = float(range_sigma_m) if range_sigma_m is not None else scan_noise_estimate(obs)
+    sigma = range_sigma(obs, range_sigma_m)
     N = obs.n_boards
     names = [str(n) for n in (obs.meta or {}).get("poses", [])][:N]
     names += [f"{i:03d}" for i in range(len(names), N)]

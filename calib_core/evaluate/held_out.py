@@ -23,7 +23,7 @@ from ..data.lines import residual_sigma
 from ..data.observations import Observations
 from ..data.residuals import range_residuals
 from ..refine.joint import board_poses, corner_residuals, joint_range_residuals, scan_data_at
-from ..refine.uncertainty import _inverse_information
+from ..refine.uncertainty import inverse_information
 
 GAUSS_Q90 = 1.6449
 """The 90% quantile of ``|z|`` for a standard normal ``z``."""
@@ -42,7 +42,7 @@ def _board_pose_covariance(obs1: Observations, corner_sigma_px: float) -> np.nda
     corners alone."""
     _, Jc = corner_residuals(obs1, board_poses(obs1), jacobian=True)
     Jc = Jc.reshape(-1, 6)
-    return _inverse_information(Jc.T @ Jc / corner_sigma_px**2, 1e-12)
+    return inverse_information(Jc.T @ Jc / corner_sigma_px**2, 1e-12)
 
 
 @dataclass(frozen=True, eq=False)

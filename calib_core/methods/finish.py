@@ -10,7 +10,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, undetermined_directions
-from ..data.lines import scan_noise_estimate
+from ..data.lines import range_sigma
 from ..data.observations import Observations
 from ..data.residuals import perturb
 from ..errors import JointError, SolveFailure, UncertaintyError
@@ -73,7 +73,7 @@ def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], n
     refined on ``residual`` (robust scale ``f_scale_m``, default ``f_scale_sigmas`` noise stds). Returns
     (T_lidar_cam, starts, info)."""
     mask, values = parse_fixed(fixed)
-    sigma = range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs)
+    sigma = range_sigma(obs, range_sigma_m)
     starts = fixed_starts(obs, mask, values, full_start)
     T, info = calibrate_fixed(obs, mask, values, starts, residual=residual, loss=loss,
                               f_scale_m=f_scale_m if f_scale_m is not None else f_scale_sigmas * sigma,

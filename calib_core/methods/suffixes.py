@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..checks.degeneracy import explain_failure
-from ..data.lines import scan_noise_estimate
+from ..data.lines import range_sigma
 from ..data.observations import Observations
 from ..errors import SolveFailure
 from ..refine.joint import RANGE_ONLY_MODEL, JointOptions
@@ -31,7 +31,7 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
     SolveFailure names them, with the analysis in its info."""
     data = obs.scan_data
     if f_scale_m is None:
-        f_scale_m = F_SCALE_SIGMAS * (range_sigma_m if range_sigma_m is not None else scan_noise_estimate(obs))
+        f_scale_m = F_SCALE_SIGMAS * range_sigma(obs, range_sigma_m)
     r = refine(data, T0, residual=residual, loss=loss, f_scale_m=f_scale_m, max_nfev=max_nfev)
     deg = refuse_undetermined(obs, r.T_lidar_cam, np.stack([r.T_lidar_cam, T0]), "refinement", range_sigma_m)
     cov = range_covariance(obs, r.T_lidar_cam, T0[None], "refinement", residual, range_sigma_m)

@@ -20,7 +20,7 @@ from ..checks.degeneracy import AXES, NULL_CONDITIONING, undetermined_directions
 from ..data.observations import MAX_BOARDS, Observations
 from ..errors import LidarcamError, UncertaintyError
 from ..refine.joint import board_informations
-from ..refine.uncertainty import _inverse_information
+from ..refine.uncertainty import inverse_information
 from .views import POSE_FIELDS, REJECTIONS, PlanRig, board_poses_lidar, feasibility, noise_free_views
 
 SIGMA_NAMES = ("roll_deg", "pitch_deg", "yaw_deg", "x_mm", "y_mm", "z_mm")
@@ -87,7 +87,7 @@ def predict(information: np.ndarray, scale_m: float = SCALE_M) -> Prediction:
     cov = None
     if not null.any():
         try:
-            cov = _inverse_information(F, 1e-12)
+            cov = inverse_information(F, 1e-12)
         except UncertaintyError:
             null = lam <= lam[0]
     if cov is not None:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..data.lines import scan_noise_estimate
+from ..data.lines import range_sigma
 from ..data.observations import Observations
 from .capture import DEFAULT_TARGET, Plan, plan_capture, set_informations
 from .views import PlanRig, rig_from_observations
@@ -38,7 +38,7 @@ def observation_noise(obs: Observations, info: dict | None = None, base: PlanRig
     ``DEFAULT_CORNER_SIGMA_PX``; the corner noise is 0 for boards without corners."""
     info = info or {}
     sr, src_r = (float(info["range_sigma_m"]), "calibration") if info.get("range_sigma_m") else \
-        (float(scan_noise_estimate(obs)), "scan lines")
+        (range_sigma(obs), "scan lines")
     if not obs.has_corners:
         return sr, 0.0, f"range from the {src_r}, no corners"
     rp = [v for v in (obs.meta or {}).get("reproj_rms_px") or [] if v is not None]

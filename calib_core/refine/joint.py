@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data.camera import Camera
-from ..data.lines import residual_sigma, scan_noise_estimate
+from ..data.lines import range_sigma, residual_sigma
 from ..data.observations import Observations
 from ..data.residuals import perturb, range_residuals
 from ..errors import JointError, ObservationError, UncertaintyError
@@ -32,7 +32,7 @@ from ..geometry.transforms import rotvec_to_matrix
 from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS, IntrinsicsPrior, augmented_blocks
 from .joint_residuals import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 from .refine import F_SCALE_SIGMAS, robust_cost
-from .uncertainty import Crlb, _inverse_information
+from .uncertainty import Crlb, inverse_information
 
 JOINT_MODEL = "joint"
 JOINT_INTRINSICS_MODEL = "joint, intrinsics uncertain"
@@ -224,7 +224,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         corner_sigma_px, range_sigma_m: noise stds; ``None`` estimates each from its own residuals (corners:
             ``2J - 6N`` degrees of freedom, ranges ``K - 6``), re-solving until they change by less than
             ``sigma_rtol`` (at most ``sigma_iters`` solves). Start values: the corner RMS at the observed poses,
-            the scan-line estimate of ``data.lines.scan_noise_estimate`` (floored by ``START_*``).
+            the scan-line estimate of ``data.lines.range_sigma`` (floored by ``START_*``).
         loss, f_scale_sigmas: robust loss (``refine.Loss``) on the normalised residuals, its scale in noise stds.
         intrinsics: when the camera states ``std_intrinsics``, estimate the intrinsics too, with that Gaussian
             prior (``refine.joint_intrinsics``), so the covariance holds their error; False takes them as exact.
@@ -235,7 +235,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
     est_c, _ = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards)
     # start weights from each sensor alone, floored so that neither sensor swamps the other before the solve
     sc = corner_sigma_px if corner_sigma_px is not None else max(est_c, START_CORNER_SIGMA_PX)
-    sr = range_sigma_m if range_sigma_m is not None else max(scan_noise_estimate(obs), START_RANGE_SIGMA_M)
+    sr = range_sigma_m if range_sigma_m is not None else max(range_sigma(obs), START_RANGE_SIGMA_M)
     prior = IntrinsicsPrior.of(obs.camera) if intrinsics else None
     k = None if prior is None else prior.k0.copy()
     for _ in range(max(1, sigma_iters)):
@@ -278,7 +278,7 @@ def intrinsics_marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T
         X = np.linalg.solve(H_bb, np.swapaxes(H_gb, 1, 2))
     except np.linalg.LinAlgError:
         raise UncertaintyError("a board's pose is not determined by its corners") from None
-    return _inverse_information(H_gg - np.einsum("nab,nbc->ac", H_gb, X), rcond)
+    return inverse_information(H_gg - np.einsum("nab,nbc->ac", H_gb, X), rcond)
 
 
 def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
@@ -314,7 +314,7 @@ def marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board:
     UncertaintyError when a board's pose or the extrinsic is not determined.
     """
     S = board_informations(obs, T_lidar_cam, T_cam_board, corner_sigma_px, range_sigma_m).sum(axis=0)
-    return _inverse_information(S, rcond)
+    return inverse_information(S, rcond)
 
 
 def joint_crlb(obs: Observations, range_sigma_m: float, corner_sigma_px: float, T_lidar_cam: np.ndarray | None = None,

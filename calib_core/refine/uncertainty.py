@@ -21,7 +21,7 @@ from ..errors import UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 
 
-def _inverse_information(A: np.ndarray, rcond: float) -> np.ndarray:
+def inverse_information(A: np.ndarray, rcond: float) -> np.ndarray:
     """Inverse of a symmetric positive semi-definite 6x6 ``A``; UncertaintyError when (nearly) singular."""
     A = 0.5 * (A + A.T)
     # scale to unit diagonal first, so that radians and metres do not decide the rank test
@@ -46,7 +46,7 @@ def covariance(jacobian: np.ndarray, residuals: np.ndarray, range_sigma_m: float
         UncertaintyError: fewer than 7 residuals with ``range_sigma_m=None``, or a singular ``J^T J``.
     """
     J = np.asarray(jacobian, float)
-    return _noise_variance(residuals, J.shape[1], range_sigma_m) * _inverse_information(J.T @ J, rcond)
+    return _noise_variance(residuals, J.shape[1], range_sigma_m) * inverse_information(J.T @ J, rcond)
 
 
 def _noise_variance(residuals: np.ndarray, n_params: int, range_sigma_m: float | None) -> float:
@@ -100,7 +100,7 @@ def crlb(obs: Observations, range_sigma_m: float, T_lidar_cam: np.ndarray | None
 
     Raises UncertaintyError for a singular Fisher information or a missing extrinsic.
     """
-    cov = _inverse_information(fisher_information(obs, _extrinsic(obs, T_lidar_cam), range_sigma_m), 1e-12)
+    cov = inverse_information(fisher_information(obs, _extrinsic(obs, T_lidar_cam), range_sigma_m), 1e-12)
     return Crlb(sigma_rot_deg(cov), sigma_trans_m(cov), cov)
 
 
@@ -165,5 +165,5 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
     J_p = J_p @ B
     m = (data.normals @ T[:3, :3].T)[data.board]
     w = np.einsum("kj,kj->k", m, data.points / np.linalg.norm(data.points, axis=1, keepdims=True))
-    Ai = _inverse_information(J_p.T @ J_p, 1e-12)
+    Ai = inverse_information(J_p.T @ J_p, 1e-12)
     return Ai @ (J_p.T @ (J_p * (sigma2 * w**2)[:, None])) @ Ai

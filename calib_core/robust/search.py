@@ -13,7 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..data.lines import scan_lines
+from ..data.lines import range_sigma, scan_lines
 from ..data.observations import Observations
 from ..data.residuals import range_residuals
 from ..errors import SolveFailure
@@ -142,7 +142,7 @@ def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_
         raise SolveFailure(f"lidarcam: only {len(good)} boards with a line-like scan (at least 3 are needed): "
                            + "; ".join(f"board {r['index']}: {r['reason']}" for r in rejected))
     obs_g = obs.subset(good)
-    sigma = range_sigma_m if range_sigma_m is not None else scan_lines(obs_g).sigma_m
+    sigma = range_sigma(obs_g, range_sigma_m)
     H = hypotheses(obs_g, sigma, outline_sigma_m, use_zhang_pless=options.use_zhang_pless, **dict(options.solver))
     if len(H.T) == 0:
         raise SolveFailure("no candidate: " + "; ".join(H.reasons))

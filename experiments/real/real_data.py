@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from calib_core.data.io import save_observations
+from calib_core.data.lines import range_sigma
 from calib_core.geometry.transforms import invert_T
 from rig import public_sets as ps
 from rig.dataset import DatasetError
@@ -42,7 +43,6 @@ from .real_eval import (
     leaderboard,
     leaderboard_md,
     planar_calibration,
-    range_noise_m,
     uncertainty_md,
 )
 
@@ -234,7 +234,7 @@ def run_set(name: str, folder: Path, out: Path, n_subsets: int, n_jobs: int) -> 
     (out / "obs").mkdir(exist_ok=True)
     shown = replace(obs, meta={**obs.meta, "dataset": repo_relative(folder)}) if obs.meta else obs
     save_observations(shown, out / "obs" / f"{SHORT[name]}.json")
-    sigma = range_noise_m(obs)
+    sigma = range_sigma(obs)  # from the scan lines alone, no extrinsic
     rows = leaderboard(obs, METHODS, sigma, rs.published)
     best = _best(rows)
     T = None if best is None else np.asarray(best["T_lidar_cam"])

@@ -11,7 +11,6 @@ import numpy as np
 
 import calib_core
 from calib_core.checks.degeneracy import undetermined_directions
-from calib_core.data.lines import scan_noise_estimate
 from calib_core.data.observations import Observations
 from calib_core.evaluate.crossval import leave_one_out
 from calib_core.geometry.metrics import pose_errors
@@ -19,11 +18,6 @@ from calib_core.geometry.mounting import UNIT_NAMES
 from calib_core.geometry.transforms import invert_T
 from rig.markdown import md_table, num
 from rig.report import board_plane_distances as plane_distances
-
-
-def range_noise_m(obs: Observations) -> float:
-    """Range-noise std (m) from the scan lines alone (no extrinsic): the library's estimate."""
-    return float(scan_noise_estimate(obs))
 
 
 def held_out(obs: Observations, method: str, sigma_m: float, **options) -> dict:
