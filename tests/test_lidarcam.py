@@ -63,7 +63,7 @@ def test_ml_suffix_refines_without_raising_the_cost_and_reports_a_covariance(rng
 
 def test_suffix_options_go_to_the_right_place(rng):
     obs = make_observations(rng, 6, 0.02)
-    r = calibrate(obs, "peng2022+ml", loss="cauchy", f_scale=0.05, range_sigma_m=0.02, delta_m=0.04)
+    r = calibrate(obs, "peng2022+ml", loss="cauchy", f_scale_m=0.05, range_sigma_m=0.02, delta_m=0.04)
     assert r.ok and r.info["refine_loss"] == "cauchy"
     P = calibrate(obs, "peng2022+ml", range_sigma_m=0.02).covariance
     P2 = calibrate(obs, "peng2022+ml", range_sigma_m=0.04).covariance

@@ -167,3 +167,15 @@ def test_calibrate_rejects_unknown_methods_and_options():
         calibrate(obs, "nope")
     with pytest.raises(CalibrationError, match="unexpected keyword"):
         calibrate(obs, "peng2022", delta=3)
+
+
+@pytest.mark.parametrize("method,key", [("lidarcam", "f_scale"), ("lidarcam", "min_conditioning"),
+                                        ("zhang_pless+ml", "f_scale"), ("zhang_pless+joint", "f_scale")])
+def test_an_option_that_meant_two_things_is_refused_with_its_new_name(method, key):
+    from calib_core import CalibrationError, calibrate
+    from calib_core.methods.options import RENAMED
+    from simulate import SimOptions, generate
+
+    obs = generate(SimOptions(n_boards=5), seed=3, trial=0)
+    with pytest.raises(CalibrationError, match=RENAMED[key].split(" ")[0]):
+        calibrate(obs, method, **{key: 0.05})

@@ -61,9 +61,10 @@ is undetermined: the data do not fix it."""
 @dataclass(frozen=True)
 class DegeneracyOptions:
     """Thresholds of ``undetermined_directions`` for a method's refusal: a direction with no information below
-    ``min_conditioning`` (``NULL_CONDITIONING``), or with a scaled 1-sigma above ``max_scaled_sigma``."""
+    ``null_conditioning`` (``NULL_CONDITIONING``), or with a scaled 1-sigma above ``max_scaled_sigma``. (The
+    warning on a poorly conditioned set, ``MIN_CONDITIONING``, is not an option.)"""
 
-    min_conditioning: float = NULL_CONDITIONING
+    null_conditioning: float = NULL_CONDITIONING
     max_scaled_sigma: float = MAX_SCALED_SIGMA
 
 

@@ -27,7 +27,7 @@ def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray
     the directions the board geometry leaves free, with the analysis and the board-set warnings in its info."""
     options = options or DegeneracyOptions()
     deg = undetermined_directions(obs, T, range_sigma_m, max_scaled_sigma=options.max_scaled_sigma,
-                                  null_conditioning=options.min_conditioning)
+                                  null_conditioning=options.null_conditioning)
     if not deg.determined:
         raise SolveFailure(f"{who}: {deg.message()}", candidates,
                            {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})

@@ -53,6 +53,8 @@ class LidarcamOptions:
             if key in SOLVER_KEYWORDS:
                 solver[key] = value
                 continue
+            if key in RENAMED:
+                raise CalibrationError(f"lidarcam: option {key!r} is now {RENAMED[key]}")
             if key not in FLAT_KEYWORDS:
                 raise CalibrationError(f"lidarcam: unknown option {key!r}; known: "
                                        f"{', '.join(sorted({*FLAT_KEYWORDS, *SOLVER_KEYWORDS}))}")
@@ -73,16 +75,20 @@ FLAT_KEYWORDS: dict[str, tuple[str | None, str]] = {
     "behind_penalty": ("score", "behind_penalty"), "prior": ("score", "prior"),
     "chord_sigma_m": ("score", "chord_sigma_m"), "chord_cap": ("score", "chord_cap"),
     "margin_sigma_m": ("score", "margin_sigma_m"), "tie_log_likelihood": ("refine", "tie_log_likelihood"),
-    "n_refine": ("refine", "n_refine"), "loss": ("refine", "loss"), "f_scale": ("refine", "f_scale_m"),
-    "f_scale_m": ("refine", "f_scale_m"), "f_scale_sigmas": ("refine", "f_scale_sigmas"),
+    "n_refine": ("refine", "n_refine"), "loss": ("refine", "loss"), "f_scale_m": ("refine", "f_scale_m"),
+    "f_scale_sigmas": ("refine", "f_scale_sigmas"),
     "max_nfev": ("refine", "max_nfev"), "polish": ("refine", "polish"),
     "polish_threshold": ("refine", "polish_threshold"),
     "distinct_rot_deg": ("refine", "distinct_rot_deg"), "distinct_trans_m": ("refine", "distinct_trans_m"),
-    "min_conditioning": ("degeneracy", "min_conditioning"), "max_scaled_sigma": ("degeneracy", "max_scaled_sigma"),
+    "null_conditioning": ("degeneracy", "null_conditioning"), "max_scaled_sigma": ("degeneracy", "max_scaled_sigma"),
     "use_corners": ("joint", "use_corners"), "corner_sigma_px": ("joint", "corner_sigma_px"),
     "joint_f_scale_sigmas": ("joint", "f_scale_sigmas"), "joint_max_iter": ("joint", "max_iter"),
 }
 """Flat keywords of ``calibrate(obs, "lidarcam", ...)`` and the (part, field) each sets (part None: the top)."""
+RENAMED = {"f_scale": "f_scale_m (metres) or f_scale_sigmas (range-noise stds)",
+           "min_conditioning": "null_conditioning (the refusal threshold; the warning's MIN_CONDITIONING is fixed)"}
+"""Option names that meant two things, and the names that replaced them (a call with the old one is refused
+with this hint rather than read one way)."""
 SOLVER_KEYWORDS = frozenset(p.name for p in inspect.signature(solve_triples).parameters.values()
                             if p.kind is inspect.Parameter.KEYWORD_ONLY)
 """Keywords that go to the minimal solver (``ConsensusOptions.solver``)."""

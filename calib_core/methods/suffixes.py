@@ -9,17 +9,17 @@ import numpy as np
 from ..checks.degeneracy import explain_failure
 from ..data.lines import range_sigma
 from ..data.observations import Observations
-from ..errors import SolveFailure
+from ..errors import CalibrationError, SolveFailure
 from ..refine.joint import RANGE_ONLY_MODEL, JointOptions
 from ..refine.joint_intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.refine import F_SCALE_SIGMAS, refine
 from ..refine.uncertainty import conditioning
 from ..registry import Method, derived
 from .finish import fixed_calibration, range_covariance, refuse_undetermined, try_joint
+from .options import RENAMED
 
-REFINE_OPTIONS = ("loss", "f_scale_m", "f_scale", "range_sigma_m", "max_nfev", "fixed")
-"""Options of an ``X+ml`` / ``X+plane`` method that go to the refinement (``f_scale``: the former name of
-``f_scale_m``, metres); all others go to ``X``."""
+REFINE_OPTIONS = ("loss", "f_scale_m", "range_sigma_m", "max_nfev", "fixed")
+"""Options of an ``X+ml`` / ``X+plane`` method that go to the refinement (metres); all others go to ``X``."""
 
 
 def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: str = "linear",
@@ -44,12 +44,16 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
     return r, cov, info
 
 
+def _refuse_renamed(options: dict) -> None:
+    for key in RENAMED:
+        if key in options:
+            raise CalibrationError(f"option {key!r} is now {RENAMED[key]}")
+
+
 def _refine_options(options: dict) -> dict:
-    """The refinement's options popped from ``options`` (``f_scale`` read as ``f_scale_m``)."""
-    ropts = {k: options.pop(k) for k in REFINE_OPTIONS if k in options}
-    if "f_scale" in ropts:
-        ropts.setdefault("f_scale_m", ropts.pop("f_scale"))
-    return ropts
+    """The refinement's options popped from ``options`` (an option ``RENAMED`` is refused with its new name)."""
+    _refuse_renamed(options)
+    return {k: options.pop(k) for k in REFINE_OPTIONS if k in options}
 
 
 def refined_method(base: Method, residual: str, suffix: str) -> Method:
@@ -77,20 +81,19 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
     return derived(base, suffix, func, f"{base.name}, then {what}, with covariance")
 
 
-JOINT_OPTIONS = ("loss", "f_scale_sigmas", "f_scale", "range_sigma_m", "corner_sigma_px", "max_iter")
-"""Options of an ``X+joint`` method that go to the joint refinement (``f_scale``: the former name of
-``f_scale_sigmas``, in noise stds); all others go to ``X``."""
+JOINT_OPTIONS = ("loss", "f_scale_sigmas", "range_sigma_m", "corner_sigma_px", "max_iter")
+"""Options of an ``X+joint`` method that go to the joint refinement (``f_scale_sigmas`` in noise stds); all others
+go to ``X``."""
 
 
 def joint_method(base: Method) -> Method:
     """The method ``base.name + "+joint"``: run ``base``, then the joint maximum likelihood over the image corners
-    and the ranges from its answer (``refine.joint.joint_step``; options ``JOINT_OPTIONS``, ``f_scale`` in noise
+    and the ranges from its answer (``refine.joint.joint_step``; options ``JOINT_OPTIONS``, ``f_scale_sigmas`` in noise
     stds), with the extrinsic's covariance, board poses marginalised. Without corners on every board it is
     ``X+ml`` and says so in ``info["warnings"]`` (its covariance ignores the camera's noise)."""
     def func(obs: Observations, **options):
+        _refuse_renamed(options)
         jopts = {k: options.pop(k) for k in JOINT_OPTIONS if k in options}
-        if "f_scale" in jopts:
-            jopts.setdefault("f_scale_sigmas", jopts.pop("f_scale"))
         T0, cands, info = base.func(obs, **options)
         T0 = np.asarray(T0, float)
         loss, sigma = jopts.pop("loss", "linear"), jopts.pop("range_sigma_m", None)
