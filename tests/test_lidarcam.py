@@ -203,9 +203,10 @@ def test_polish_with_the_analytic_jacobian_reaches_the_forward_difference_optimu
 def test_pruned_choice_of_starts_is_the_full_scoring_choice(seed):
     """``best_starts`` scores the outline term only where it can matter: its starts are those of the full score."""
     from calib_core.data.residuals import perturb
-    from calib_core.robust.choose import best_starts, distinct_order
+    from calib_core.robust.choose import best_starts
     from calib_core.robust.scorers import ScoreOptions
     from calib_core.robust.scorers import lidarcam as lidarcam_score
+    from calib_core.robust.starts import distinct_order
 
     rng = np.random.default_rng(seed)
     obs = make_observations(rng, 3 + seed % 6, 0.02)
@@ -247,7 +248,7 @@ def test_gauss_newton_steps_on_some_boards_are_those_on_their_subset(seed):
     """The basin test's Gauss-Newton steps on the scan points of some boards equal the steps on the subset of those
     boards, and from a start near the truth on noise-free data they land on it."""
     from calib_core.data.residuals import perturb
-    from calib_core.robust.choose import gauss_newton_steps
+    from calib_core.robust.starts import gauss_newton_steps
 
     rng = np.random.default_rng(seed)
     obs = make_observations(rng, 5, 0.0)

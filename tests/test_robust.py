@@ -13,9 +13,9 @@ from calib_core import calibrate
 from calib_core.data.result import load_result
 from calib_core.geometry.metrics import pose_errors
 from calib_core.robust.consensus import board_statistics
+from calib_core.robust.final import point_test
 from calib_core.robust.hypotheses import needed_samples
 from calib_core.robust.inliers import clipped_sigma, trim_points
-from calib_core.robust.search import _point_test
 from simulate import SimOptions, generate
 
 
@@ -63,7 +63,7 @@ def test_final_point_test_leaves_a_board_offset_to_the_board_test_and_finds_a_st
     stray = np.zeros(len(boards[3].scan))
     stray[len(stray) // 2] = 10 * sigma
     boards[3] = replace(boards[3], scan=_with_ranges(boards[3].scan, stray))
-    kept, n = _point_test(replace(obs, boards=tuple(boards)), obs.T_lidar_cam_true, sigma)
+    kept, n = point_test(replace(obs, boards=tuple(boards)), obs.T_lidar_cam_true, sigma)
     assert n == 1
     assert len(kept.boards[1].scan) == len(boards[1].scan) and len(kept.boards[3].scan) == len(stray) - 1
 

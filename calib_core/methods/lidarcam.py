@@ -23,9 +23,10 @@ from ..refine.joint_intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.uncertainty import conditioning
 from ..registry import Method
 from ..robust.choose import TIE_LOG_LIKELIHOOD, WEAK_LOG_LIKELIHOOD, Choice, choose_and_refine
+from ..robust.final import FinalTests, final_tests
 from ..robust.inliers import trim
 from ..robust.scorers import lidarcam as lidarcam_score
-from ..robust.search import FinalTests, Search, consensus_search, final_tests
+from ..robust.search import Search, consensus_search
 from .finish import (
     NO_CORNERS,
     fixed_calibration,
@@ -52,7 +53,7 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
        ``range_sigma_m``; endpoint and outline terms; boards behind the camera); the ``refine.n_refine`` best
        distinct ones are refined by maximum likelihood on the range residuals, polished on the whole cost when the
        outlines disagree; the best is kept.
-    4. Final tests (``robust.search.final_tests``): a per-board test at the refined pose and a point test (range
+    4. Final tests (``robust.final.final_tests``): a per-board test at the refined pose and a point test (range
        residuals beyond ``inliers.TRIM_SIGMAS`` stds of their board's median one); when they change the boards or
        points, step 3 again from the answer on what is left.
     5. Degeneracy (``methods.finish.refuse_undetermined``): directions the board geometry leaves free (e.g. roll,

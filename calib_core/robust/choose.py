@@ -11,16 +11,13 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..data.observations import Observations
-from ..data.residuals import perturb, range_residuals
+from ..data.residuals import perturb
 from ..errors import SolveFailure
 from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine, so3_left_jacobian
 from .scorers import ScoreOptions, lidarcam_linearised, outline_term
 from .scorers import lidarcam as lidarcam_score
+from .starts import DISTINCT_ROT_DEG, DISTINCT_TRANS_M, distinct_order, gauss_newton_steps, near_any
 
-DISTINCT_ROT_DEG = 1.0
-"""Two extrinsics are distinct starts when they differ by at least this rotation (degrees) ..."""
-DISTINCT_TRANS_M = 0.05
-"""... or this translation (metres); the one rule for every choice of starts (consensus and refinement)."""
 POLISH_THRESHOLD = 10.0
 """The refined pose is polished on the whole cost when its endpoint and outline terms exceed this (in the
 cost's units, half a squared number of scale-lengths): the range optimum disagrees with the board outlines."""
@@ -69,29 +66,6 @@ class RefineOptions:
         return float(self.f_scale_m) if self.f_scale_m is not None else self.f_scale_sigmas * sigma_m
 
 
-def distinct_order(T: np.ndarray, cost: np.ndarray, n: int, rot_deg: float = DISTINCT_ROT_DEG,
-                   trans_m: float = DISTINCT_TRANS_M) -> list[int]:
-    """Indices of the ``n`` lowest finite ``cost`` among (M,4,4) ``T`` that differ pairwise by at least
-    ``rot_deg`` of rotation or ``trans_m`` of translation, best first."""
-    out: list[int] = []
-    for j in np.argsort(cost, kind="stable"):
-        if not np.isfinite(cost[j]) or len(out) >= n:
-            break
-        if out and near_any(T[j], T[out], rot_deg, trans_m):
-            continue
-        out.append(int(j))
-    return out
-
-
-def near_any(A: np.ndarray, K: np.ndarray, rot_deg: float = DISTINCT_ROT_DEG,
-             trans_m: float = DISTINCT_TRANS_M) -> bool:
-    """Whether the extrinsic ``A`` (4,4) is within ``rot_deg`` of rotation and ``trans_m`` of translation of one of
-    ``K`` (k,4,4): the distinct-start rule."""
-    cos = (np.einsum("ab,kab->k", A[:3, :3], K[:, :3, :3]) - 1.0) / 2.0         # cos of the relative angle
-    near = (cos > np.cos(np.radians(rot_deg))) & (np.linalg.norm(K[:, :3, 3] - A[:3, 3], axis=1) < trans_m)
-    return bool(near.any())
-
-
 def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions, range_sigma_m: float,
            give_up_above: float = np.inf) -> np.ndarray:
     """Minimise the whole ``lidarcam`` selection cost from ``T0`` (``least_squares``, ``POLISH_METHOD``) with its
@@ -122,13 +96,6 @@ def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions
     return perturb(T0, sol.x)
 
 
-BASIN_STEPS = 2
-"""Gauss-Newton steps that tell where a start heads (``gauss_newton_steps``): a start that lands within the
-distinct-start rule (``DISTINCT_ROT_DEG``, ``DISTINCT_TRANS_M``) of an optimum already found is in its basin and is
-not optimised again."""
-BASIN_DAMPING = 1e-12
-"""The basin test's normal equations are damped by this times their mean diagonal: the step stays finite along a
-direction the boards leave free (where it is not a test of anything)."""
 PRUNE_FIRST = 4
 """``best_starts`` scores the outline term of this many candidates (at least ``n + 1``) first, doubling as needed."""
 
@@ -230,23 +197,6 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
         best = min((o.cost for o in out), default=np.inf)
         out.append(polish_choice(obs, c, sigma_m, score, opts, GIVE_UP_FACTOR * best) if opts.polish and off else c)
     return with_ties(out, opts, opts.tie_log_likelihood)
-
-
-def gauss_newton_steps(data, T0: np.ndarray, boards: np.ndarray | None = None, n: int = BASIN_STEPS) -> np.ndarray:
-    """The extrinsics ``n`` Gauss-Newton steps on the range residuals (of the scan points of ``boards``, (N,) or
-    (M,N) bool; default all) take ``T0`` (4,4) or (M,4,4) to, all starts at once: where refining each heads (each
-    step solves the 6x6 normal equations, damped by ``BASIN_DAMPING``: a test of where a start heads, not an
-    estimate)."""
-    T = np.asarray(T0, float)
-    w = np.ones(len(data.points)) if boards is None else np.asarray(boards)[..., data.board].astype(float)
-    w = np.broadcast_to(w, T.shape[:-2] + w.shape[-1:])
-    for _ in range(n):
-        e, J = range_residuals(T, data, jacobian=True)
-        Jw = np.swapaxes(J * w[..., None], -1, -2)
-        JtJ = Jw @ J
-        damp = BASIN_DAMPING * np.trace(JtJ, axis1=-2, axis2=-1)[..., None, None] / 6 * np.eye(6)
-        T = perturb(T, -np.linalg.solve(JtJ + damp, (Jw @ e[..., None]))[..., 0])
-    return T
 
 
 def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score: ScoreOptions,

@@ -21,7 +21,7 @@ face. The test reads the two origins and the plane only, whichever face the boar
 normal flips ``d`` and ``d + m . t`` together), so no pose convention can tell a board seen from behind from a
 wrong candidate. Such a board is therefore read as the data contradicting a one-faced board: from 4 boards on the
 consensus leaves it out and names it (its per-board statistic is infinite, as for a board behind the camera,
-``consensus.board_reason``), and with 3 boards no candidate is plausible and the method refuses. A rig that
+``search.board_reason``), and with 3 boards no candidate is plausible and the method refuses. A rig that
 really sees boards from behind leaves those boards out of the observations.
 """
 

@@ -8,21 +8,20 @@ observations. Lidar frame, metres, radians.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 
 from ..data.lines import range_sigma, scan_lines
 from ..data.observations import Observations
-from ..data.residuals import range_residuals
 from ..errors import SolveFailure
 from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine
-from .choose import distinct_order, gauss_newton_steps, near_any
 from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
-from .inliers import TRIM_SIGMAS, TrimReport
+from .inliers import TrimReport
 from .plausible import implausible_reason
+from .starts import distinct_order, gauss_newton_steps, near_any
 
 POOL_MAX = 64
 """The final selection scores at most this many hypotheses, the best by MSAC cost (the per-board statistics are
@@ -44,8 +43,6 @@ suite (wrong boards, outlier points, mixed pixels) it names and leaves out the s
 it runs by Levenberg-Marquardt in less than half the time of ``soft_l1``'s trust-region solver."""
 MIN_TESTABLE = 4
 """Boards are tested and rejected only from this many on: three boards fit every minimal solution exactly."""
-FINAL_MIN_POINTS = 3
-"""The final point test leaves a board at least this many points (else it keeps them all)."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +87,7 @@ class Search:
         return self.hyps.T
 
 
-def _rejection(index: int, reason: str, statistic: float | None = None) -> dict:
+def rejection(index: int, reason: str, statistic: float | None = None) -> dict:
     return {"index": int(index), "reason": reason, "statistic": None if statistic is None else float(statistic)}
 
 
@@ -137,7 +134,7 @@ def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_
     options = options or ConsensusOptions()
     lines = scan_lines(obs)
     good = np.flatnonzero(lines.line_like)
-    rejected = [_rejection(i, f"no line fits its scan: {lines.problem[i]}") for i in np.flatnonzero(~lines.line_like)]
+    rejected = [rejection(i, f"no line fits its scan: {lines.problem[i]}") for i in np.flatnonzero(~lines.line_like)]
     if len(good) < 3:
         raise SolveFailure(f"lidarcam: only {len(good)} boards with a line-like scan (at least 3 are needed): "
                            + "; ".join(f"board {r['index']}: {r['reason']}" for r in rejected))
@@ -182,7 +179,7 @@ def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m
     tau = TEST_CHI2 * max(res.inflation for res in results)
     best = min(results, key=lambda res: float(msac_cost(res.q[None], tau)[0]))
     used = best.used
-    rejected = rejected + [_rejection(good[k], board_reason(best.q[k], TEST_CHI2 * best.inflation,
+    rejected = rejected + [rejection(good[k], board_reason(best.q[k], TEST_CHI2 * best.inflation,
                                                             implausible_reason(obs_g, best.T, k)), best.q[k])
                            for k in np.flatnonzero(~used)]
     if used.sum() < 3:
@@ -219,65 +216,3 @@ def board_reason(q: float, threshold: float, implausible: str | None = None) -> 
         return f"{implausible or 'its scan falls behind the camera'} under the consensus extrinsic"
     return (f"scan inconsistent with the board plane and outline (chi-square statistic {q:.3g} > {threshold:.3g}): "
             "not this board's scan, or a moved board")
-
-
-@dataclass(frozen=True, eq=False)
-class FinalTests:
-    """The final tests of a refined answer: the boards used (as Observations, points failing the point test left
-    out), whether that changed anything (then the method refines again on them), the warnings and the ``info``
-    entries (``boards_used``, ``boards_rejected``, ``points_trimmed``, ``consensus``)."""
-
-    obs_used: Observations
-    changed: bool
-    warnings: list
-    info: dict
-
-
-def _point_test(obs: Observations, T: np.ndarray, sigma_m: float) -> tuple[Observations, int]:
-    """Boards of ``obs`` without the scan points whose range residual at ``T``, less their board's median residual,
-    exceeds ``TRIM_SIGMAS`` stds (a board keeps at least ``FINAL_MIN_POINTS`` points); and how many were left out.
-
-    A point is tested against the rest of its board: an offset common to the whole board (its plane from the
-    camera a few mm off, a range bias) is the per-board test's evidence, not a reason to drop its points."""
-    e = range_residuals(T, obs.scan_data)
-    boards, n = [], 0
-    for i, b in enumerate(obs.boards):
-        ei = e[obs.scan_data.board == i]
-        keep = np.abs(ei - np.median(ei)) <= TRIM_SIGMAS * sigma_m
-        if keep.all() or keep.sum() < FINAL_MIN_POINTS:
-            boards.append(b)
-            continue
-        n += int((~keep).sum())
-        boards.append(replace(b, scan=b.scan[keep]))
-    if n == 0:
-        return obs, 0
-    return replace(obs, boards=tuple(boards), meta=dict(obs.meta)), n
-
-
-def final_tests(s: Search, T: np.ndarray, *, reject: bool) -> FinalTests:
-    """The final per-board test at the refined ``T`` (boards that fail are left out, boards that pass are taken
-    back) and the point test on the boards kept."""
-    q = board_statistics(s.obs_good, T, s.sigma_m, s.outline_sigma_m)[0]
-    s2 = inflation(q[s.used])
-    used = q <= TEST_CHI2 * s2 if reject and len(q) >= MIN_TESTABLE else s.used
-    if used.sum() < 3:
-        raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(q)} boards pass the per-board test at the "
-                           "refined extrinsic (at least 3 are needed): the boards do not agree on one extrinsic",
-                           s.hyps.T)
-    rejected = [r for r in s.rejected if r["index"] not in set(s.good.tolist())]
-    rejected += [_rejection(s.good[k], board_reason(q[k], TEST_CHI2 * s2, implausible_reason(s.obs_good, T, k)), q[k])
-                 for k in np.flatnonzero(~used)]
-    obs_u, n_pts = _point_test(s.obs.subset(s.good[used]), T, s.sigma_m)
-    warnings = [f"board {r['index']} left out: {r['reason']}" for r in sorted(rejected, key=lambda r: r["index"])]
-    trimmed = s.trim.summary() if s.trim is not None else {"total": 0}
-    trimmed["in_fit"] = n_pts
-    if trimmed["total"] + n_pts:
-        warnings.append(f"{trimmed['total'] + n_pts} scan points left out as outliers (off their board's line: "
-                        f"{trimmed.get('off_line', 0)}, at the segment ends: {trimmed.get('at_ends', 0)}, "
-                        f"in the final fit: {n_pts})")
-    info = {"boards_used": [int(i) for i in s.good[used]],
-            "boards_rejected": sorted(rejected, key=lambda r: r["index"]), "points_trimmed": trimmed,
-            "consensus": {"n_hypotheses": int(len(s.hyps.T)), "n_triples": int(s.hyps.n_triples),
-                          "exhaustive": bool(s.hyps.exhaustive), "inflation": float(s2),
-                          "statistics": [float(v) for v in q]}}
-    return FinalTests(obs_u, bool(n_pts or not np.array_equal(used, s.used)), warnings, info)
