@@ -7,6 +7,7 @@ Frames (see docs/METHOD.md): ``{L}`` lidar, scan plane z = 0; ``{C}`` camera (z 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from functools import cached_property
 from typing import Any
 
@@ -23,11 +24,15 @@ MIN_CORNERS = 4
 """Fewest image corners a board may carry (a planar pose needs 4)."""
 
 
-OUTLINE_KINDS = ("exact", "lower_bound", "none")
-"""What a board's ``outline`` says of the physical board: ``exact`` (the edges the lidar meets; the default),
-``lower_bound`` (the physical board contains this outline: scan points may run past it, e.g. a printed pattern on
-a larger board) or ``none`` (no outline known; ``outline`` may be omitted). Only ``exact`` outlines are evidence
-for the endpoint and outline terms and tests."""
+class OutlineKind(StrEnum):
+    """What a board's ``outline`` says of the physical board: ``exact`` (the edges the lidar meets; the default;
+    evidence for the endpoint and outline terms and tests), ``lower_bound`` (inside the physical board, e.g. a
+    printed pattern on a larger board: evidence for ``robust.lower_bound``'s one-sided terms) or ``none``."""
+
+    EXACT, LOWER_BOUND, NONE = "exact", "lower_bound", "none"
+
+
+OUTLINE_KINDS = tuple(k.value for k in OutlineKind)  # as the observation file writes them
 
 MAX_BOARDS = 100
 """Most boards one problem may hold (the exhaustive methods grow as N^4); more are refused when loaded."""
@@ -124,9 +129,8 @@ def check_simple_polygon(outline: np.ndarray) -> str | None:
         return "has zero area"
     for i in range(V):
         for j in range(i + 1, V):
-            if j == i + 1 or (i == 0 and j == V - 1):
-                continue  # adjacent edges share a vertex
-            if _segments_cross(outline[i], outline[(i + 1) % V], outline[j], outline[(j + 1) % V]):
+            adjacent = j == i + 1 or (i == 0 and j == V - 1)  # adjacent edges share a vertex
+            if not adjacent and _segments_cross(outline[i], outline[(i + 1) % V], outline[j], outline[(j + 1) % V]):
                 return f"is not a simple polygon (edges {i} and {j} cross)"
     return None
 
