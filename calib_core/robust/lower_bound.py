@@ -45,8 +45,8 @@ margin beyond the printed edge it is paired with, and its error is the paper's p
 gives about 2 h^2 / L, an overshoot a along it past the printed corner 2 a: the scale is reached at a 0.12 m margin
 on a 0.6 m edge (a printed sheet on a backing board a decimetre larger per side) or 0.06 m on a letter sheet's
 0.16 m edge, but 25 mm past the pattern's corner along the edge (about the beam spacing at the board edges). The
-public rigs' ends lie 0-210 mm outside their patterns at the all-board answers, almost all beside an edge, not
-beyond a corner."""
+ends of EdenShin's, Kazmierczak's and Nowicki's segments lie 0-210 mm outside their patterns at the all-board
+answers, every one beside an edge, none beyond a corner."""
 
 MARGIN_CAP = 2.0
 """Cost cap of one end's margin term (half a squared number of ``MARGIN_SIGMA_M``; reached at 2 scales): the flat
