@@ -98,3 +98,14 @@ def test_fig8_title_fits_inside_the_figure(tmp_path):
         assert e.x0 >= box.x0 - 0.5 and e.x1 <= box.x1 + 0.5 and e.y0 >= box.y0 - 0.5 and e.y1 <= box.y1 + 0.5, e
     ax = fig.axes[0].get_window_extent(renderer)
     assert all(t.get_window_extent(renderer).y0 >= ax.y1 - 0.5 for t in texts)  # above the image, not over it
+
+
+def test_the_covariance_line_says_what_each_model_did():
+    from calib_core.refine.joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL, RANGE_ONLY_MODEL
+    from experiments.real.real_data import _covariance_md
+
+    said = {m: _covariance_md([{"method": "lidarcam", "ok": True, "covariance_model": m}])[0]
+            for m in (JOINT_MODEL, JOINT_INTRINSICS_MODEL, RANGE_ONLY_MODEL)}
+    assert "intrinsics taken as exact" in said[JOINT_MODEL] and "under that prior" in said[JOINT_INTRINSICS_MODEL]
+    assert "range-only" in said[RANGE_ONLY_MODEL] and "no image corners" in said[RANGE_ONLY_MODEL]
+    assert len(set(said.values())) == 3

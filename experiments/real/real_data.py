@@ -28,6 +28,7 @@ import pandas as pd
 from calib_core.data.io import save_observations
 from calib_core.data.lines import range_sigma
 from calib_core.geometry.transforms import invert_T
+from calib_core.refine.joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL
 from rig import public_sets as ps
 from rig.dataset import DatasetError
 from rig.extract import extract, format_diagnostics
@@ -139,9 +140,13 @@ def _covariance_md(rows) -> list[str]:
     if r is None or not r["ok"]:
         return []
     model = r.get("covariance_model") or "-"
-    why = ("every board carries its image corners and the file its camera, so the joint model over corners and "
-           "ranges ran (board poses estimated)") if model == "joint" else (
-        "the boards carry no image corners, so only the range-only model can run (board poses taken as exact)")
+    why = {JOINT_MODEL: "every board carries its image corners and the file its camera, so the joint model over "
+                        "corners and ranges ran (board poses estimated, the intrinsics taken as exact: the file "
+                        "states no std_intrinsics)",
+           JOINT_INTRINSICS_MODEL: "every board carries its image corners and the file its camera with "
+                                   "std_intrinsics, so the joint model ran with the intrinsics as parameters under "
+                                   "that prior (board poses estimated)"}.get(model, (
+        "the boards carry no image corners, so only the range-only model can run (board poses taken as exact)"))
     return [f"Covariance model of `lidarcam`: **{model}**: {why}.", ""]
 
 
