@@ -148,13 +148,16 @@ def _cancel_midway(proc: subprocess.Popen, results: Path, timeout_s: float = 180
     raise AssertionError(f"no job caught mid-way in {timeout_s:.0f} s")
 
 
-def _final_states(array: str, timeout_s: float = 120.0) -> dict[str, tuple[str, str]]:
+def _final_states(array: str, expected: set[str] | None = None,
+                  timeout_s: float = 120.0) -> dict[str, tuple[str, str]]:
     """sacct's (state, node) of each job of ``array`` once every one has left squeue and ended in sacct (a job
-    whose task has returned its result may still be running or completing for a moment)."""
+    whose task has returned its result may still be running or completing for a moment), and once every job of
+    ``expected`` is listed there (slurmdbd records a job a moment after it ends)."""
     t0 = time.monotonic()
     while True:
         states = {} if _squeue(array) else _sacct(array)
-        if states and not {s for s, _ in states.values()} & {"PENDING", "RUNNING", "COMPLETING", "REQUEUED"}:
+        ended = states and not {s for s, _ in states.values()} & {"PENDING", "RUNNING", "COMPLETING", "REQUEUED"}
+        if ended and (expected is None or expected <= set(states)):
             return states
         assert time.monotonic() - t0 < timeout_s, f"jobs of {array} not ended after {timeout_s:.0f} s: {states}"
         time.sleep(0.5)
@@ -194,7 +197,7 @@ def test_slurm_sweep_rows_equal_the_local_sweep(tmp_path):
     ran = _run(_command(remote, SWEEP, *SLURM))
     assert ran.returncode == 0, ran.stderr[-2000:]
     [sweep_dir] = _sweep_dirs(remote)
-    states = _final_states(_array_id(sweep_dir))
+    states = _final_states(_array_id(sweep_dir), expected=set(_jobs(sweep_dir).values()))
     n_jobs = len(SWEEP["boards"]) * len(SWEEP["noises"])
     assert sorted(states) == sorted(_jobs(sweep_dir).values()), states
     assert {s for s, _ in states.values()} == {"COMPLETED"}, states
@@ -213,7 +216,7 @@ def test_slurm_job_cancelled_midway_resumes_without_loss_or_duplicates(tmp_path)
     finally:
         if first.poll() is None:
             first.kill()
-    states = _final_states(array)
+    states = _final_states(array, expected={cancelled})
     assert states[cancelled][0] == "CANCELLED", states
     _check_slurm_jobs(_sweep_dirs(tmp_path)[0], 1, states)
     kept = {f.name: f.stat().st_mtime_ns for f in cell.glob("chunk-*.csv")}
@@ -225,7 +228,7 @@ def test_slurm_job_cancelled_midway_resumes_without_loss_or_duplicates(tmp_path)
     again = _run(_command(tmp_path, CANCEL, *SLURM))
     assert again.returncode == 0, again.stderr[-2000:]
     second = _sweep_dirs(tmp_path)[-1]
-    rerun = _final_states(_array_id(second))
+    rerun = _final_states(_array_id(second), expected=set(_jobs(second).values()))
     assert {s for s, _ in rerun.values()} == {"COMPLETED"}, rerun
     _check_slurm_jobs(second, 1, rerun)
     assert {f.name: f.stat().st_mtime_ns for f in cell.glob("chunk-*.csv") if f.name in kept} == kept, \
