@@ -39,9 +39,10 @@ NO_CORNERS = "no image corners"
 
 
 def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, loss: str,
-              options: JointOptions | None = None) -> tuple[tuple | None, str | None]:
+              options: JointOptions | None = None, names=None) -> tuple[tuple | None, str | None]:
     """The joint step (``refine.joint.joint_step``) from ``T``: ((T, covariance, info), None) when it applies and
-    succeeds; (None, why) otherwise (``why`` None when the corners are switched off)."""
+    succeeds; (None, why) otherwise (``why`` None when the corners are switched off). ``names``: the boards' names
+    in its warnings (default their index in ``obs``)."""
     options = options or JointOptions()
     if not options.use_corners:
         return None, None
@@ -49,7 +50,8 @@ def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, 
         return None, NO_CORNERS
     try:
         return joint_step(obs, T, corner_sigma_px=options.corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
-                          f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter), None
+                          f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter, widen=options.widen,
+                          names=names), None
     except (JointError, UncertaintyError) as err:
         return None, f"joint refinement failed ({err})"
 

@@ -158,7 +158,8 @@ def finish(found: Found, opts: LidarcamOptions):
     obs_u = tests.obs_used
     deg = refuse_undetermined(obs_u, best.T, np.concatenate([best.T[None], C]), "lidarcam", sigma_given,
                               opts.degeneracy)
-    joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.refine.loss, options=opts.joint)
+    joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.refine.loss, options=opts.joint,
+                           names=tests.info.get("boards_used"))
     prior = opts.score.prior
     if joint is not None:
         T, cov, jinfo = joint

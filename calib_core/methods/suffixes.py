@@ -81,7 +81,7 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
     return derived(base, suffix, func, f"{base.name}, then {what}, with covariance")
 
 
-JOINT_OPTIONS = ("loss", "f_scale_sigmas", "range_sigma_m", "corner_sigma_px", "max_iter")
+JOINT_OPTIONS = ("loss", "f_scale_sigmas", "range_sigma_m", "corner_sigma_px", "max_iter", "widen")
 """Options of an ``X+joint`` method that go to the joint refinement (``f_scale_sigmas`` in noise stds); all others
 go to ``X``."""
 
@@ -101,7 +101,9 @@ def joint_method(base: Method) -> Method:
         if joint is not None:
             T, cov, jinfo = joint
             jinfo["conditioning"] = conditioning(obs, T)
-            return T, cands, {**info, **jinfo, "covariance": cov, "base_T_lidar_cam": T0}
+            warnings = [*info.get("warnings", []), *jinfo.pop("warnings", [])]
+            return T, cands, {**info, **jinfo, "covariance": cov, "base_T_lidar_cam": T0,
+                              **({"warnings": warnings} if warnings else {})}
         r, _, rinfo = refine_and_cover(obs, T0, "range", loss=loss, range_sigma_m=sigma)
         warn = f"{why}: range-only maximum likelihood; its covariance ignores the camera's noise"
         return r.T_lidar_cam, cands, {**info, **rinfo, "base_T_lidar_cam": T0,

@@ -18,7 +18,7 @@ in ``calib_core.refine.joint_residuals``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from ..data.residuals import perturb, range_residuals
 from ..errors import JointError, ObservationError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import rotvec_to_matrix
+from .dispersion import widened_covariance
 from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS, IntrinsicsPrior, augmented_blocks
 from .joint_residuals import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 from .refine import F_SCALE_SIGMAS, robust_cost
@@ -64,12 +65,14 @@ STEP_TOL = 1e-12
 @dataclass(frozen=True)
 class JointOptions:
     """A method's joint step: ``use_corners`` (when every board carries them), ``corner_sigma_px`` (default
-    estimated), the robust loss's scale ``f_scale_sigmas`` in noise stds, at most ``max_iter`` iterations."""
+    estimated), the robust loss's scale ``f_scale_sigmas`` in noise stds, at most ``max_iter`` iterations; ``widen``:
+    the covariance widened where the boards disagree beyond the model (``refine.dispersion``)."""
 
     use_corners: bool = True
     corner_sigma_px: float | None = None
     f_scale_sigmas: float = F_SCALE_SIGMAS
     max_iter: int = MAX_ITER
+    widen: bool = True
 
 
 def _weighted(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sc: float, sr: float, jacobian: bool,
@@ -307,6 +310,27 @@ def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: 
     return H_ee - H_eb @ X
 
 
+def board_scores(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
+                 range_sigma_m: float, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Each board's score (N,6), the gradient of its normalised joint cost with respect to the extrinsic (rotation
+    rad then translation m) with its own pose profiled out (to first order: ``g_e - H_eb H_bb^-1 g_b``, exact at the
+    pose's optimum), and its Fisher information with its pose marginalised (N,6,6; ``board_informations``): what
+    ``refine.dispersion`` tests. ``camera``: the intrinsics to use (default the file's)."""
+    if camera is not None:
+        obs = replace(obs, camera=camera)
+    T_e, T_b = np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float)
+    e, Jc, Je, Jb = _weighted(obs, T_e, T_b, float(corner_sigma_px), float(range_sigma_m), True)
+    offsets = _row_offsets(obs)
+    _, g_b, _, H_eb, H_bb = _normal_equations(obs, offsets, e, Jc, Je, Jb)
+    H_ee = np.add.reduceat(np.einsum("ra,rb->rab", Je, Je), offsets[1])
+    g_e = np.add.reduceat(Je * e[len(Jc):, None], offsets[1])
+    try:
+        X = np.linalg.solve(H_bb, np.concatenate([np.swapaxes(H_eb, 1, 2), g_b[:, :, None]], axis=2))
+    except np.linalg.LinAlgError:
+        raise UncertaintyError("a board's pose is not determined by its corners") from None
+    return g_e - np.einsum("nab,nb->na", H_eb, X[:, :, 6]), H_ee - H_eb @ X[:, :, :6]
+
+
 def marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
                         range_sigma_m: float, rcond: float = 1e-12) -> np.ndarray:
     """The extrinsic block (6x6) of the inverse joint information: ``(H_ee - sum_i H_ei H_ii^-1 H_ie)^-1``.
@@ -336,22 +360,34 @@ def joint_crlb(obs: Observations, range_sigma_m: float, corner_sigma_px: float, 
 
 def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
-               max_iter: int = MAX_ITER) -> tuple[np.ndarray, np.ndarray, dict]:
+               max_iter: int = MAX_ITER, widen: bool = True, names=None) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
     (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
     ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
-    ``info["intrinsics"]`` (``EXACT_INTRINSICS`` or ``ESTIMATED_INTRINSICS``) and the noise figures.
+    ``info["intrinsics"]`` (``EXACT_INTRINSICS`` or ``ESTIMATED_INTRINSICS``) and the noise figures. With
+    ``widen``, ``info["board_dispersion"]`` holds the boards' dispersion test (``refine.dispersion``; boards named by
+    ``names``, default their index) and where it fails the covariance is widened to the boards' spread, with a
+    warning that says so.
 
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
                      f_scale_sigmas=f_scale_sigmas, max_iter=max_iter)
-    exact = j.camera is None
+    exact, cov, warnings = j.camera is None, j.covariance, []
+    if widen:  # the boards' pulls in units of the noise each sensor shows alone (dispersion's module docstring)
+        sc = corner_sigma_px if corner_sigma_px is not None else \
+            _estimate_sigmas(obs, j.T_lidar_cam, board_poses(obs), 6 * obs.n_boards, j.camera)[0]
+        sr = range_sigma(obs, range_sigma_m)
+        cov, disp = widened_covariance(cov, *board_scores(obs, j.T_lidar_cam, j.T_cam_board, sc, sr, j.camera))
+        warnings += [disp.warning(names)] if disp.widened else []
     info = {"covariance_model": JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
             "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
             "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m, "corner_rms_px": j.corner_rms_px,
             "range_rms_m": j.range_rms_m, "joint_cost": j.cost,
-            "joint_iterations": j.iterations, "joint_converged": j.converged}
+            "joint_iterations": j.iterations, "joint_converged": j.converged,
+            **({"board_dispersion": disp.to_dict(names)} if widen else {})}
     if not j.converged:
-        info["warnings"] = [f"joint refinement stopped after {max_iter} iterations without converging"]
-    return j.T_lidar_cam, j.covariance, info
+        warnings.insert(0, f"joint refinement stopped after {max_iter} iterations without converging")
+    if warnings:
+        info["warnings"] = warnings
+    return j.T_lidar_cam, cov, info
