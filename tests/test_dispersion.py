@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from calib_core import calibrate
 from calib_core.data.observations import Observations
+from calib_core.methods.finish import widened_range_covariance
 from calib_core.refine.dispersion import (
     DISPERSION_ALPHA,
     dispersion,
@@ -159,3 +160,22 @@ def test_lidarcam_keeps_the_model_covariance_when_the_boards_agree():
         if not d["widened"]:
             np.testing.assert_array_equal(res.covariance, calibrate(obs, "lidarcam", widen=False).covariance)
     assert fired <= 2
+
+
+def test_range_model_widens_on_board_level_error(rng):
+    """The range model's covariance (board poses taken as exact) through the same test, on ``zhang_pless+ml``."""
+    opts = SimOptions(n_boards=10, noise_mm=5.0, dist_min_m=1.0, dist_max_m=3.0)
+    model, wide, fired = [], [], 0
+    for t in range(30):
+        obs = planes_moved(generate(opts, seed=5, trial=t), rng, 0.3, 0.005)
+        res = calibrate(obs, "zhang_pless+ml", verdict=False)
+        cov, info = widened_range_covariance(obs, res.T_lidar_cam, res.covariance, None)
+        fired += info["board_dispersion"]["widened"]
+        model.append(nees(res, obs.T_lidar_cam_true))
+        wide.append(nees(replace(res, covariance=cov), obs.T_lidar_cam_true))
+    assert fired >= 27
+    assert np.median(model) > 30
+    assert 2.0 < np.median(wide) < 12.0
+    few = generate(SimOptions(n_boards=3), seed=5)
+    cov, info = widened_range_covariance(few, few.T_lidar_cam_true, np.eye(6), 0.02)
+    assert info == {} and np.array_equal(cov, np.eye(6))

@@ -15,13 +15,14 @@ from ..geometry.transforms import invert_T
 RESULT_SCHEMA = "lidarcam.result/1"
 
 JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior",
-             "intrinsics")
+             "intrinsics", "board_dispersion")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
 answers a refused tie could not decide between (``alternatives``: each ``{"T_lidar_cam": 4x4, "cost": the negative
-log-likelihood, "mounting": its parameters}``, best first), the mounting prior given (``prior``), and how the joint
-model treated the camera's intrinsics (``calib_core.refine.joint_intrinsics``)."""
+log-likelihood, "mounting": its parameters}``, best first), the mounting prior given (``prior``), how the joint
+model treated the camera's intrinsics (``calib_core.refine.joint_intrinsics``), and the boards' dispersion test
+(``board_dispersion``, ``calib_core.refine.dispersion``: whether the covariance was widened to the boards' spread)."""
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,10 +15,11 @@ from ..data.observations import Observations
 from ..data.residuals import perturb
 from ..errors import JointError, SolveFailure, UncertaintyError
 from ..geometry.mounting import MountingPrior, params_from_T, parse_fixed, with_units
+from ..refine.dispersion import widened_covariance
 from ..refine.joint import JointOptions, joint_step
 from ..refine.partial import calibrate_fixed, fixed_starts
 from ..refine.refine import F_SCALE_SIGMAS
-from ..refine.uncertainty import refinement_covariance
+from ..refine.uncertainty import range_board_scores, refinement_covariance
 
 
 def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str,
@@ -64,6 +65,20 @@ def range_covariance(obs: Observations, T: np.ndarray, candidates: np.ndarray, w
         return refinement_covariance(obs.scan_data, T, residual, range_sigma_m)
     except UncertaintyError as err:
         raise SolveFailure(f"{who}: {err}", candidates) from None
+
+
+def widened_range_covariance(obs: Observations, T: np.ndarray, cov: np.ndarray, range_sigma_m: float | None,
+                             names=None) -> tuple[np.ndarray, dict]:
+    """The range model's covariance ``cov`` at ``T`` through the boards' dispersion test (``refine.dispersion``,
+    ranges in units of the scan lines' scatter): (covariance, info with ``board_dispersion`` and, where it was
+    widened, the warning). Three boards or fewer leave nothing to test: ``cov`` and no entry."""
+    if obs.n_boards <= 3:
+        return cov, {}
+    try:
+        cov, disp = widened_covariance(cov, *range_board_scores(obs, T, range_sigma(obs, range_sigma_m)))
+    except np.linalg.LinAlgError:
+        return cov, {}
+    return cov, {"board_dispersion": disp.to_dict(names), "warnings": [disp.warning(names)] if disp.widened else []}
 
 
 def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray], *,

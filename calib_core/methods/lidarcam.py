@@ -34,6 +34,7 @@ from .finish import (
     range_covariance,
     refuse_undetermined,
     try_joint,
+    widened_range_covariance,
     with_prior,
 )
 from .options import FLAT_KEYWORDS, LidarcamOptions
@@ -167,11 +168,14 @@ def finish(found: Found, opts: LidarcamOptions):
             T, cov = with_prior(T, cov, prior, step=True)
     else:
         T, cov = best.T, range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given)
+        jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS, "warnings": []}
+        if opts.joint.widen:
+            cov, disp = widened_range_covariance(obs_u, T, cov, sigma_given, tests.info.get("boards_used"))
+            jinfo.update(disp)
         if prior is not None:  # the refinement held the prior already: its information only
             T, cov = with_prior(T, cov, prior, step=False)
-        jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS}
         if why is not None and why != NO_CORNERS:
-            jinfo["warnings"] = [f"{why}; covariance of the range model only"]
+            jinfo["warnings"].append(f"{why}; covariance of the range model only")
     weak, alts = runner_up_warning(found.first) if not tests.changed else ([], {})
     warnings = tests.warnings + jinfo.pop("warnings", []) + degeneracy_warnings(obs_u, T) + \
         ([deg.message()] if len(deg.directions) else []) + weak

@@ -374,6 +374,7 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
                      f_scale_sigmas=f_scale_sigmas, max_iter=max_iter)
     exact, cov, warnings = j.camera is None, j.covariance, []
+    widen = widen and obs.n_boards > 3  # three boards fit exactly: nothing to test
     if widen:  # the boards' pulls in units of the noise each sensor shows alone (dispersion's module docstring)
         sc = corner_sigma_px if corner_sigma_px is not None else \
             _estimate_sigmas(obs, j.T_lidar_cam, board_poses(obs), 6 * obs.n_boards, j.camera)[0]

@@ -77,6 +77,16 @@ def fisher_information(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m
     return J.T @ J / float(range_sigma_m) ** 2
 
 
+def range_board_scores(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float) -> tuple[np.ndarray,
+                                                                                                   np.ndarray]:
+    """The range model's board scores (N,6), ``J_i^T e_i / sigma^2``, and informations (N,6,6), ``J_i^T J_i /
+    sigma^2``, at ``T_lidar_cam`` (board poses taken as exact): what ``refine.dispersion`` tests."""
+    e, J = range_residuals(np.asarray(T_lidar_cam, float), obs.scan_data, jacobian=True)
+    starts = np.r_[0, np.cumsum([len(b.scan) for b in obs.boards])[:-1]]
+    s2 = float(range_sigma_m) ** 2
+    return np.add.reduceat(J * e[:, None], starts) / s2, np.add.reduceat(np.einsum("ka,kb->kab", J, J), starts) / s2
+
+
 @dataclass(frozen=True)
 class Crlb:
     """Cramer-Rao lower bound of an unbiased estimator of the extrinsic.
