@@ -79,7 +79,8 @@ def loo_spread(res, folds: np.ndarray) -> dict:
     if cov is None:
         return {}
     out = {"loo_sigma_rot_deg": sigma_rot_deg(cov), "loo_sigma_trans_mm": 1000 * sigma_trans_m(cov),
-           "covariance_model": (res.info or {}).get("covariance_model")}
+           "covariance_model": (res.info or {}).get("covariance_model"),
+           "board_dispersion": (res.info or {}).get("board_dispersion")}
     if res.sigma_rot_deg:
         out["loo_ratio_rot"] = out["loo_sigma_rot_deg"] / res.sigma_rot_deg
         out["loo_ratio_trans"] = out["loo_sigma_trans_mm"] / res.sigma_trans_mm
@@ -116,17 +117,25 @@ def uncertainty_md(rows: list[dict]) -> list[str]:
     body = []
     for r in rows:
         sp = (r.get("cv") or {}).get("spread") or {}
+        d = r.get("board_dispersion") or {}
         body.append([f"`{r['method']}`", r.get("covariance_model") or "-",
+                     (f"{d['statistic']:.1f} / {d['dof']} (p {d['p_value']:.0e}): "
+                      + ("widened" if d["widened"] else "model's")) if d else "-",
                      f"{num(r['sigma_rot_deg'], '.3f')} / {num(r['sigma_trans_mm'], '.1f')}",
                      f"{num(r['loo_sigma_rot_deg'], '.3f')} / {num(r['loo_sigma_trans_mm'], '.1f')}",
                      f"{num(r['loo_ratio_rot'], '.2f')} / {num(r['loo_ratio_trans'], '.2f')}",
                      f"{num(sp.get('rms_z'), '.2f')} / {num(sp.get('q90_ratio'), '.2f')} / "
                      f"{num(sp.get('chi2_per_point'), '.2f')}"])
-    out = md_table(["method", "covariance model", "reported 1-sigma rot (deg) / trans (mm)", "leave-one-out 1-sigma",
-                    "ratio rot / trans", "held-out z: RMS / q90 / chi2 per point"], body, "llrrrr")
+    out = md_table(["method", "covariance model", "boards' dispersion / dof: covariance",
+                    "reported 1-sigma rot (deg) / trans (mm)", "leave-one-out 1-sigma", "ratio rot / trans",
+                    "held-out z: RMS / q90 / chi2 per point"], body, "lllrrrr")
     off = [why_off(r) for r in rows if max(r["loo_ratio_rot"], r["loo_ratio_trans"]) > 1.5]
     out += [""] + [f"- {o}" for o in off] if off else []
-    return out + ["", "Leave-one-out 1-sigma: the jackknife spread of the fold answers, "
+    return out + ["", "Boards' dispersion: the chi-square test of how the boards pull on the extrinsic, in units "
+                  "of the noise each sensor shows alone (`calib_core.refine.dispersion`, docs/lidarcam.md); where it "
+                  "fails at 1% the reported covariance is widened to the boards' spread (the larger of the model's "
+                  "times the dispersion ratio and the boards' one-step jackknife), else it is the model's.",
+                  "", "Leave-one-out 1-sigma: the jackknife spread of the fold answers, "
                   "`(n-1)/n sum (x_i - mean)^2` over the poses left out "
                   "(`calib_core.evaluate.crossval.jackknife_covariance`); "
                   "ratio = leave-one-out / reported (within 1.5 of 1: the reported sigma holds on this data). "
