@@ -175,6 +175,10 @@ class CalibrationResult:
                        + (f" (covariance model: {model})" if model else ""))
             if "intrinsics" in self.info:
                 out.append(f"camera intrinsics: {self.info['intrinsics']}")
+            if (d := self.info.get("board_dispersion")) is not None:
+                out.append(f"boards' dispersion: {d['statistic']:.1f} on {d['dof']} degrees of freedom (p "
+                           f"{d['p_value']:.1e}): " + ("the covariance is widened to the boards' spread"
+                                                        if d["widened"] else "the boards agree with the noise model"))
         if "mounting" in self.info:
             out.append("mounting (camera pose in the lidar frame; degrees and metres):")
             for k, v in self.info["mounting"].items():
