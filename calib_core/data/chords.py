@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from .observations import Observations
-from .residuals import given_frames, scan_endpoints
+from .residuals import given_frames, outline_groups, scan_endpoints
 
 MIN_CROSSING_SIN = 1e-9
 """An outline edge whose direction makes a sine below this with the scan line is not crossed (parallel)."""
@@ -28,17 +28,9 @@ MIN_SEGMENT_M = 1e-9
 
 
 def lower_bound_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(board indices, outline) of each distinct lower-bound outline among the boards (boards sharing one are
-    handled at once); computed once per observation set."""
-    return obs.derived("chords.lower_bound_groups", _lower_bound_groups)
-
-
-def _lower_bound_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
-    groups: dict[bytes, list[int]] = {}
-    for i, b in enumerate(obs.boards):
-        if b.outline_kind == "lower_bound" and b.outline is not None:
-            groups.setdefault(np.ascontiguousarray(b.outline).tobytes() + bytes([len(b.outline)]), []).append(i)
-    return [(np.array(idx), obs.boards[idx[0]].outline) for idx in groups.values()]
+    """(board indices, outline) of each distinct lower-bound outline among the boards
+    (``residuals.outline_groups``)."""
+    return outline_groups(obs, "lower_bound")
 
 
 def lower_bound_boards(obs: Observations) -> np.ndarray:

@@ -240,16 +240,16 @@ def points_in_boards(obs: Observations, candidates: np.ndarray) -> list[np.ndarr
     return [b.scan_3d @ np.swapaxes(A[:, i], -1, -2) + c[:, i, None] for i, b in enumerate(obs.boards)]
 
 
-def outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(board indices, outline) of each distinct exact outline among the boards (``outline_kind`` exact; boards
-    sharing one outline are handled at once); computed once per observation set."""
-    return obs.derived("residuals.outline_groups", _outline_groups)
+def outline_groups(obs: Observations, kind: str = "exact") -> list[tuple[np.ndarray, np.ndarray]]:
+    """(board indices, outline) of each distinct outline of ``outline_kind`` ``kind`` among the boards (boards
+    sharing one outline are handled at once); computed once per observation set and kind."""
+    return obs.derived(f"residuals.outline_groups.{kind}", lambda o: _outline_groups(o, kind))
 
 
-def _outline_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
+def _outline_groups(obs: Observations, kind: str) -> list[tuple[np.ndarray, np.ndarray]]:
     groups: dict[bytes, list[int]] = {}
     for i, b in enumerate(obs.boards):
-        if b.outline_exact:
+        if b.outline_kind == kind and b.outline is not None:
             groups.setdefault(np.ascontiguousarray(b.outline).tobytes() + bytes([len(b.outline)]), []).append(i)
     return [(np.array(idx), obs.boards[idx[0]].outline) for idx in groups.values()]
 
