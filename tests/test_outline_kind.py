@@ -92,7 +92,7 @@ def test_lower_bound_outline_lets_the_scan_run_past_it():
 
 def test_lidarcam_score_reads_lower_bounds_one_sided_and_missing_outlines_not_at_all():
     """Only exact outlines enter the endpoint and outline terms; a lower-bound outline enters only the one-sided
-    chord and margin term (``robust.lower_bound``), and a missing one nothing: without that term every kind
+    chord and margin term (``refine.lower_bound``), and a missing one nothing: without that term every kind
     scores alike, and a pattern well inside the board (its chord covered) costs only the margin prior."""
     obs = generate(SimOptions(n_boards=5), seed=4, trial=0)
     rng = np.random.default_rng(4)

@@ -27,7 +27,7 @@ MIN_CORNERS = 4
 class OutlineKind(StrEnum):
     """What a board's ``outline`` says of the physical board: ``exact`` (the edges the lidar meets; the default;
     evidence for the endpoint and outline terms and tests), ``lower_bound`` (inside the physical board, e.g. a
-    printed pattern on a larger board: evidence for ``robust.lower_bound``'s one-sided terms) or ``none``."""
+    printed pattern on a larger board: evidence for ``refine.lower_bound``'s one-sided terms) or ``none``."""
 
     EXACT, LOWER_BOUND, NONE = "exact", "lower_bound", "none"
 

@@ -81,7 +81,7 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
     return derived(base, suffix, func, f"{base.name}, then {what}, with covariance")
 
 
-JOINT_OPTIONS = ("loss", "f_scale_sigmas", "range_sigma_m", "corner_sigma_px", "max_iter", "widen")
+JOINT_OPTIONS = ("loss", "f_scale_sigmas", "range_sigma_m", "corner_sigma_px", "max_iter", "widen", "outline")
 """Options of an ``X+joint`` method that go to the joint refinement (``f_scale_sigmas`` in noise stds); all others
 go to ``X``."""
 

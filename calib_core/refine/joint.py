@@ -31,6 +31,7 @@ from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import rotvec_to_matrix
 from .dispersion import widened_covariance
 from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS, IntrinsicsPrior, augmented_blocks
+from .joint_outline import outline_cost, with_outline
 from .joint_residuals import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 from .refine import F_SCALE_SIGMAS, robust_cost
 from .uncertainty import Crlb, inverse_information
@@ -66,13 +67,15 @@ STEP_TOL = 1e-12
 class JointOptions:
     """A method's joint step: ``use_corners`` (when every board carries them), ``corner_sigma_px`` (default
     estimated), the robust loss's scale ``f_scale_sigmas`` in noise stds, at most ``max_iter`` iterations; ``widen``:
-    the covariance widened where the boards disagree beyond the model (``refine.dispersion``)."""
+    the covariance widened where the boards disagree beyond the model (``refine.dispersion``); ``outline``: the
+    lower-bound outlines' terms in the cost (``refine.joint_outline``)."""
 
     use_corners: bool = True
     corner_sigma_px: float | None = None
     f_scale_sigmas: float = F_SCALE_SIGMAS
     max_iter: int = MAX_ITER
     widen: bool = True
+    outline: bool = True
 
 
 def _weighted(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sc: float, sr: float, jacobian: bool,
@@ -148,7 +151,7 @@ def _blocks(obs, offsets, weighted, w, prior, k):
                             prior.residuals(k), prior.std)
 
 
-def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL, prior=None, k=None):
+def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL, prior=None, k=None, outline=False):
     """Levenberg-Marquardt on the joint cost, each step by the Schur complement (linear in the boards); robust
     losses by iteratively reweighted least squares (the intrinsics prior's rows are Gaussian, never reweighted).
     Returns (T_e, T_b, cost, iterations, converged, k) (``k`` the free intrinsics; None without a prior)."""
@@ -157,6 +160,7 @@ def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL,
 
     def cost_of(Te, Tb, kk):
         c = robust_cost(_weighted(obs, Te, Tb, sc, sr, False, prior, kk), loss, f_scale_sigmas)
+        c += outline_cost(obs, Te, Tb) if outline else 0.0
         return c if prior is None else c + 0.5 * float(np.sum(prior.residuals(kk) ** 2))
 
     cost, lam, it = cost_of(T_e, T_b, k), INITIAL_LAMBDA, 0
@@ -164,6 +168,7 @@ def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL,
         lin = _weighted(obs, T_e, T_b, sc, sr, True, prior, k)
         w = np.sqrt(drho((lin[0] / f_scale_sigmas) ** 2))
         blocks = _blocks(obs, offsets, lin, w, prior, k)
+        blocks = with_outline(blocks, obs, T_e, T_b) if outline else blocks
         while True:
             de, db = _schur_step(*blocks, lam)
             Te, Tb = _apply(T_e, T_b, de, db)
@@ -220,7 +225,7 @@ def _estimate_sigmas(obs, T_e, T_b, n_params_boards: int, camera=None):
 def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                  range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                  max_iter: int = MAX_ITER, sigma_iters: int = 3, sigma_rtol: float = 0.05,
-                 intrinsics: bool = True) -> JointResult:
+                 intrinsics: bool = True, outline: bool = True) -> JointResult:
     """Maximise the joint likelihood from the extrinsic ``T0`` and the observed board poses.
 
     Args:
@@ -231,6 +236,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         loss, f_scale_sigmas: robust loss (``refine.Loss``) on the normalised residuals, its scale in noise stds.
         intrinsics: when the camera states ``std_intrinsics``, estimate the intrinsics too, with that Gaussian
             prior (``refine.joint_intrinsics``), so the covariance holds their error; False takes them as exact.
+        outline: the lower-bound outlines' chord and margin terms in the cost (``refine.joint_outline``).
     Raises:
         JointError: no corners or camera; UncertaintyError: the joint information is singular.
     """
@@ -243,7 +249,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
     k = None if prior is None else prior.k0.copy()
     for _ in range(max(1, sigma_iters)):
         T_e, T_b, _, nit, converged, k = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter,
-                                                prior=prior, k=k)
+                                                prior=prior, k=k, outline=outline)
         cam = None if prior is None else prior.camera_at(k)
         new_c, new_r = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards, cam)
         new_c = corner_sigma_px if corner_sigma_px is not None else new_c
@@ -258,7 +264,8 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         cov = intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k)[:6, :6]
     ec = corner_residuals(obs, T_b, camera=cam)
     er = joint_range_residuals(obs, T_e, T_b)
-    cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale_sigmas)
+    cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale_sigmas) + \
+        (outline_cost(obs, T_e, T_b) if outline else 0.0)
     if prior is not None:
         cost += 0.5 * float(np.sum(prior.residuals(k) ** 2))
     return JointResult(T_e, T_b, cov, sc, sr, float(np.sqrt(np.mean(np.sum(ec**2, axis=1)))),
@@ -312,10 +319,9 @@ def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: 
 
 def board_scores(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
                  range_sigma_m: float, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Each board's score (N,6), the gradient of its normalised joint cost with respect to the extrinsic (rotation
-    rad then translation m) with its own pose profiled out (to first order: ``g_e - H_eb H_bb^-1 g_b``, exact at the
-    pose's optimum), and its Fisher information with its pose marginalised (N,6,6; ``board_informations``): what
-    ``refine.dispersion`` tests. ``camera``: the intrinsics to use (default the file's)."""
+    """Each board's score (N,6), the gradient of its normalised cost in the extrinsic (rad, m), its pose profiled
+    out to first order (``g_e - H_eb H_bb^-1 g_b``), and its information (N,6,6; ``board_informations``), at
+    ``camera``'s intrinsics (default the file's): what ``refine.dispersion`` tests."""
     if camera is not None:
         obs = replace(obs, camera=camera)
     T_e, T_b = np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float)
@@ -360,7 +366,8 @@ def joint_crlb(obs: Observations, range_sigma_m: float, corner_sigma_px: float, 
 
 def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
-               max_iter: int = MAX_ITER, widen: bool = True, names=None) -> tuple[np.ndarray, np.ndarray, dict]:
+               max_iter: int = MAX_ITER, widen: bool = True, names=None,
+               outline: bool = True) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
     (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
     ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
@@ -372,10 +379,10 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
-                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter)
+                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline)
     exact, cov, warnings = j.camera is None, j.covariance, []
-    widen = widen and obs.n_boards > 3  # three boards fit exactly: nothing to test
-    if widen:  # the boards' pulls in units of the noise each sensor shows alone (dispersion's module docstring)
+    widen = widen and obs.n_boards > 3  # three boards fit exactly; units: the noise each sensor shows alone
+    if widen:
         sc = corner_sigma_px if corner_sigma_px is not None else \
             _estimate_sigmas(obs, j.T_lidar_cam, board_poses(obs), 6 * obs.n_boards, j.camera)[0]
         sr = range_sigma(obs, range_sigma_m)
@@ -384,9 +391,8 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
     info = {"covariance_model": JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
             "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
             "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m, "corner_rms_px": j.corner_rms_px,
-            "range_rms_m": j.range_rms_m, "joint_cost": j.cost,
-            "joint_iterations": j.iterations, "joint_converged": j.converged,
-            **({"board_dispersion": disp.to_dict(names)} if widen else {})}
+            "range_rms_m": j.range_rms_m, "joint_cost": j.cost, "joint_iterations": j.iterations,
+            "joint_converged": j.converged, **({"board_dispersion": disp.to_dict(names)} if widen else {})}
     if not j.converged:
         warnings.insert(0, f"joint refinement stopped after {max_iter} iterations without converging")
     if warnings:

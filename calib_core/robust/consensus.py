@@ -12,7 +12,7 @@ each scan, so scoring M hypotheses on N boards costs O(M N) (not O(M x points)):
 * outline: the two scan ends, mapped into the board frame, lie inside the board outline; their distances outside
   it over ``outline_sigma`` squared (boards with an exact outline only: a ``lower_bound`` or no outline is no
   evidence against the scan ends).
-* lower bound: on a board whose outline is a lower bound (``robust.lower_bound``), the squared chord and margin
+* lower bound: on a board whose outline is a lower bound (``refine.lower_bound``), the squared chord and margin
   residuals of its two scan ends (at their default scales; the chord's capped, so a partial segment costs at most
   ``2 CHORD_CAP``).
 * an implausible board (``robust.plausible``: its scan behind the camera or the lidar, or the two sensors on
@@ -36,7 +36,7 @@ from ..data.chords import lower_bound_boards
 from ..data.lines import ScanLines, scan_lines
 from ..data.observations import Observations
 from ..data.residuals import board_frames, outline_groups, outside_outline
-from .lower_bound import chord_residuals, margin_residuals
+from ..refine.lower_bound import chord_residuals, margin_residuals
 from .plausible import plausible_boards
 
 SCORE_TAU = 400.0

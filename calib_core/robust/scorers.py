@@ -28,7 +28,14 @@ from ..data.residuals import (
 )
 from ..errors import CalibrationError, SolveFailure
 from ..geometry.mounting import MountingPrior
-from .lower_bound import CHORD_CAP, CHORD_SIGMA_M, MARGIN_SIGMA_M, chord_residuals, lower_bound_rows, margin_residuals
+from ..refine.lower_bound import (
+    CHORD_CAP,
+    CHORD_SIGMA_M,
+    MARGIN_SIGMA_M,
+    chord_residuals,
+    lower_bound_rows,
+    margin_residuals,
+)
 from .plausible import plausible_boards
 
 EDGE_SIGMA_M = 0.03
@@ -185,7 +192,7 @@ def _peng_normaliser(log_pi_of, blocks, N: int, normalise: bool):
 @dataclass(frozen=True)
 class ScoreOptions:
     """Scales (metres) of the ``lidarcam`` score's endpoint and outline terms (exact outlines) and of its chord and
-    margin terms (lower-bound outlines, ``robust.lower_bound``), its cost per implausible board (behind a sensor,
+    margin terms (lower-bound outlines, ``refine.lower_bound``), its cost per implausible board (behind a sensor,
     or the sensors on opposite sides of its plane: ``robust.plausible``), and the mounting ``prior`` (None: no
     prior)."""
 
@@ -244,7 +251,7 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
     every scan point against its board plane, ``d`` the point-line errors of the two endpoints of every board
     (docs/METHOD.md eq. 8-12), ``o_k`` the distance of every scan point, mapped into its board's frame, outside the
     board outline (``d`` and ``o`` on boards with an exact outline only, ``exact_outline_boards``), ``r_lower`` the
-    chord and margin residuals of the boards with a lower-bound outline (``robust.lower_bound``), ``r_prior`` the
+    chord and margin residuals of the boards with a lower-bound outline (``refine.lower_bound``), ``r_prior`` the
     mounting prior's (when given), and a board implausible when it is behind the camera or the lidar or the two
     sensors lie on opposite sides of its plane (``robust.plausible``).
 
