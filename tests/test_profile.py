@@ -82,15 +82,16 @@ def _fold(boards):
 
 
 @pytest.mark.skipif(not NOWICKI.exists(), reason="the committed Nowicki observations are not in this checkout")
-@pytest.mark.parametrize("boards", [(4, 5, 10), (1, 6, 12)])
+@pytest.mark.parametrize("boards", [(4, 5, 10), (1, 6, 12), (0, 1, 11)])
 def test_a_fold_of_three_boards_is_weak_with_its_profile_sigma(boards):
-    """Three real boards (Nowicki's Hokuyo) whose range optimum sits where two minimal solutions meet: no
-    first-order information along one direction, yet the likelihood rises there; the answer stands with that
-    direction named and its profile sigma, and the covariance holds that sigma."""
+    """Three real boards (Nowicki's Hokuyo) whose range optimum sits where two minimal solutions meet, or next to
+    it: no first-order information along one direction (or a linear sigma beyond a radian), yet the likelihood
+    rises there; the answer stands with that direction named and its profile sigma, and the covariance holds
+    that sigma (degrees, not the thousands of the linearisation)."""
     obs, T = _fold(boards)
     lam, _ = _scaled_information(obs, T)
-    assert lam[0] <= NULL_CONDITIONING**2 * lam[-1]
     d = undetermined_directions(obs, T, None)
+    assert lam[0] <= NULL_CONDITIONING**2 * lam[-1] or d.range_sigma_m / np.sqrt(lam[0]) > FOLD_SPAN
     assert d.determined and d.profile.sum() == 1
     v, s = d.directions[d.profile][0], d.sigmas[d.profile][0]
     assert 0.0 < s < FOLD_SPAN
@@ -99,4 +100,4 @@ def test_a_fold_of_three_boards_is_weak_with_its_profile_sigma(boards):
     assert FOLD_WORDS in d.message()
     res = calibrate(load_observations(NOWICKI).subset(list(boards)), "lidarcam")
     assert res.ok and any(FOLD_WORDS in w for w in res.warnings)
-    assert res.sigma_rot_deg is not None and np.isfinite(res.sigma_rot_deg)
+    assert res.sigma_rot_deg is not None and 0.5 < res.sigma_rot_deg < 20.0

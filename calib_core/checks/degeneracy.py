@@ -22,9 +22,10 @@ boards, high noise, normals near one other plane): the answer stands and a warni
 
 No information at first order is not always none at all: with three boards the answer can sit where two of the
 minimal solver's solutions meet (a fold), and there the residuals change only at second order along one
-direction. Such a direction is judged by its profile likelihood (``checks.profile``, ``FOLD_SPAN``): when the
-likelihood rises by its 1-sigma within ``FOLD_SPAN`` it is weak (or determined) with that profile sigma, as any
-other direction, and named as such in the message; only a direction flat at every order is undetermined.
+direction (near it, the linear sigma runs to radians). Such a direction is judged by its profile likelihood
+(``checks.profile``, ``FOLD_SPAN``): when the likelihood rises by its 1-sigma within ``FOLD_SPAN`` it is weak (or
+determined) with that profile sigma, as any other direction, and named as such in the message; only a direction
+flat at every order is undetermined.
 """
 
 from __future__ import annotations
@@ -64,10 +65,11 @@ MAX_SCALED_SIGMA = 0.1
 is undetermined: the data do not fix it."""
 
 FOLD_SPAN = 1.0
-"""A direction without first-order information (``NULL_CONDITIONING``) whose profile likelihood
-(``checks.profile``) still rises by its 1-sigma within this many scaled units (a radian, or one typical range:
-as far as a small motion of the extrinsic means anything) is a fold of the board set's solutions, not a direction
-the geometry leaves free: it is weak with its profile 1-sigma, judged by ``MAX_SCALED_SIGMA`` like any other."""
+"""A direction whose linear 1-sigma exceeds this many scaled units (a radian, or one typical range: as far as a
+small motion of the extrinsic means anything), or that has no first-order information at all
+(``NULL_CONDITIONING``), is judged by its profile likelihood (``checks.profile``): when that still rises by its
+1-sigma within this span, the direction is a fold of the board set's solutions, not one the geometry leaves free;
+it is weak (or determined) with its profile 1-sigma, judged by ``MAX_SCALED_SIGMA`` like any other."""
 
 
 
@@ -135,7 +137,7 @@ class Degeneracy:
         cause: why, in words (e.g. "every board stands vertical (normals 0.0 deg RMS from the scan plane)").
         scale_m: the typical range used to scale translations; range_sigma_m: the noise std used.
         profile: (k,) bool, the directions whose sigma is the profile likelihood's (a fold: no first-order
-            information, ``FOLD_SPAN``); empty when none.
+            information, or a linear sigma beyond ``FOLD_SPAN``); empty when none.
     """
 
     directions: np.ndarray
@@ -264,8 +266,8 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     lean = vertical_boards(obs, T)
     vertical = lean is not None
     fold = np.zeros(6, bool)
-    if null.any() and not vertical:
-        sig, fold = _folds(obs, T, V, null, sig, L, sigma)
+    if (null | (sig > FOLD_SPAN)).any() and not vertical:
+        sig, fold = _folds(obs, T, V, null | (sig > FOLD_SPAN), sig, L, sigma)
         null = null & ~fold
     weak = null | (sig > max_scaled_sigma)
     U, sig_u, fold_u = V[:, weak].T, sig[weak], fold[weak]
@@ -285,12 +287,12 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
                       cause, L, sigma, fold_u)
 
 
-def _folds(obs: Observations, T: np.ndarray, V: np.ndarray, null: np.ndarray, sig: np.ndarray, scale_m: float,
-           sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """The sigmas (scaled) with each null direction (columns of ``V`` where ``null``) that is a fold given its
-    profile 1-sigma (``FOLD_SPAN``), and the mask of those folds."""
+def _folds(obs: Observations, T: np.ndarray, V: np.ndarray, linear_beyond: np.ndarray, sig: np.ndarray,
+           scale_m: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """The sigmas (scaled) with each direction the linear analysis leaves beyond ``FOLD_SPAN`` (columns of ``V``
+    where ``linear_beyond``) that is a fold given its profile 1-sigma, and the mask of those folds."""
     sig, fold = sig.copy(), np.zeros(len(sig), bool)
-    for j in np.flatnonzero(null):
+    for j in np.flatnonzero(linear_beyond):
         s = profile_sigma(obs.scan_data, T, V[:, j], FOLD_SPAN, scale_m, sigma)
         if np.isfinite(s):
             sig[j], fold[j] = s, True

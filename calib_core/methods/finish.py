@@ -37,9 +37,10 @@ def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray
 
 def fold_covariance(obs: Observations, T: np.ndarray, deg: Degeneracy) -> np.ndarray:
     """The range model's covariance at ``T`` (6x6 in the parameters of ``data.residuals``) where the degeneracy
-    analysis found folds (``Degeneracy.profile``): the first-order information with, along each fold direction,
-    the information of its profile 1-sigma added (``1 / sigma^2`` in the scaled lidar-origin axes), since the
-    linearisation alone holds none there. Noise std: ``deg.range_sigma_m``."""
+    analysis found folds (``Degeneracy.profile``): the first-order information with, along each fold direction
+    (an eigen-direction of it), the information of its profile 1-sigma in place of the linear one (``1 / sigma^2``
+    in the scaled lidar-origin axes), since the linearisation holds none or next to none there. Noise std:
+    ``deg.range_sigma_m``."""
     T = np.asarray(T, float)
     e, J = range_linearised(T, obs.scan_data)
     L = deg.scale_m
@@ -48,12 +49,9 @@ def fold_covariance(obs: Observations, T: np.ndarray, deg: Degeneracy) -> np.nda
     A[:, 3:] *= L
     Fs = (J @ A).T @ (J @ A) / deg.range_sigma_m**2
     for v, s in zip(deg.directions[deg.profile], deg.sigmas[deg.profile], strict=True):
-        Fs = Fs + np.outer(v, v) / s**2
+        Fs = Fs + (1.0 / s**2 - v @ Fs @ v) * np.outer(v, v)
     return A @ inverse_information(Fs, 1e-12) @ A.T
 
-
-FOLD_NO_JOINT = "no joint step at a fold (its linearisation holds no information along the fold direction)"
-"""``lidarcam``'s warning when the degeneracy analysis found a fold: the covariance is ``fold_covariance``."""
 
 NO_CORNERS = "no image corners"
 """``try_joint``'s reason when a board carries no image corners."""

@@ -28,7 +28,6 @@ from ..robust.inliers import trim
 from ..robust.scorers import lidarcam as lidarcam_score
 from ..robust.search import Search, consensus_search
 from .finish import (
-    FOLD_NO_JOINT,
     NO_CORNERS,
     fixed_calibration,
     fold_covariance,
@@ -62,8 +61,8 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
        pitch and height z when every board is vertical) are not presented as estimated: ``ok=False``, the reason
        names them and how to calibrate the rest. Directions weak only for lack of data are warned about; so is a
        fold (three boards' solutions meeting at the answer: no first-order information along one direction, its
-       sigma from the profile likelihood, ``checks.profile``), whose covariance is ``finish.fold_covariance``
-       (the joint step, linear too, is not run there).
+       sigma from the profile likelihood, ``checks.profile``); where the joint step fails there (its linearisation
+       is singular too), the covariance is ``finish.fold_covariance``.
     6. On the boards used: with image corners on every board (``joint.use_corners``), the joint maximum likelihood
        over corners and ranges, covariance with the board poses marginalised (``info["covariance_model"]``
        "joint"); otherwise the range model's covariance (it ignores camera noise).
@@ -163,16 +162,14 @@ def finish(found: Found, opts: LidarcamOptions):
     obs_u = tests.obs_used
     deg = refuse_undetermined(obs_u, best.T, np.concatenate([best.T[None], C]), "lidarcam", sigma_given,
                               opts.degeneracy)
-    folds = bool(deg.profile.any())  # a fold: the linear models hold no information along it (checks.profile)
-    joint, why = (None, FOLD_NO_JOINT) if folds and opts.joint.use_corners and obs_u.has_corners else \
-        try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.refine.loss, options=opts.joint)
+    joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.refine.loss, options=opts.joint)
     prior = opts.score.prior
     if joint is not None:
         T, cov, jinfo = joint
         if prior is not None:  # the joint model ran without the prior: one Gauss-Newton step of the posterior
             T, cov = with_prior(T, cov, prior, step=True)
     else:
-        T, cov = best.T, fold_covariance(obs_u, best.T, deg) if folds else \
+        T, cov = best.T, fold_covariance(obs_u, best.T, deg) if deg.profile.any() else \
             range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given)
         if prior is not None:  # the refinement held the prior already: its information only
             T, cov = with_prior(T, cov, prior, step=False)
