@@ -96,7 +96,7 @@ def test_exact_recovery_with_the_outline_terms(trial):
     (the noise stds fall to their floors, where the outline's few rows weigh next to nothing)."""
     obs = rig(trial, noise_mm=0.0, pixel_noise_px=0.0)
     rng = np.random.default_rng(300 + trial)
-    j = joint_refine(obs, perturb(obs.T_lidar_cam_true, rng.normal(0, 0.02, 6)))
+    j = joint_refine(obs, perturb(obs.T_lidar_cam_true, rng.normal(0, 0.02, 6)), outline=True)
     assert outline_cost(obs, obs.T_lidar_cam_true, board_poses(obs)) > 0  # the terms are there
     np.testing.assert_allclose(j.T_lidar_cam, obs.T_lidar_cam_true, atol=2e-6)
     np.testing.assert_allclose(j.T_cam_board, board_poses(obs), atol=2e-6)

@@ -19,11 +19,18 @@ robot), which leave roll, pitch and z not determined whatever their sigma: a lea
 the board-pose and flatness errors the range model leaves out. Otherwise they are weak for lack of data (few
 boards, high noise, normals near one other plane): the answer stands and a warning names them with their sigma
 (on simulated sets of that kind, with exact board poses, the estimates are mostly still valid).
+
+No information at first order is not always none at all: with three boards the answer can sit where two of the
+minimal solver's solutions meet (a fold), and there the residuals change only at second order along one
+direction (near it, the linear sigma runs to radians). Such a direction is judged by its profile likelihood
+(``checks.profile``, ``FOLD_SPAN``): when the likelihood rises by its 1-sigma within ``FOLD_SPAN`` it is weak (or
+determined) with that profile sigma, as any other direction, and named as such in the message; only a direction
+flat at every order is undetermined.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -34,6 +41,7 @@ from ..errors import SolveFailure
 from ..geometry.transforms import skew
 from ..refine.partial import vertical_start
 from ..refine.uncertainty import conditioning, normal_spread_deg, typical_range
+from .profile import profile_sigma
 
 MIN_BOARDS = 4
 """Fewer boards than this is warned about: with 3 the minimal solver's candidates all fit the scan lines exactly
@@ -56,6 +64,13 @@ MAX_SCALED_SIGMA = 0.1
 """A direction whose 1-sigma exceeds this in scaled units (radians; translation in units of the typical range)
 is undetermined: the data do not fix it."""
 
+FOLD_SPAN = 1.0
+"""A direction whose linear 1-sigma exceeds this many scaled units (a radian, or one typical range: as far as a
+small motion of the extrinsic means anything), or that has no first-order information at all
+(``NULL_CONDITIONING``), is judged by its profile likelihood (``checks.profile``): when that still rises by its
+1-sigma within this span, the direction is a fold of the board set's solutions, not one the geometry leaves free;
+it is weak (or determined) with its profile 1-sigma, judged by ``MAX_SCALED_SIGMA`` like any other."""
+
 
 
 @dataclass(frozen=True)
@@ -77,6 +92,10 @@ VERTICAL_TOL_DEG = 10.0
 
 VERTICAL_MISFIT_DEG = 2.5
 """Or: one rotation turns every board normal onto its scan line's normal in the scan plane within this (RMS)."""
+
+FOLD_WORDS = (" from the profile likelihood: the range residuals change only at second order along it here, where "
+              "two of the boards' solutions meet")
+"""How a fold direction's sigma (``FOLD_SPAN``) is named in the message."""
 
 AXES = ("roll", "pitch", "yaw", "x", "y", "z")
 AXIS_WORDS = {"roll": "roll (rotation about the lidar x axis)", "pitch": "pitch (about the lidar y axis)",
@@ -117,6 +136,8 @@ class Degeneracy:
             determined* and a method must not present them as estimated.
         cause: why, in words (e.g. "every board stands vertical (normals 0.0 deg RMS from the scan plane)").
         scale_m: the typical range used to scale translations; range_sigma_m: the noise std used.
+        profile: (k,) bool, the directions whose sigma is the profile likelihood's (a fold: no first-order
+            information, or a linear sigma beyond ``FOLD_SPAN``); empty when none.
     """
 
     directions: np.ndarray
@@ -127,6 +148,7 @@ class Degeneracy:
     cause: str
     scale_m: float
     range_sigma_m: float
+    profile: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def determined(self) -> bool:
@@ -143,10 +165,11 @@ class Degeneracy:
 
     def _sigma_words(self) -> str:
         out = []
-        for v, s in zip(self.directions, self.sigmas, strict=True):
+        profile = self.profile if len(self.profile) == len(self.sigmas) else np.zeros(len(self.sigmas), bool)
+        for v, s, p in zip(self.directions, self.sigmas, profile, strict=True):
             rot = float(v[:3] @ v[:3]) >= 0.5
-            out.append("inf" if not np.isfinite(s) else f"{np.degrees(s):.1f} deg" if rot
-                       else f"{1000 * s * self.scale_m:.0f} mm")
+            out.append(("inf" if not np.isfinite(s) else f"{np.degrees(s):.1f} deg" if rot
+                        else f"{1000 * s * self.scale_m:.0f} mm") + (FOLD_WORDS if p else ""))
         return ", ".join(out)
 
     def message(self) -> str:
@@ -164,11 +187,13 @@ class Degeneracy:
                 f"and calibrate the rest with fixed={{{keys}}}")
 
     def to_dict(self) -> dict:
-        """JSON-able summary: axes, aligned, geometric, cause, message, directions, sigmas (None for infinite)."""
+        """JSON-able summary: axes, aligned, geometric, cause, message, directions, sigmas (None for infinite) and
+        which are profile sigmas (folds)."""
         return {"axes": list(self.axes), "aligned": bool(self.aligned), "geometric": bool(self.geometric),
                 "cause": self.cause, "message": self.message(), "directions": np.round(self.directions, 6).tolist(),
                 "sigmas_scaled": [None if not np.isfinite(s) else float(s) for s in self.sigmas],
-                "scale_m": self.scale_m, "range_sigma_m": self.range_sigma_m}
+                "profile": [bool(p) for p in self.profile], "scale_m": self.scale_m,
+                "range_sigma_m": self.range_sigma_m}
 
 
 def fixed_key(axis: str) -> str:
@@ -238,15 +263,20 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     lam, V = np.linalg.eigh(F)
     null = lam <= (null_conditioning**2) * lam[-1]
     sig = np.where(null, np.inf, sigma / np.sqrt(np.where(null, 1.0, lam)))
-    weak = null | (sig > max_scaled_sigma)
-    U, sig_u = V[:, weak].T, sig[weak]
     lean = vertical_boards(obs, T)
     vertical = lean is not None
+    fold = np.zeros(6, bool)
+    if (null | (sig > FOLD_SPAN)).any() and not vertical:
+        sig, fold = _folds(obs, T, V, null | (sig > FOLD_SPAN), sig, L, sigma)
+        null = null & ~fold
+    weak = null | (sig > max_scaled_sigma)
+    U, sig_u, fold_u = V[:, weak].T, sig[weak], fold[weak]
     if vertical:
         E = np.eye(6)[[AXES.index(a) for a in VERTICAL_AXES]]
         other = np.sum((U @ E.T) ** 2, axis=1) < 0.5
         U, sig_u = np.concatenate([E, U[other]]), np.r_[_marginal_sigmas(F, E, sigma, null_conditioning),
                                                         sig_u[other]]
+        fold_u = np.r_[np.zeros(len(E), bool), fold_u[other]]
     k = len(U)
     order = np.argsort(-np.sum(U**2, axis=0), kind="stable")
     n_axes = next((n for n in range(k, 6) if np.all(np.sum(U[:, order[:n]] ** 2, axis=1) >= ALIGNED_SHARE)), 6)
@@ -254,7 +284,19 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     cause = "" if not k else board_set_cause(obs, T) if lean is None else \
         f"every board stands vertical (normals {lean:.1f} deg RMS from the scan plane)"
     return Degeneracy(U, sig_u, tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
-                      cause, L, sigma)
+                      cause, L, sigma, fold_u)
+
+
+def _folds(obs: Observations, T: np.ndarray, V: np.ndarray, linear_beyond: np.ndarray, sig: np.ndarray,
+           scale_m: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """The sigmas (scaled) with each direction the linear analysis leaves beyond ``FOLD_SPAN`` (columns of ``V``
+    where ``linear_beyond``) that is a fold given its profile 1-sigma, and the mask of those folds."""
+    sig, fold = sig.copy(), np.zeros(len(sig), bool)
+    for j in np.flatnonzero(linear_beyond):
+        s = profile_sigma(obs.scan_data, T, V[:, j], FOLD_SPAN, scale_m, sigma)
+        if np.isfinite(s):
+            sig[j], fold[j] = s, True
+    return sig, fold
 
 
 def _marginal_sigmas(F: np.ndarray, E: np.ndarray, sigma: float, null_conditioning: float) -> np.ndarray:

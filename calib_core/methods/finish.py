@@ -12,14 +12,15 @@ import numpy as np
 from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, undetermined_directions
 from ..data.lines import range_sigma
 from ..data.observations import Observations
-from ..data.residuals import perturb
+from ..data.residuals import perturb, range_linearised
 from ..errors import JointError, SolveFailure, UncertaintyError
 from ..geometry.mounting import MountingPrior, params_from_T, parse_fixed, with_units
+from ..geometry.transforms import skew
 from ..refine.dispersion import widened_covariance
 from ..refine.joint import JointOptions, joint_step
 from ..refine.partial import calibrate_fixed, fixed_starts
 from ..refine.refine import F_SCALE_SIGMAS
-from ..refine.uncertainty import range_board_scores, refinement_covariance
+from ..refine.uncertainty import inverse_information, range_board_scores, refinement_covariance
 
 
 def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str,
@@ -33,6 +34,24 @@ def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray
         raise SolveFailure(f"{who}: {deg.message()}", candidates,
                            {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
     return deg
+
+
+def fold_covariance(obs: Observations, T: np.ndarray, deg: Degeneracy) -> np.ndarray:
+    """The range model's covariance at ``T`` (6x6 in the parameters of ``data.residuals``) where the degeneracy
+    analysis found folds (``Degeneracy.profile``): the first-order information with, along each fold direction
+    (an eigen-direction of it), the information of its profile 1-sigma in place of the linear one (``1 / sigma^2``
+    in the scaled lidar-origin axes), since the linearisation holds none or next to none there. Noise std:
+    ``deg.range_sigma_m``."""
+    T = np.asarray(T, float)
+    e, J = range_linearised(T, obs.scan_data)
+    L = deg.scale_m
+    A = np.eye(6)                                   # scaled lidar-origin axes -> the parameters of data.residuals
+    A[3:, :3] = -skew(T[:3, 3])
+    A[:, 3:] *= L
+    Fs = (J @ A).T @ (J @ A) / deg.range_sigma_m**2
+    for v, s in zip(deg.directions[deg.profile], deg.sigmas[deg.profile], strict=True):
+        Fs = Fs + (1.0 / s**2 - v @ Fs @ v) * np.outer(v, v)
+    return A @ inverse_information(Fs, 1e-12) @ A.T
 
 
 NO_CORNERS = "no image corners"

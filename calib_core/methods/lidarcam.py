@@ -30,6 +30,7 @@ from ..robust.search import Search, consensus_search
 from .finish import (
     NO_CORNERS,
     fixed_calibration,
+    fold_covariance,
     prior_info,
     range_covariance,
     refuse_undetermined,
@@ -59,7 +60,10 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
        points, step 3 again from the answer on what is left.
     5. Degeneracy (``methods.finish.refuse_undetermined``): directions the board geometry leaves free (e.g. roll,
        pitch and height z when every board is vertical) are not presented as estimated: ``ok=False``, the reason
-       names them and how to calibrate the rest. Directions weak only for lack of data are warned about.
+       names them and how to calibrate the rest. Directions weak only for lack of data are warned about; so is a
+       fold (three boards' solutions meeting at the answer: no first-order information along one direction, its
+       sigma from the profile likelihood, ``checks.profile``); where the joint step fails there (its linearisation
+       is singular too), the covariance is ``finish.fold_covariance``.
     6. On the boards used: with image corners on every board (``joint.use_corners``), the joint maximum likelihood
        over corners and ranges, covariance with the board poses marginalised (``info["covariance_model"]``
        "joint"); otherwise the range model's covariance (it ignores camera noise).
@@ -167,7 +171,8 @@ def finish(found: Found, opts: LidarcamOptions):
         if prior is not None:  # the joint model ran without the prior: one Gauss-Newton step of the posterior
             T, cov = with_prior(T, cov, prior, step=True)
     else:
-        T, cov = best.T, range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given)
+        T, cov = best.T, fold_covariance(obs_u, best.T, deg) if deg.profile.any() else \
+            range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given)
         jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS, "warnings": []}
         if opts.joint.widen:
             cov, disp = widened_range_covariance(obs_u, T, cov, sigma_given, tests.info.get("boards_used"))

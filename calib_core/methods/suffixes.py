@@ -15,7 +15,7 @@ from ..refine.joint_intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.refine import F_SCALE_SIGMAS, refine
 from ..refine.uncertainty import conditioning
 from ..registry import Method, derived
-from .finish import fixed_calibration, range_covariance, refuse_undetermined, try_joint
+from .finish import fixed_calibration, fold_covariance, range_covariance, refuse_undetermined, try_joint
 from .options import RENAMED
 
 REFINE_OPTIONS = ("loss", "f_scale_m", "range_sigma_m", "max_nfev", "fixed")
@@ -34,7 +34,8 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
         f_scale_m = F_SCALE_SIGMAS * range_sigma(obs, range_sigma_m)
     r = refine(data, T0, residual=residual, loss=loss, f_scale_m=f_scale_m, max_nfev=max_nfev)
     deg = refuse_undetermined(obs, r.T_lidar_cam, np.stack([r.T_lidar_cam, T0]), "refinement", range_sigma_m)
-    cov = range_covariance(obs, r.T_lidar_cam, T0[None], "refinement", residual, range_sigma_m)
+    cov = fold_covariance(obs, r.T_lidar_cam, deg) if residual == "range" and deg.profile.any() else \
+        range_covariance(obs, r.T_lidar_cam, T0[None], "refinement", residual, range_sigma_m)
     info = {"refine_cost": r.cost, "refine_initial_cost": r.initial_cost, "refine_nfev": r.nfev,
             "refine_residual": residual, "refine_loss": str(loss), "covariance": cov,
             "covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS,

@@ -31,7 +31,7 @@ from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import rotvec_to_matrix
 from .dispersion import widened_covariance
 from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS, IntrinsicsPrior, augmented_blocks
-from .joint_outline import outline_cost, with_outline
+from .joint_outline import has_outline_rows, outline_cost, with_outline
 from .joint_residuals import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 from .refine import F_SCALE_SIGMAS, robust_cost
 from .uncertainty import Crlb, inverse_information
@@ -75,7 +75,7 @@ class JointOptions:
     f_scale_sigmas: float = F_SCALE_SIGMAS
     max_iter: int = MAX_ITER
     widen: bool = True
-    outline: bool = True
+    outline: bool = False
 
 
 def _weighted(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sc: float, sr: float, jacobian: bool,
@@ -225,7 +225,7 @@ def _estimate_sigmas(obs, T_e, T_b, n_params_boards: int, camera=None):
 def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                  range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                  max_iter: int = MAX_ITER, sigma_iters: int = 3, sigma_rtol: float = 0.05,
-                 intrinsics: bool = True, outline: bool = True) -> JointResult:
+                 intrinsics: bool = True, outline: bool = False) -> JointResult:
     """Maximise the joint likelihood from the extrinsic ``T0`` and the observed board poses.
 
     Args:
@@ -258,10 +258,8 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         sc, sr = new_c, new_r
         if done:
             break
-    if prior is None:
-        cov = marginal_covariance(obs, T_e, T_b, sc, sr)
-    else:
-        cov = intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k)[:6, :6]
+    cov = intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k, outline)[:6, :6] \
+        if prior is not None or (outline and has_outline_rows(obs)) else marginal_covariance(obs, T_e, T_b, sc, sr)
     ec = corner_residuals(obs, T_b, camera=cam)
     er = joint_range_residuals(obs, T_e, T_b)
     cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale_sigmas) + \
@@ -273,17 +271,19 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
 
 
 def intrinsics_marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray,
-                                   corner_sigma_px: float, range_sigma_m: float, prior: IntrinsicsPrior,
-                                   k: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
+                                   corner_sigma_px: float, range_sigma_m: float, prior: IntrinsicsPrior | None,
+                                   k: np.ndarray | None, outline: bool = False, rcond: float = 1e-12) -> np.ndarray:
     """Covariance (6+m, 6+m) of the extrinsic (rotation rad, translation m) and the free intrinsics ``k`` of
-    ``prior`` (their units), board poses marginalised by the Schur complement: the inverse of
-    ``H_gg - sum_i H_gi H_ii^-1 H_ig`` with the prior's information in ``H_gg``. Linear in the boards.
+    ``prior`` (their units; none without one), board poses marginalised by the Schur complement: the inverse of
+    ``H_gg - sum_i H_gi H_ii^-1 H_ig`` with the prior's information in ``H_gg`` and with ``outline`` the active
+    lower-bound outline rows' (``refine.joint_outline``). Linear in the boards.
 
     UncertaintyError when a board's pose or the extrinsic is not determined.
     """
     lin = _weighted(obs, np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float), float(corner_sigma_px),
                     float(range_sigma_m), True, prior, k)
-    _, _, H_gg, H_gb, H_bb = _blocks(obs, _row_offsets(obs), lin, np.ones(len(lin[0])), prior, k)
+    blocks = _blocks(obs, _row_offsets(obs), lin, np.ones(len(lin[0])), prior, k)
+    _, _, H_gg, H_gb, H_bb = with_outline(blocks, obs, T_lidar_cam, T_cam_board) if outline else blocks
     try:
         X = np.linalg.solve(H_bb, np.swapaxes(H_gb, 1, 2))
     except np.linalg.LinAlgError:
@@ -367,7 +367,7 @@ def joint_crlb(obs: Observations, range_sigma_m: float, corner_sigma_px: float, 
 def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                max_iter: int = MAX_ITER, widen: bool = True, names=None,
-               outline: bool = True) -> tuple[np.ndarray, np.ndarray, dict]:
+               outline: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
     (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
     ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),

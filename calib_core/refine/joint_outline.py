@@ -1,4 +1,5 @@
-"""The lower-bound outline's evidence in the joint model: the chord-coverage and margin terms of
+"""The lower-bound outline's evidence in the joint model (an option, ``joint_outline=True``; docs/lidarcam.md says
+why it is off by default): the chord-coverage and margin terms of
 ``calib_core.refine.lower_bound`` (the same residuals, scales and caps the selection, the consensus and the polish
 read), as rows of the joint cost that touch the extrinsic and their own board's pose.
 
@@ -10,9 +11,11 @@ R^T`` (``data.residuals.board_frame_rows``), and the board row is ``(u x q, -u)`
 ``q = R^T (p_L - t) - Delta`` (the end in the camera frame, from the board's origin): ``d p_W = Phi^T ([q]_x phi -
 d)``. Each crossing's edge and each end's paired edge are held fixed (piecewise constant), as in the polish.
 
-The rows enter the joint solve (cost and Gauss-Newton blocks); the joint covariance leaves them out: they are
-one-sided (zero wherever the scan covers its chord and ends beside the printed edges) and capped, so where active
-they would only add information, and the covariance without them is the conservative one.
+The rows enter the joint solve (cost and Gauss-Newton blocks) and its covariance, the inverse of the information
+of the cost it minimises: they are one-sided (zero wherever the scan covers its chord and ends beside the printed
+edges) and capped, so they add information only where active, as at three boards whose range optimum lies where
+two minimal solutions meet (a fold, ``checks.profile``), where the corners and ranges alone determine a direction
+only to second order.
 """
 
 from __future__ import annotations
@@ -72,6 +75,11 @@ def outline_rows(obs, T_e: np.ndarray, T_b: np.ndarray):
     Je_m = board_frame_rows(obs, T_e, pts, board, gm[0], frames)
     Jb_m = _board_rows(T_e, T_b, pts, board, gm[0])
     return np.r_[rc[0], rm[0]], np.r_[Je_c, Je_m], np.r_[Jb_c, Jb_m], np.r_[board, board]
+
+
+def has_outline_rows(obs) -> bool:
+    """Whether any board has a lower-bound outline (and so rows here)."""
+    return bool(len(lower_bound_boards(obs)))
 
 
 def outline_cost(obs, T_e: np.ndarray, T_b: np.ndarray) -> float:
