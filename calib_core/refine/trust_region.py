@@ -9,15 +9,20 @@ Parameters and residuals are in the caller's units; nothing here knows of frames
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
-from numpy.linalg import norm
 from scipy.linalg import svd
 
 EPS = np.finfo(float).eps
 TOL = 1e-8
 """``ftol``, ``xtol`` and ``gtol`` of ``least_squares`` (its defaults)."""
+
+
+def norm(v: np.ndarray) -> float:
+    """The Euclidean norm of a vector, as ``numpy.linalg.norm`` computes it (the root of ``v . v``)."""
+    return math.sqrt(v.dot(v))
 
 
 def trust_region_step(uf: np.ndarray, s: np.ndarray, V: np.ndarray, Delta: float, alpha: float,
@@ -85,10 +90,10 @@ def _one_start(x0: np.ndarray, f: np.ndarray, J: np.ndarray, max_nfev: int):
     cost, g = 0.5 * np.dot(f, f), J.T.dot(f)
     done, iteration = False, 0
     while True:
-        done = done or norm(g, ord=np.inf) < TOL
+        done = done or np.max(np.abs(g)) < TOL
         if done or nfev == max_nfev:
             return x
-        U, s, V = svd(J, full_matrices=False)
+        U, s, V = svd(J, full_matrices=False, check_finite=False)
         V, uf = V.T, U.T.dot(f)
         actual = -1
         while actual <= 0 and nfev < max_nfev:
