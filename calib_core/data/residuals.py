@@ -217,7 +217,7 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
     out, grad = np.zeros((M, N, 2)), np.zeros((M, N, 2, 3))
     for idx, a, L, nrm, a_nrm, a2 in obs.derived("residuals.edge_groups", _edge_groups):
         V = a.shape[1]
-        nxt = np.roll(np.arange(V), -1)                                      # k -> k + 1 (mod V)
+        nxt = np.arange(1, V + 1) % V                                        # k -> k + 1 (mod V)
         Pi = P[:, idx]
         xy, z2 = Pi[..., :2], Pi[..., 2:3] ** 2                               # (M,n,2,2), (M,n,2,1)
         # |p - q_k| from the expansion |xy|^2 - 2 xy.q_k + |q_k|^2 + z^2; |p - q_{k+1}| is its roll
@@ -240,11 +240,8 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
 def take_last(a: np.ndarray, k: np.ndarray) -> np.ndarray:
     """``np.take_along_axis(a, k, axis=-1)`` for ``k`` of ``a``'s shape but its last axis (the same numbers, with
     less overhead on the small arrays of the hot path)."""
-    lead = a.shape[:-1]
-    n = int(np.prod(lead))
-    flat = a.reshape(n, a.shape[-1])
-    return flat[np.arange(n)[:, None], np.broadcast_to(k, lead + k.shape[-1:]).reshape(n, -1)].reshape(
-        lead + k.shape[-1:])
+    flat = a.reshape(-1, a.shape[-1])
+    return flat[np.arange(len(flat))[:, None], k.reshape(len(flat), -1)].reshape(k.shape)
 
 
 def points_in_boards(obs: Observations, candidates: np.ndarray) -> list[np.ndarray]:

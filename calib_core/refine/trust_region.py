@@ -9,11 +9,12 @@ Parameters and residuals are in the caller's units; nothing here knows of frames
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 
 import numpy as np
-from scipy.linalg import svd
+from scipy.linalg import get_lapack_funcs, svd
 
 EPS = np.finfo(float).eps
 TOL = 1e-8
@@ -23,6 +24,25 @@ TOL = 1e-8
 def norm(v: np.ndarray) -> float:
     """The Euclidean norm of a vector, as ``numpy.linalg.norm`` computes it (the root of ``v . v``)."""
     return math.sqrt(v.dot(v))
+
+
+@functools.lru_cache(maxsize=16)
+def _gesdd(m: int, n: int):
+    """LAPACK's ``gesdd`` as ``scipy.linalg.svd`` picks it for an (m,n) float matrix, and its work size."""
+    gesdd, gesdd_lwork = get_lapack_funcs(("gesdd", "gesdd_lwork"), (np.zeros((1, 1)),), ilp64="preferred")
+    work, info = gesdd_lwork(m, n, compute_uv=True, full_matrices=False)
+    return gesdd, (int(work.real) if info == 0 else None)
+
+
+def thin_svd(J: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``scipy.linalg.svd(J, full_matrices=False)``: the same LAPACK call, without its checks on every call (the
+    checked one where LAPACK reports a problem, to raise its error)."""
+    gesdd, lwork = _gesdd(*J.shape)
+    if lwork is not None and J.dtype == np.float64:
+        U, s, Vt, info = gesdd(J, compute_uv=True, lwork=lwork, full_matrices=False, overwrite_a=False)
+        if info == 0:
+            return U, s, Vt
+    return svd(J, full_matrices=False)
 
 
 def trust_region_step(uf: np.ndarray, s: np.ndarray, V: np.ndarray, Delta: float, alpha: float,
@@ -93,7 +113,7 @@ def _one_start(x0: np.ndarray, f: np.ndarray, J: np.ndarray, max_nfev: int):
         done = done or np.max(np.abs(g)) < TOL
         if done or nfev == max_nfev:
             return x
-        U, s, V = svd(J, full_matrices=False, check_finite=False)
+        U, s, V = thin_svd(J)
         V, uf = V.T, U.T.dot(f)
         actual = -1
         while actual <= 0 and nfev < max_nfev:

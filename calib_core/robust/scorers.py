@@ -313,7 +313,7 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
     T = np.asarray(T_lidar_cam, float)
     data = obs.scan_data
     exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
-    ends, rows = obs.derived("scorers.linearised_rows", _linearised_rows)
+    ends = obs.derived("scorers.linearised_rows", _linearised_rows)[0]
     rng, J_rng = range_residuals(T, data, jacobian=True)
     frames = board_frames(obs, T[None])                     # every board-frame map below, computed once
     P = scan_points_in_boards(obs, T[None], frames=frames)  # every scan point in its board's frame, once
@@ -322,7 +322,7 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
     g_out = g_out[0][on_exact]
     # the endpoint and outline rows at once: the outline's gradient has no board-frame z part
     g = np.concatenate([g_edge[0][exact].reshape(-1, 3), np.concatenate([g_out, np.zeros((len(g_out), 1))], 1)])
-    J_ends_out = board_frame_rows(obs, T, data.points[rows], data.board[rows], g, frames)
+    J_ends_out = board_frame_rows(obs, T, *obs.derived("scorers.linearised_points", _linearised_points), g, frames)
     n_edge = 2 * len(exact)
     rc, Jc, rm, Jm = lower_bound_rows(obs, T, frames, chord_sigma_m, chord_cap, margin_sigma_m)
     rp, Jp = (prior.residuals(T), prior.jacobian(T)) if prior is not None else (np.zeros(0), np.zeros((0, 6)))
@@ -330,6 +330,12 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
                           out[0][on_exact] / outline_sigma_m, rc, rm, rp])
     return res, np.concatenate([J_rng / range_sigma_m, J_ends_out[:n_edge] / edge_sigma_m,
                                 J_ends_out[n_edge:] / outline_sigma_m, Jc, Jm, Jp], axis=0)
+
+
+def _linearised_points(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+    """The lidar-frame points (K',3) and boards (K',) of the endpoint and outline rows (``_linearised_rows``)."""
+    rows = obs.derived("scorers.linearised_rows", _linearised_rows)[1]
+    return obs.scan_data.points[rows], obs.scan_data.board[rows]
 
 
 def _linearised_rows(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
