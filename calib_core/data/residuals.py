@@ -184,7 +184,8 @@ def _board_slices(obs: Observations) -> list[slice]:
 
 def _edge_groups(obs: Observations) -> list[tuple]:
     """Per vertex count V of the boards' outlines: the boards (n,), their vertices ``q_k`` (n,V,2), edge lengths
-    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V))."""
+    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V)), and the
+    vertices in the board frame (n,V,3) (z = 0)."""
     counts = np.array([0 if b.outline is None else len(b.outline) for b in obs.boards])
     groups = []
     for V in np.unique(counts[counts > 0]):
@@ -194,7 +195,7 @@ def _edge_groups(obs: Observations) -> list[tuple]:
         L = np.linalg.norm(edge, axis=-1)
         nrm = np.stack([-edge[..., 1], edge[..., 0]], axis=-1) / L[..., None]
         groups.append((idx, a, L[None, :, None], nrm, np.sum(a * nrm, axis=-1)[None, :, None],
-                       np.sum(a**2, axis=-1)[None, :, None]))
+                       np.sum(a**2, axis=-1)[None, :, None], np.concatenate([a, np.zeros(a.shape[:2] + (1,))], -1)))
     return groups
 
 
@@ -215,25 +216,28 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
     P = endpoints_in_board(obs, candidates, frames) if ends is None else ends  # (M,N,2,3)
     M, N = P.shape[:2]
     out, grad = np.zeros((M, N, 2)), np.zeros((M, N, 2, 3))
-    for idx, a, L, nrm, a_nrm, a2 in obs.derived("residuals.edge_groups", _edge_groups):
-        V = a.shape[1]
-        nxt = np.arange(1, V + 1) % V                                        # k -> k + 1 (mod V)
+    for idx, a, L, nrm, a_nrm, a2, a3 in obs.derived("residuals.edge_vertex_groups", _edge_groups):
+        V, n = a.shape[1], len(idx)
         Pi = P[:, idx]
         xy, z2 = Pi[..., :2], Pi[..., 2:3] ** 2                               # (M,n,2,2), (M,n,2,1)
         # |p - q_k| from the expansion |xy|^2 - 2 xy.q_k + |q_k|^2 + z^2; |p - q_{k+1}| is its roll
         d2 = (xy[..., 0] ** 2 + xy[..., 1] ** 2)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a) + a2 + z2
         da = np.sqrt(np.maximum(d2, 0.0))                                    # (M,n,2,V)
-        err = da + da[..., nxt] - L
+        nxt = np.arange(1, V + 1) % V                                        # k -> k + 1 (mod V)
+        db = da[..., nxt]                                                    # |p - q_{k+1}|
+        err = da + db - L
         dist = np.sqrt((np.einsum("mnkc,nvc->mnkv", xy, nrm) - a_nrm) ** 2 + z2)  # point-to-line distances
         pair = dist[:, :, 0, :, None] + dist[:, :, 1, None, :]              # (M,n,V,V)
         pair[..., np.arange(V), np.arange(V)] = np.inf                       # the two edges differ
-        k = np.stack(np.divmod(np.argmin(pair.reshape(M, len(idx), V * V), axis=-1), V), axis=-1)  # (M,n,2)
-        out[:, idx] = take_last(err, k[..., None])[..., 0]
+        k = np.empty((M, n, 2), int)                                         # each endpoint's edge
+        k[..., 0], k[..., 1] = np.divmod(np.argmin(pair.reshape(M, n, V * V), axis=-1), V)
+        at = k.ravel() + np.arange(0, err.size, V)                           # flat index of each one's edge
+        out[:, idx] = err.ravel()[at].reshape(M, n, 2)
         if gradient:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, summed over the paired edge's two vertices
-            v = np.stack([k, nxt[k]], axis=-1)                                   # (M,n,2,2) the two vertices
-            q = np.concatenate([a, np.zeros(a.shape[:2] + (1,))], axis=-1)[np.arange(len(idx))[:, None, None], v]
-            d = np.maximum(take_last(da, v), 1e-300)[..., None]
-            grad[:, idx] = np.sum((Pi[:, :, :, None] - q) / d, axis=3)
+            board = np.arange(n)[:, None]
+            d_a = np.maximum(da.ravel()[at], 1e-300).reshape(M, n, 2, 1)
+            d_b = np.maximum(db.ravel()[at], 1e-300).reshape(M, n, 2, 1)
+            grad[:, idx] = (Pi - a3[board, k]) / d_a + (Pi - a3[board, nxt[k]]) / d_b
     return (out, grad) if gradient else out
 
 
