@@ -101,7 +101,10 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     # with dm = w x m: d(num)/dw = m x t and d(mb)/dw = m x b, so de/dw = (m x b num / mb - m x t) / mb
     # = m x (p* - t) / mb, with p* = (num / mb) b the point where the beam meets the plane; de/d(dt) = -m / mb
     p_t = r_star[..., None] * b - T[..., None, :3, 3]                                  # p* - t
-    J = np.concatenate([_cross(mk, p_t), -mk], axis=-1) / mb[..., None]
+    J = np.empty(np.broadcast_shapes(mk.shape, p_t.shape)[:-1] + (6,))
+    _cross_into(J[..., :3], mk, p_t)
+    np.negative(mk, out=J[..., 3:])
+    J /= mb[..., None]
     return e, J
 
 
@@ -121,9 +124,15 @@ def range_linearised(T: np.ndarray, data: ScanData) -> tuple[np.ndarray, np.ndar
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross product of (...,3) arrays (``np.cross`` without its axis handling, on the hot path)."""
+    return _cross_into(np.empty(np.broadcast_shapes(a.shape, b.shape)), a, b)
+
+
+def _cross_into(out: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``_cross(a, b)`` written into ``out`` (...,3), which it returns."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    out[..., 0], out[..., 1], out[..., 2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    return out
 
 
 class Residual(StrEnum):
@@ -356,4 +365,7 @@ def board_frame_rows(obs: Observations, T: np.ndarray, points: np.ndarray, board
     v = g[:, 0, None] * A[:, 0]
     for r in range(1, g.shape[1]):                                                # the sum over the r coordinates
         v = v + g[:, r, None] * A[:, r]
-    return np.concatenate([_cross(v, points - T[:3, 3]), -v], axis=1)
+    rows = np.empty((len(v), 6))
+    _cross_into(rows[:, :3], v, points - T[:3, 3])
+    np.negative(v, out=rows[:, 3:])
+    return rows
