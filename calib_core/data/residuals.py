@@ -297,8 +297,11 @@ def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool =
     ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y). ``frames``: the candidates'
     ``board_frames``; ``points``: the (M,K,2) points in their boards' frames, when the caller has them."""
     P = scan_points_in_boards(obs, candidates, rows=2, frames=frames) if points is None else points
+    groups = obs.derived("residuals.outline_point_groups", _outline_point_groups)
+    if len(groups) == 1 and groups[0][0].all():                             # one outline for every board
+        return outside_outline(P, groups[0][1], gradient=gradient)
     out, grad = np.zeros(P.shape[:2]), np.zeros(P.shape)
-    for sel, outline in obs.derived("residuals.outline_point_groups", _outline_point_groups):
+    for sel, outline in groups:
         if gradient:
             out[:, sel], grad[:, sel] = outside_outline(P[:, sel], outline, gradient=True)
         else:

@@ -313,21 +313,25 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
     T = np.asarray(T_lidar_cam, float)
     data = obs.scan_data
     exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
-    ends = obs.derived("scorers.linearised_rows", _linearised_rows)[0]
+    ends, rows = obs.derived("scorers.linearised_rows", _linearised_rows)
+    n_edge = 2 * len(exact)
     rng, J_rng = range_residuals(T, data, jacobian=True)
     frames = board_frames(obs, T[None])                     # every board-frame map below, computed once
     P = scan_points_in_boards(obs, T[None], frames=frames)  # every scan point in its board's frame, once
     edge, g_edge = point_line_errors(obs, T[None], gradient=True, frames=frames, ends=P[:, ends])
     out, g_out = outside_outlines(obs, T[None], gradient=True, frames=frames, points=P[..., :2])
-    g_out = g_out[0][on_exact]
+    if len(exact) == obs.n_boards:                          # every outline exact: no rows to leave out
+        edge, g_edge, out, g_out = edge[0], g_edge[0], out[0], g_out[0]
+    else:
+        edge, g_edge, out, g_out = edge[0][exact], g_edge[0][exact], out[0][on_exact], g_out[0][on_exact]
     # the endpoint and outline rows at once: the outline's gradient has no board-frame z part
-    g = np.concatenate([g_edge[0][exact].reshape(-1, 3), np.concatenate([g_out, np.zeros((len(g_out), 1))], 1)])
+    g = np.zeros((len(rows), 3))
+    g[:n_edge] = g_edge.reshape(-1, 3)
+    g[n_edge:, :2] = g_out
     J_ends_out = board_frame_rows(obs, T, *obs.derived("scorers.linearised_points", _linearised_points), g, frames)
-    n_edge = 2 * len(exact)
     rc, Jc, rm, Jm = lower_bound_rows(obs, T, frames, chord_sigma_m, chord_cap, margin_sigma_m)
     rp, Jp = (prior.residuals(T), prior.jacobian(T)) if prior is not None else (np.zeros(0), np.zeros((0, 6)))
-    res = np.concatenate([rng / range_sigma_m, edge[0][exact].ravel() / edge_sigma_m,
-                          out[0][on_exact] / outline_sigma_m, rc, rm, rp])
+    res = np.concatenate([rng / range_sigma_m, edge.ravel() / edge_sigma_m, out / outline_sigma_m, rc, rm, rp])
     return res, np.concatenate([J_rng / range_sigma_m, J_ends_out[:n_edge] / edge_sigma_m,
                                 J_ends_out[n_edge:] / outline_sigma_m, Jc, Jm, Jp], axis=0)
 
