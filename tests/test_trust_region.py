@@ -57,7 +57,7 @@ def test_equal_to_least_squares_on_random_curve_fits(seed):
             np.testing.assert_allclose(x, ref.x, rtol=1e-12, atol=1e-12)
 
 
-def _polish_ref(obs, T0, max_nfev, sigma, give_up_above=np.inf):
+def _polish_ref(obs, T0, max_nfev, sigma, give_up_above=np.inf, after=GIVE_UP_ITERATIONS):
     """The polish as ``least_squares`` runs it (analytic Jacobian, left Jacobian of SO(3) at the step)."""
     kw = {"range_sigma_m": sigma, **ScoreOptions().kwargs()}
 
@@ -67,7 +67,7 @@ def _polish_ref(obs, T0, max_nfev, sigma, give_up_above=np.inf):
         return f, J
 
     def hopeless(intermediate_result):
-        if intermediate_result.nit >= GIVE_UP_ITERATIONS and intermediate_result.cost > give_up_above:
+        if intermediate_result.nit >= after and intermediate_result.cost > give_up_above:
             raise StopIteration
 
     sol = least_squares(lambda x: f_and_J(x)[0], np.zeros(6), jac=lambda x: f_and_J(x)[1], method="trf",
@@ -75,32 +75,62 @@ def _polish_ref(obs, T0, max_nfev, sigma, give_up_above=np.inf):
     return perturb(T0, sol.x)
 
 
-@pytest.mark.parametrize("seed", range(10))
-def test_polish_many_equal_to_least_squares_from_the_same_starts(seed):
-    """The polish of 4 starts at once (some far off) is ``least_squares``' from each start, to 1e-10; with a stop
-    rule whose bound for each start is known only once the starts before it end (the give-up of
-    ``choose_and_refine``) too."""
+STOP_AFTER = 2
+"""The stop rule of the polish test: after this many iterations, above the best final cost of the starts before."""
+
+
+def _scene(seed):
+    """The polish test's problem and its 4 starts (the odd seeds far off)."""
     rng = np.random.default_rng(300 + seed)
     obs = make_observations(rng, 3 + seed % 3, 0.02)
     spread = np.array([0.02] * 3 + [0.05] * 3) * (1 + 10 * (seed % 2))
-    T0 = np.array([perturb(obs.T_lidar_cam_true, rng.normal(0, spread)) for _ in range(4)])
+    return obs, np.array([perturb(obs.T_lidar_cam_true, rng.normal(0, spread)) for _ in range(4)])
+
+
+def _deferred_stops(obs):
+    """A stop rule as ``choose_and_refine``'s give-up: after ``STOP_AFTER`` iterations, above the best final cost
+    of the starts before (unknown while they run); its ``done``, the cost function and counts of its answers."""
+    kw = {"range_sigma_m": 0.02, **ScoreOptions().kwargs()}
+    ends: dict[int, float] = {}
+    count = {"later": 0, "stop": 0}
+
+    def cost(T):
+        return 0.5 * float(np.sum(lidarcam_linearised(obs, T, **kw)[0] ** 2))
+
+    def halt(i, nit, c):
+        if any(j not in ends for j in range(i)):
+            count["later"] += 1
+            return None
+        stop = bool(nit >= STOP_AFTER and c > min((ends[j] for j in range(i)), default=np.inf))
+        count["stop"] += stop
+        return stop
+
+    return halt, lambda i, T: ends.__setitem__(i, cost(T)), cost, count
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_polish_many_equal_to_least_squares_from_the_same_starts(seed):
+    """The polish of 4 starts at once (some far off) is ``least_squares``' from each start, to 1e-10; with a stop
+    rule whose bound for each start is known only once the starts before it end (as the give-up of
+    ``choose_and_refine``) too."""
+    obs, T0 = _scene(seed)
     np.testing.assert_allclose(polish_many(obs, T0, 100, ScoreOptions(), 0.02),
                                [_polish_ref(obs, T, 100, 0.02) for T in T0], atol=1e-10)
-    ends: dict[int, float] = {}
-    kw = {"range_sigma_m": 0.02, **ScoreOptions().kwargs()}
-
-    def done(i, T):
-        ends[i] = 0.5 * float(np.sum(lidarcam_linearised(obs, T, **kw)[0] ** 2))
-
-    def halt(i, nit, cost):
-        if any(j not in ends for j in range(i)):
-            return None
-        bound = 0.5 * min((ends[j] for j in range(i)), default=np.inf)
-        return bool(nit >= GIVE_UP_ITERATIONS and cost > bound)
-
+    halt, done, cost, count = _deferred_stops(obs)
     got = polish_many(obs, T0, 100, ScoreOptions(), 0.02, halt, done)
     ref = []
     for T in T0:
-        ref.append(_polish_ref(obs, T, 100, 0.02, 0.5 * min((0.5 * float(np.sum(
-            lidarcam_linearised(obs, R, **kw)[0] ** 2)) for R in ref), default=np.inf)))
+        ref.append(_polish_ref(obs, T, 100, 0.02, min((cost(R) for R in ref), default=np.inf), STOP_AFTER))
     np.testing.assert_allclose(got, ref, atol=1e-10)
+    assert count["later"] > 0                                # some stops were decided after the start ran on
+
+
+def test_the_deferred_stop_rule_stops_some_polishes():
+    """Across the polish test's seeds the deferred stop rule does stop polishes (the comparison exercises it)."""
+    stops = 0
+    for seed in range(10):
+        obs, T0 = _scene(seed)
+        halt, done, _, count = _deferred_stops(obs)
+        polish_many(obs, T0, 100, ScoreOptions(), 0.02, halt, done)
+        stops += count["stop"]
+    assert stops > 0
