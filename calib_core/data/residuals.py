@@ -101,7 +101,10 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     # with dm = w x m: d(num)/dw = m x t and d(mb)/dw = m x b, so de/dw = (m x b num / mb - m x t) / mb
     # = m x (p* - t) / mb, with p* = (num / mb) b the point where the beam meets the plane; de/d(dt) = -m / mb
     p_t = r_star[..., None] * b - T[..., None, :3, 3]                                  # p* - t
-    J = np.concatenate([_cross(mk, p_t), -mk], axis=-1) / mb[..., None]
+    J = np.empty(np.broadcast_shapes(mk.shape, p_t.shape)[:-1] + (6,))
+    _cross_into(J[..., :3], mk, p_t)
+    np.negative(mk, out=J[..., 3:])
+    J /= mb[..., None]
     return e, J
 
 
@@ -121,9 +124,15 @@ def range_linearised(T: np.ndarray, data: ScanData) -> tuple[np.ndarray, np.ndar
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross product of (...,3) arrays (``np.cross`` without its axis handling, on the hot path)."""
+    return _cross_into(np.empty(np.broadcast_shapes(a.shape, b.shape)), a, b)
+
+
+def _cross_into(out: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``_cross(a, b)`` written into ``out`` (...,3), which it returns."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    out[..., 0], out[..., 1], out[..., 2] = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    return out
 
 
 class Residual(StrEnum):
@@ -184,7 +193,8 @@ def _board_slices(obs: Observations) -> list[slice]:
 
 def _edge_groups(obs: Observations) -> list[tuple]:
     """Per vertex count V of the boards' outlines: the boards (n,), their vertices ``q_k`` (n,V,2), edge lengths
-    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V))."""
+    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V)), and the
+    vertices in the board frame (n,V,3) (z = 0)."""
     counts = np.array([0 if b.outline is None else len(b.outline) for b in obs.boards])
     groups = []
     for V in np.unique(counts[counts > 0]):
@@ -194,14 +204,16 @@ def _edge_groups(obs: Observations) -> list[tuple]:
         L = np.linalg.norm(edge, axis=-1)
         nrm = np.stack([-edge[..., 1], edge[..., 0]], axis=-1) / L[..., None]
         groups.append((idx, a, L[None, :, None], nrm, np.sum(a * nrm, axis=-1)[None, :, None],
-                       np.sum(a**2, axis=-1)[None, :, None]))
+                       np.sum(a**2, axis=-1)[None, :, None], np.concatenate([a, np.zeros(a.shape[:2] + (1,))], -1)))
     return groups
 
 
-def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None):
+def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None,
+                      ends: np.ndarray | None = None):
     """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (docs/METHOD.md eq. 8-12);
     with ``gradient`` also (M,N,2,3) their gradients in the endpoints' board-frame coordinates (the pairing of
-    endpoints with edges held fixed: it is piecewise constant). ``frames``: the candidates' ``board_frames``.
+    endpoints with edges held fixed: it is piecewise constant). ``frames``: the candidates' ``board_frames``;
+    ``ends``: the (M,N,2,3) endpoints in their boards' frames (``endpoints_in_board``), when the caller has them.
 
     Each endpoint is paired with the board edge nearest to it (point-to-line distance), the two endpoints
     with different edges (the pair of distinct edges with the least summed distance). The error of an
@@ -210,28 +222,39 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
     shape at a time (vectorised over candidates and boards that share a vertex count). Every outline is read
     as given, whatever its ``outline_kind``; a board without one (kind ``none``) gets 0.
     """
-    P = endpoints_in_board(obs, candidates, frames)                         # (M,N,2,3)
+    P = endpoints_in_board(obs, candidates, frames) if ends is None else ends  # (M,N,2,3)
     M, N = P.shape[:2]
     out, grad = np.zeros((M, N, 2)), np.zeros((M, N, 2, 3))
-    for idx, a, L, nrm, a_nrm, a2 in obs.derived("residuals.edge_groups", _edge_groups):
-        V = a.shape[1]
+    for idx, a, L, nrm, a_nrm, a2, a3 in obs.derived("residuals.edge_vertex_groups", _edge_groups):
+        V, n = a.shape[1], len(idx)
         Pi = P[:, idx]
         xy, z2 = Pi[..., :2], Pi[..., 2:3] ** 2                               # (M,n,2,2), (M,n,2,1)
         # |p - q_k| from the expansion |xy|^2 - 2 xy.q_k + |q_k|^2 + z^2; |p - q_{k+1}| is its roll
-        d2 = np.sum(xy**2, axis=-1)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a) + a2 + z2
+        d2 = (xy[..., 0] ** 2 + xy[..., 1] ** 2)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a) + a2 + z2
         da = np.sqrt(np.maximum(d2, 0.0))                                    # (M,n,2,V)
-        err = da + np.roll(da, -1, axis=-1) - L
+        nxt = np.arange(1, V + 1) % V                                        # k -> k + 1 (mod V)
+        db = da[..., nxt]                                                    # |p - q_{k+1}|
+        err = da + db - L
         dist = np.sqrt((np.einsum("mnkc,nvc->mnkv", xy, nrm) - a_nrm) ** 2 + z2)  # point-to-line distances
         pair = dist[:, :, 0, :, None] + dist[:, :, 1, None, :]              # (M,n,V,V)
         pair[..., np.arange(V), np.arange(V)] = np.inf                       # the two edges differ
-        k = np.stack(np.divmod(np.argmin(pair.reshape(M, len(idx), V * V), axis=-1), V), axis=-1)  # (M,n,2)
-        out[:, idx] = np.take_along_axis(err, k[..., None], axis=-1)[..., 0]
+        k = np.empty((M, n, 2), int)                                         # each endpoint's edge
+        k[..., 0], k[..., 1] = np.divmod(np.argmin(pair.reshape(M, n, V * V), axis=-1), V)
+        at = k.ravel() + np.arange(0, err.size, V)                           # flat index of each one's edge
+        out[:, idx] = err.ravel()[at].reshape(M, n, 2)
         if gradient:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, summed over the paired edge's two vertices
-            v = np.stack([k, (k + 1) % V], axis=-1)                              # (M,n,2,2) the two vertices
-            q = np.concatenate([a, np.zeros(a.shape[:2] + (1,))], axis=-1)[np.arange(len(idx))[:, None, None], v]
-            d = np.maximum(np.take_along_axis(da, v, axis=-1), 1e-300)[..., None]
-            grad[:, idx] = np.sum((Pi[:, :, :, None] - q) / d, axis=3)
+            board = np.arange(n)[:, None]
+            d_a = np.maximum(da.ravel()[at], 1e-300).reshape(M, n, 2, 1)
+            d_b = np.maximum(db.ravel()[at], 1e-300).reshape(M, n, 2, 1)
+            grad[:, idx] = (Pi - a3[board, k]) / d_a + (Pi - a3[board, nxt[k]]) / d_b
     return (out, grad) if gradient else out
+
+
+def take_last(a: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """``np.take_along_axis(a, k, axis=-1)`` for ``k`` of ``a``'s shape but its last axis (the same numbers, with
+    less overhead on the small arrays of the hot path)."""
+    flat = a.reshape(-1, a.shape[-1])
+    return flat[np.arange(len(flat))[:, None], k.reshape(len(flat), -1)].reshape(k.shape)
 
 
 def points_in_boards(obs: Observations, candidates: np.ndarray) -> list[np.ndarray]:
@@ -267,14 +290,18 @@ def scan_points_in_boards(obs: Observations, candidates: np.ndarray, rows: int =
     return out
 
 
-def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None):
+def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None,
+                     points: np.ndarray | None = None):
     """(M,K) distance (metres) of every scan point outside its board's exact outline under every candidate (0
     inside, and on boards without an exact outline; ``outside_outline`` per group of boards sharing one); with
     ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y). ``frames``: the candidates'
-    ``board_frames``."""
-    P = scan_points_in_boards(obs, candidates, rows=2, frames=frames)
+    ``board_frames``; ``points``: the (M,K,2) points in their boards' frames, when the caller has them."""
+    P = scan_points_in_boards(obs, candidates, rows=2, frames=frames) if points is None else points
+    groups = obs.derived("residuals.outline_point_groups", _outline_point_groups)
+    if len(groups) == 1 and groups[0][0].all():                             # one outline for every board
+        return outside_outline(P, groups[0][1], gradient=gradient)
     out, grad = np.zeros(P.shape[:2]), np.zeros(P.shape)
-    for sel, outline in obs.derived("residuals.outline_point_groups", _outline_point_groups):
+    for sel, outline in groups:
         if gradient:
             out[:, sel], grad[:, sel] = outside_outline(P[:, sel], outline, gradient=True)
         else:
@@ -289,21 +316,26 @@ def _outline_point_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarra
 
 def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool = False):
     """Distance (metres) of 2D points ``xy`` (...,2) outside the simple polygon ``outline`` (V,2); 0 inside. With
-    ``gradient`` also (...,2) its gradient in ``xy``: the unit vector from the nearest point of the outline."""
-    ax, ay, abx, aby, inv_len2, by, slope = _edges(np.ascontiguousarray(outline, float).tobytes(), len(outline))
-    x, y = xy[..., 0, None], xy[..., 1, None]
-    wx, wy = x - ax, y - ay                                                     # (...,V) from each edge's start
+    ``gradient`` also (...,2) its gradient in ``xy``: the unit vector from the nearest point of the outline.
+    (The work runs edge by edge along the first axis, the points along the others: short reductions over the
+    edges are then elementwise.)"""
+    V = len(outline)
+    shape = (V,) + (1,) * (xy.ndim - 1)
+    ax, ay, abx, aby, inv_len2, by, slope = (e.reshape(shape) for e in
+                                             _edges(np.ascontiguousarray(outline, float).tobytes(), V))
+    x, y = xy[..., 0], xy[..., 1]
+    wx, wy = x - ax, y - ay                                                     # (V,...) from each edge's start
     s = np.clip((wx * abx + wy * aby) * inv_len2, 0.0, 1.0)
     ox, oy = wx - s * abx, wy - s * aby                                         # from the nearest point of each edge
     d2 = ox**2 + oy**2
-    dist = np.sqrt(d2.min(axis=-1))
+    dist = np.sqrt(d2.min(axis=0))
     crosses = (ay > y) != (by > y)                                              # even-odd rule
-    inside = np.logical_xor.reduce(crosses & (x < ax + wy * slope), axis=-1)
+    inside = np.logical_xor.reduce(crosses & (x < ax + wy * slope), axis=0)
     out = np.where(inside, 0.0, dist)
     if not gradient:
         return out
-    k = np.argmin(d2, axis=-1)[..., None]
-    nearest = np.stack([np.take_along_axis(ox, k, -1)[..., 0], np.take_along_axis(oy, k, -1)[..., 0]], axis=-1)
+    k = np.argmin(d2, axis=0).ravel() * dist.size + np.arange(dist.size)       # flat index of the nearest edge
+    nearest = np.stack([ox.ravel()[k], oy.ravel()[k]], axis=-1).reshape(dist.shape + (2,))
     g = np.where((inside | (dist == 0))[..., None], 0.0, nearest / np.where(dist > 0, dist, 1.0)[..., None])
     return out, g
 
@@ -333,5 +365,10 @@ def board_frame_rows(obs: Observations, T: np.ndarray, points: np.ndarray, board
     those of ``T[None]``, when the caller has them), ``d p_W / d x = A [[p_L - t]_x, -I]``, so the row is
     ``(v x (p_L - t), -v)`` with ``v = A^T g``."""
     A = given_frames(obs, T[None], g.shape[1], frames)[0][0][board]                 # (K,r,3)
-    v = np.sum(g[..., None] * A, axis=1)
-    return np.concatenate([_cross(v, points - T[:3, 3]), -v], axis=1)
+    v = g[:, 0, None] * A[:, 0]
+    for r in range(1, g.shape[1]):                                                # the sum over the r coordinates
+        v = v + g[:, r, None] * A[:, r]
+    rows = np.empty((len(v), 6))
+    _cross_into(rows[:, :3], v, points - T[:3, 3])
+    np.negative(v, out=rows[:, 3:])
+    return rows

@@ -8,12 +8,12 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..data.observations import Observations
 from ..data.residuals import perturb
 from ..errors import SolveFailure
 from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine, so3_left_jacobian
+from ..refine.trust_region import least_squares_many
 from .scorers import ScoreOptions, lidarcam_linearised, outline_term
 from .scorers import lidarcam as lidarcam_score
 from .starts import DISTINCT_ROT_DEG, DISTINCT_TRANS_M, distinct_order, gauss_newton_steps, near_any
@@ -68,32 +68,35 @@ class RefineOptions:
 
 def polish(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions, range_sigma_m: float,
            give_up_above: float = np.inf) -> np.ndarray:
-    """Minimise the whole ``lidarcam`` selection cost from ``T0`` (``least_squares``, ``POLISH_METHOD``) with its
-    analytic Jacobian (``scorers.lidarcam_linearised``, times the left Jacobian of SO(3) at the rotation step);
-    residuals and Jacobian are computed together and the Jacobian kept for the call at the same step. A polish
-    whose cost is still above ``give_up_above`` after ``GIVE_UP_ITERATIONS`` iterations is stopped there."""
+    """Minimise the whole ``lidarcam`` selection cost from ``T0`` (``polish_many`` of one start). A polish whose
+    cost is still above ``give_up_above`` after ``GIVE_UP_ITERATIONS`` iterations is stopped there."""
+    def halt(_, nit, cost):
+        return bool(np.isfinite(give_up_above) and nit >= GIVE_UP_ITERATIONS and cost > give_up_above)
+
+    return polish_many(obs, np.asarray(T0, float)[None], max_nfev, score, range_sigma_m, halt)[0]
+
+
+def polish_many(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOptions, range_sigma_m: float,
+                halt=None, done=None) -> np.ndarray:
+    """Minimise the whole ``lidarcam`` selection cost from each of the (B,4,4) ``T0`` at once (B,4,4):
+    ``least_squares(method=POLISH_METHOD)`` of each in ``x = (w, dt)`` around its start (``data.residuals``' left
+    perturbation), as ``refine.trust_region.least_squares_many`` runs it, with the analytic Jacobian
+    (``scorers.lidarcam_linearised``, times the left Jacobian of SO(3) at the rotation step). ``halt`` and
+    ``done``: ``least_squares_many``'s (``done`` is told the start's index and its polished pose)."""
+    T0 = np.asarray(T0, float).reshape(-1, 4, 4)
     kw = {"range_sigma_m": range_sigma_m, **score.kwargs()}
-    last: dict = {}
 
-    def fun(x):
-        last["x"] = x.copy()
-        last["f"], last["J"] = lidarcam_linearised(obs, perturb(T0, x), **kw)
-        return last["f"]
+    def fun(idx, X):
+        F, J = [], []
+        for i, x in zip(idx, X, strict=True):
+            f, j = lidarcam_linearised(obs, perturb(T0[i], x), **kw)
+            j[:, :3] = j[:, :3] @ so3_left_jacobian(x[:3])
+            F.append(f), J.append(j)
+        return np.array(F), np.array(J)
 
-    def jac(x):
-        if not np.array_equal(last.get("x"), x):
-            fun(x)
-        J = last["J"].copy()
-        J[:, :3] = J[:, :3] @ so3_left_jacobian(x[:3])
-        return J
-
-    def hopeless(intermediate_result):
-        if intermediate_result.nit >= GIVE_UP_ITERATIONS and intermediate_result.cost > give_up_above:
-            raise StopIteration
-
-    sol = least_squares(fun, np.zeros(6), jac=jac, method=POLISH_METHOD, max_nfev=max_nfev,
-                        callback=hopeless if np.isfinite(give_up_above) else None)
-    return perturb(T0, sol.x)
+    told = None if done is None else (lambda i, x: done(i, perturb(T0[i], x)))
+    X = least_squares_many(fun, np.zeros((len(T0), 6)), max_nfev, halt, told)
+    return perturb(T0, X)
 
 
 PRUNE_FIRST = 4
@@ -192,11 +195,34 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
         raise SolveFailure("lidarcam: no candidate has a finite score (under every one some board is implausible: "
                            "behind a sensor, or the sensors on opposite sides of its plane)", C)
     known = refined if opts.loss == Loss.LINEAR else ()
-    out: list[Choice] = []
-    for c, off in _refine_starts(obs, C[starts], sigma_m, score, opts, known):
-        best = min((o.cost for o in out), default=np.inf)
-        out.append(polish_choice(obs, c, sigma_m, score, opts, GIVE_UP_FACTOR * best) if opts.polish and off else c)
-    return with_ties(out, opts, opts.tie_log_likelihood)
+    out = _refine_starts(obs, C[starts], sigma_m, score, opts, known)
+    return with_ties(polish_choices(obs, out, sigma_m, score, opts), opts, opts.tie_log_likelihood)
+
+
+def polish_choices(obs: Observations, refined: list[tuple[Choice, bool]], sigma_m: float, score: ScoreOptions,
+                   opts: RefineOptions) -> list[Choice]:
+    """Each refined choice (best first), polished (``polish_choice``) when it disagrees with the outlines, all
+    polishes at once (``polish_many``); the polish of a later start is stopped as hopeless after
+    ``GIVE_UP_ITERATIONS`` iterations while its cost is above ``GIVE_UP_FACTOR`` times the best final cost of the
+    choices before it (as when the polishes run one after another)."""
+    out: dict[int, Choice] = {k: c for k, (c, off) in enumerate(refined) if not (opts.polish and off)}
+    todo = [k for k in range(len(refined)) if k not in out]
+    if not todo:
+        return [out[k] for k in range(len(refined))]
+
+    def halt(i, nit, cost):
+        if any(k not in out for k in range(todo[i])):
+            return None
+        bound = GIVE_UP_FACTOR * min((out[k].cost for k in range(todo[i])), default=np.inf)
+        return bool(np.isfinite(bound) and nit >= GIVE_UP_ITERATIONS and cost > bound)
+
+    def done(i, T2):
+        c = refined[todo[i]][0]
+        f2 = float(lidarcam_score(obs, T2[None], range_sigma_m=sigma_m, **score.kwargs())[0])
+        out[todo[i]] = Choice(f2, c.refined, T2, True, c.start) if f2 < c.cost else c
+
+    polish_many(obs, np.array([refined[k][0].T for k in todo]), opts.max_nfev, score, sigma_m, halt, done)
+    return [out[k] for k in range(len(refined))]
 
 
 def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score: ScoreOptions,

@@ -24,7 +24,7 @@ from ..data.residuals import (
     plane_residuals,
     point_line_errors,
     range_residuals,
-    scan_endpoints,
+    scan_points_in_boards,
 )
 from ..errors import CalibrationError, SolveFailure
 from ..geometry.mounting import MountingPrior
@@ -320,19 +320,42 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
     T = np.asarray(T_lidar_cam, float)
     data = obs.scan_data
     exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    ends, rows = obs.derived("scorers.linearised_rows", _linearised_rows)
+    n_edge = 2 * len(exact)
     rng, J_rng = range_residuals(T, data, jacobian=True)
     frames = board_frames(obs, T[None])                     # every board-frame map below, computed once
-    edge, g_edge = point_line_errors(obs, T[None], gradient=True, frames=frames)
-    out, g_out = outside_outlines(obs, T[None], gradient=True, frames=frames)
-    J_edge = board_frame_rows(obs, T, scan_endpoints(obs)[exact].reshape(-1, 3), np.repeat(exact, 2),
-                              g_edge[0][exact].reshape(-1, 3), frames)
-    J_out = board_frame_rows(obs, T, data.points[on_exact], data.board[on_exact], g_out[0][on_exact], frames)
+    P = scan_points_in_boards(obs, T[None], frames=frames)  # every scan point in its board's frame, once
+    edge, g_edge = point_line_errors(obs, T[None], gradient=True, frames=frames, ends=P[:, ends])
+    out, g_out = outside_outlines(obs, T[None], gradient=True, frames=frames, points=P[..., :2])
+    if len(exact) == obs.n_boards:                          # every outline exact: no rows to leave out
+        edge, g_edge, out, g_out = edge[0], g_edge[0], out[0], g_out[0]
+    else:
+        edge, g_edge, out, g_out = edge[0][exact], g_edge[0][exact], out[0][on_exact], g_out[0][on_exact]
+    # the endpoint and outline rows at once: the outline's gradient has no board-frame z part
+    g = np.zeros((len(rows), 3))
+    g[:n_edge] = g_edge.reshape(-1, 3)
+    g[n_edge:, :2] = g_out
+    J_ends_out = board_frame_rows(obs, T, *obs.derived("scorers.linearised_points", _linearised_points), g, frames)
     rc, Jc, rm, Jm = lower_bound_rows(obs, T, frames, chord_sigma_m, chord_cap, margin_sigma_m)
     rp, Jp = (prior.residuals(T), prior.jacobian(T)) if prior is not None else (np.zeros(0), np.zeros((0, 6)))
-    res = np.concatenate([rng / range_sigma_m, edge[0][exact].ravel() / edge_sigma_m,
-                          out[0][on_exact] / outline_sigma_m, rc, rm, rp])
-    return res, np.concatenate([J_rng / range_sigma_m, J_edge / edge_sigma_m, J_out / outline_sigma_m, Jc, Jm, Jp],
-                               axis=0)
+    res = np.concatenate([rng / range_sigma_m, edge.ravel() / edge_sigma_m, out / outline_sigma_m, rc, rm, rp])
+    return res, np.concatenate([J_rng / range_sigma_m, J_ends_out[:n_edge] / edge_sigma_m,
+                                J_ends_out[n_edge:] / outline_sigma_m, Jc, Jm, Jp], axis=0)
+
+
+def _linearised_points(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+    """The lidar-frame points (K',3) and boards (K',) of the endpoint and outline rows (``_linearised_rows``)."""
+    rows = obs.derived("scorers.linearised_rows", _linearised_rows)[1]
+    return obs.scan_data.points[rows], obs.scan_data.board[rows]
+
+
+def _linearised_rows(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+    """(N,2) the rows of ``obs.scan_data`` of every board's first and last scan point (its endpoints), and the rows
+    of the endpoints of the exact-outline boards followed by those of their scan points (``lidarcam_linearised``)."""
+    stops = np.cumsum([len(b.scan) for b in obs.boards])
+    ends = np.stack([stops - [len(b.scan) for b in obs.boards], stops - 1], axis=1)
+    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    return ends, np.concatenate([ends[exact].ravel(), np.flatnonzero(on_exact)])
 
 
 PENG2022_OPTIONS = ("delta_m", "normalise_candidates", "beta_norm", "beta_eps", "error", "weighting")
