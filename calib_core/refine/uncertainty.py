@@ -81,7 +81,7 @@ def range_board_scores(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m
                                                                                                    np.ndarray]:
     """The range model's board scores (N,6), ``J_i^T e_i / sigma^2``, and informations (N,6,6), ``J_i^T J_i /
     sigma^2``, at ``T_lidar_cam`` (board poses taken as exact): what ``refine.dispersion`` tests."""
-    e, J = range_residuals(np.asarray(T_lidar_cam, float), obs.scan_data, jacobian=True)
+    e, J = range_linearised(np.asarray(T_lidar_cam, float), obs.scan_data)  # the final checks' linearisation
     starts = np.r_[0, np.cumsum([len(b.scan) for b in obs.boards])[:-1]]
     s2 = float(range_sigma_m) ** 2
     return np.add.reduceat(J * e[:, None], starts) / s2, np.add.reduceat(np.einsum("ka,kb->kab", J, J), starts) / s2
