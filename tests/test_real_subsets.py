@@ -109,3 +109,39 @@ def test_the_covariance_line_says_what_each_model_did():
     assert "intrinsics taken as exact" in said[JOINT_MODEL] and "under that prior" in said[JOINT_INTRINSICS_MODEL]
     assert "range-only" in said[RANGE_ONLY_MODEL] and "no image corners" in said[RANGE_ONLY_MODEL]
     assert len(set(said.values())) == 3
+
+
+def test_drawn_prior_is_seeded_per_subset_and_spread_as_stated():
+    T_ref = make_T(rotvec_to_matrix([0.3, -0.1, 1.2]), [0.1, -0.05, 0.2])
+    a, b = sub.drawn_prior("x", (0, 1, 2), T_ref), sub.drawn_prior("x", (0, 1, 2), T_ref)
+    assert np.array_equal(a.T_lidar_cam, b.T_lidar_cam)
+    assert not np.array_equal(a.T_lidar_cam, sub.drawn_prior("x", (0, 1, 3), T_ref).T_lidar_cam)
+    assert not np.array_equal(a.T_lidar_cam, sub.drawn_prior("y", (0, 1, 2), T_ref).T_lidar_cam)
+    assert np.isclose(a.sigma_rot_rad, np.radians(sub.PRIOR_SIGMA_DEG))
+    assert np.isclose(a.sigma_trans_m, sub.PRIOR_SIGMA_MM / 1000)
+    # over many subsets the guesses' errors have the stated spread: the normalised squared error ~ chi-square(6)
+    from calib_core.geometry.transforms import matrix_to_rotvec
+
+    e = []
+    for i in range(2000):
+        T = sub.drawn_prior("x", (i, i + 1, i + 2), T_ref).T_lidar_cam
+        w = matrix_to_rotvec(T[:3, :3] @ T_ref[:3, :3].T) / np.radians(sub.PRIOR_SIGMA_DEG)
+        t = (T[:3, 3] - T_ref[:3, 3]) / (sub.PRIOR_SIGMA_MM / 1000)
+        e.append(np.concatenate([w, t]))
+    e = np.array(e)
+    assert np.allclose(e.mean(axis=0), 0, atol=0.08) and np.allclose(e.std(axis=0), 1, atol=0.05)
+    assert abs(np.mean(np.sum(e**2, axis=1)) - 6) < 0.2
+
+
+def test_subset_run_with_a_prior_adds_its_labelled_row():
+    from calib_core import calibrate
+
+    obs = generate(SimOptions(n_boards=5), seed=11, trial=0)
+    prior = sub.drawn_prior("x", (0, 1, 2), obs.T_lidar_cam_true)
+    rows = sub._run(obs, (0, 1, 2), ["peng2022"], prior)
+    assert [r["method"] for r in rows] == ["peng2022", sub.PRIOR_LABEL]
+    res = calibrate(obs.subset([0, 1, 2]), sub.PRIOR_METHOD, prior=prior)
+    assert rows[1]["ok"] == res.ok
+    if res.ok:
+        assert json.loads(rows[1]["T"]) == np.round(res.T_lidar_cam, 9).tolist()
+    assert [r["method"] for r in sub._run(obs, (0, 1, 2), ["peng2022"])] == ["peng2022"]

@@ -12,7 +12,7 @@ import numpy as np
 from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, undetermined_directions
 from ..data.lines import range_sigma
 from ..data.observations import Observations
-from ..data.residuals import perturb, range_linearised
+from ..data.residuals import range_linearised
 from ..errors import JointError, SolveFailure, UncertaintyError
 from ..geometry.mounting import MountingPrior, params_from_T, parse_fixed, with_units
 from ..geometry.transforms import skew
@@ -59,10 +59,12 @@ NO_CORNERS = "no image corners"
 
 
 def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, loss: str,
-              options: JointOptions | None = None, names=None) -> tuple[tuple | None, str | None]:
+              options: JointOptions | None = None, names=None,
+              mounting: MountingPrior | None = None) -> tuple[tuple | None, str | None]:
     """The joint step (``refine.joint.joint_step``) from ``T``: ((T, covariance, info), None) when it applies and
     succeeds; (None, why) otherwise (``why`` None when the corners are switched off). ``names``: the boards' names
-    in its warnings (default their index in ``obs``)."""
+    in its warnings (default their index in ``obs``); ``mounting``: a mounting prior in its cost (the covariance
+    stays the data's: ``with_prior`` adds the prior's information)."""
     options = options or JointOptions()
     if not options.use_corners:
         return None, None
@@ -71,7 +73,7 @@ def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, 
     try:
         return joint_step(obs, T, corner_sigma_px=options.corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
                           f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter, widen=options.widen,
-                          names=names, outline=options.outline), None
+                          names=names, outline=options.outline, mounting=mounting), None
     except (JointError, UncertaintyError) as err:
         return None, f"joint refinement failed ({err})"
 
@@ -118,18 +120,13 @@ def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], n
                                    "refine_loss": str(loss), "warnings": board_set_warnings(obs)}
 
 
-def with_prior(T: np.ndarray, cov: np.ndarray, prior: MountingPrior, step: bool) -> tuple[np.ndarray, np.ndarray]:
-    """The answer ``T`` with covariance ``cov`` (6x6 in ``(w, dt)``, ``data.residuals``' left perturbation) combined
-    with the mounting ``prior``: its information ``J^T J`` added (``J = prior.jacobian(T)``), and with ``step`` one
-    Gauss-Newton step of the posterior ``x^T cov^-1 x + |r + J x|^2`` (an answer the prior did not enter yet; exact
-    for a Gaussian likelihood)."""
+def with_prior(T: np.ndarray, cov: np.ndarray, prior: MountingPrior) -> np.ndarray:
+    """The posterior covariance of the answer ``T`` (the posterior's mode) whose data alone give ``cov`` (6x6 in
+    ``(w, dt)``, ``data.residuals``' left perturbation): the mounting ``prior``'s information ``J^T J`` added
+    (``J = prior.jacobian(T)``)."""
     J = prior.jacobian(T)
-    info = np.linalg.inv(cov) + J.T @ J
-    post = np.linalg.inv(info)
-    post = 0.5 * (post + post.T)
-    if step:
-        T = perturb(T, -post @ (J.T @ prior.residuals(T)))
-    return T, post
+    post = np.linalg.inv(np.linalg.inv(cov) + J.T @ J)
+    return 0.5 * (post + post.T)
 
 
 def prior_info(prior: MountingPrior) -> dict:

@@ -163,13 +163,13 @@ def finish(found: Found, opts: LidarcamOptions):
     obs_u = tests.obs_used
     deg = refuse_undetermined(obs_u, best.T, np.concatenate([best.T[None], C]), "lidarcam", sigma_given,
                               opts.degeneracy)
-    joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.refine.loss, options=opts.joint,
-                           names=tests.info.get("boards_used"))
     prior = opts.score.prior
+    joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.refine.loss, options=opts.joint,
+                           names=tests.info.get("boards_used"), mounting=prior)
     if joint is not None:
         T, cov, jinfo = joint
-        if prior is not None:  # the joint model ran without the prior: one Gauss-Newton step of the posterior
-            T, cov = with_prior(T, cov, prior, step=True)
+        if prior is not None:  # the joint model's answer is the posterior's mode; its covariance the data's
+            cov = with_prior(T, cov, prior)
     else:
         T, cov = best.T, fold_covariance(obs_u, best.T, deg) if deg.profile.any() else \
             range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given)
@@ -178,7 +178,7 @@ def finish(found: Found, opts: LidarcamOptions):
             cov, disp = widened_range_covariance(obs_u, T, cov, sigma_given, tests.info.get("boards_used"))
             jinfo.update(disp)
         if prior is not None:  # the refinement held the prior already: its information only
-            T, cov = with_prior(T, cov, prior, step=False)
+            cov = with_prior(T, cov, prior)
         if why is not None and why != NO_CORNERS:
             jinfo["warnings"].append(f"{why}; covariance of the range model only")
     weak, alts = runner_up_warning(found.first) if not tests.changed else ([], {})

@@ -28,6 +28,7 @@ from ..data.observations import Observations
 from ..data.residuals import perturb, range_residuals
 from ..errors import JointError, ObservationError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
+from ..geometry.mounting import MountingPrior
 from ..geometry.transforms import rotvec_to_matrix
 from .dispersion import widened_covariance
 from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS, IntrinsicsPrior, augmented_blocks
@@ -151,16 +152,35 @@ def _blocks(obs, offsets, weighted, w, prior, k):
                             prior.residuals(k), prior.std)
 
 
-def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL, prior=None, k=None, outline=False):
+def with_mounting(blocks: tuple, mounting: MountingPrior, T_e: np.ndarray) -> tuple:
+    """The Gauss-Newton blocks (``_normal_equations``' order) with the mounting prior's rows added to the
+    extrinsic's (its first six global parameters)."""
+    g_e, g_b, H_ee, H_eb, H_bb = blocks
+    J, r = mounting.jacobian(T_e), mounting.residuals(T_e)
+    g_e, H_ee = g_e.copy(), H_ee.copy()
+    g_e[:6] += J.T @ r
+    H_ee[:6, :6] += J.T @ J
+    return g_e, g_b, H_ee, H_eb, H_bb
+
+
+def mounting_cost(mounting: MountingPrior | None, T_e: np.ndarray) -> float:
+    """Minus the mounting prior's log-density at ``T_e`` (up to a constant): half its squared residuals; 0 without
+    one."""
+    return 0.0 if mounting is None else 0.5 * float(np.sum(mounting.residuals(T_e) ** 2))
+
+
+def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL, prior=None, k=None, outline=False,
+           mounting=None):
     """Levenberg-Marquardt on the joint cost, each step by the Schur complement (linear in the boards); robust
-    losses by iteratively reweighted least squares (the intrinsics prior's rows are Gaussian, never reweighted).
-    Returns (T_e, T_b, cost, iterations, converged, k) (``k`` the free intrinsics; None without a prior)."""
+    losses by iteratively reweighted least squares (the intrinsics prior's and the mounting prior's rows are
+    Gaussian, never reweighted). Returns (T_e, T_b, cost, iterations, converged, k) (``k`` the free intrinsics;
+    None without an intrinsics prior)."""
     drho = _DRHO[loss]
     offsets = _row_offsets(obs)
 
     def cost_of(Te, Tb, kk):
         c = robust_cost(_weighted(obs, Te, Tb, sc, sr, False, prior, kk), loss, f_scale_sigmas)
-        c += outline_cost(obs, Te, Tb) if outline else 0.0
+        c += (outline_cost(obs, Te, Tb) if outline else 0.0) + mounting_cost(mounting, Te)
         return c if prior is None else c + 0.5 * float(np.sum(prior.residuals(kk) ** 2))
 
     cost, lam, it = cost_of(T_e, T_b, k), INITIAL_LAMBDA, 0
@@ -169,6 +189,7 @@ def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL,
         w = np.sqrt(drho((lin[0] / f_scale_sigmas) ** 2))
         blocks = _blocks(obs, offsets, lin, w, prior, k)
         blocks = with_outline(blocks, obs, T_e, T_b) if outline else blocks
+        blocks = with_mounting(blocks, mounting, T_e) if mounting is not None else blocks
         while True:
             de, db = _schur_step(*blocks, lam)
             Te, Tb = _apply(T_e, T_b, de, db)
@@ -225,7 +246,7 @@ def _estimate_sigmas(obs, T_e, T_b, n_params_boards: int, camera=None):
 def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                  range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                  max_iter: int = MAX_ITER, sigma_iters: int = 3, sigma_rtol: float = 0.05,
-                 intrinsics: bool = True, outline: bool = False) -> JointResult:
+                 intrinsics: bool = True, outline: bool = False, mounting: MountingPrior | None = None) -> JointResult:
     """Maximise the joint likelihood from the extrinsic ``T0`` and the observed board poses.
 
     Args:
@@ -237,6 +258,8 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         intrinsics: when the camera states ``std_intrinsics``, estimate the intrinsics too, with that Gaussian
             prior (``refine.joint_intrinsics``), so the covariance holds their error; False takes them as exact.
         outline: the lower-bound outlines' chord and margin terms in the cost (``refine.joint_outline``).
+        mounting: a mounting prior (``geometry.mounting.MountingPrior``) in the cost: the answer is the posterior's
+            mode. The covariance is the data's alone (``methods.finish.with_prior`` adds the prior's information).
     Raises:
         JointError: no corners or camera; UncertaintyError: the joint information is singular.
     """
@@ -249,7 +272,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
     k = None if prior is None else prior.k0.copy()
     for _ in range(max(1, sigma_iters)):
         T_e, T_b, _, nit, converged, k = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter,
-                                                prior=prior, k=k, outline=outline)
+                                                prior=prior, k=k, outline=outline, mounting=mounting)
         cam = None if prior is None else prior.camera_at(k)
         new_c, new_r = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards, cam)
         new_c = corner_sigma_px if corner_sigma_px is not None else new_c
@@ -263,7 +286,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
     ec = corner_residuals(obs, T_b, camera=cam)
     er = joint_range_residuals(obs, T_e, T_b)
     cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale_sigmas) + \
-        (outline_cost(obs, T_e, T_b) if outline else 0.0)
+        (outline_cost(obs, T_e, T_b) if outline else 0.0) + mounting_cost(mounting, T_e)
     if prior is not None:
         cost += 0.5 * float(np.sum(prior.residuals(k) ** 2))
     return JointResult(T_e, T_b, cov, sc, sr, float(np.sqrt(np.mean(np.sum(ec**2, axis=1)))),
@@ -367,7 +390,7 @@ def joint_crlb(obs: Observations, range_sigma_m: float, corner_sigma_px: float, 
 def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                max_iter: int = MAX_ITER, widen: bool = True, names=None,
-               outline: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
+               outline: bool = False, mounting: MountingPrior | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
     (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
     ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
@@ -379,7 +402,7 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
-                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline)
+                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline, mounting=mounting)
     exact, cov, warnings = j.camera is None, j.covariance, []
     widen = widen and obs.n_boards > 3  # three boards fit exactly; units: the noise each sensor shows alone
     if widen:

@@ -174,17 +174,21 @@ def _subset_md(rs, obs, rows, out: Path, images: dict, n_subsets: int, n_jobs: i
     refs = fair_references(rows)
     if not refs:
         return ["No method solved on all boards: no reference for the subset experiment.", ""], {}
-    df = sub.run_subsets(SHORT[rs.name], obs, METHODS, out, n_jobs=n_jobs, n=n_subsets)
+    T_prior = refs[sub.PRIOR_METHOD]["T_lidar_cam"] if sub.PRIOR_METHOD in refs else None
+    df = sub.run_subsets(SHORT[rs.name], obs, METHODS, out, n_jobs=n_jobs, n=n_subsets, T_prior=T_prior)
+    judged = {m: m for m in METHODS} | ({sub.PRIOR_LABEL: sub.PRIOR_METHOD} if T_prior is not None else {})
     parts, ref_rows = [], []
-    for m in METHODS:
-        d = df[df["method"] == m]
+    for label, m in judged.items():
+        d = df[df["method"] == label]
         if m not in refs:
             parts.append(d.assign(e_R_deg=np.nan, e_t_m=np.nan, valid=False, valid_3sigma=False))
             ref_rows.append([f"`{m}`", "none", "-"])
             continue
         sr, st, which = _reference_sigmas(refs[m])
         parts.append(sub.valid_columns(d, np.asarray(refs[m]["T_lidar_cam"]), sr, None if st is None else st / 1000))
-        ref_rows.append([f"`{m}`", f"`{refs[m]['method']}`", f"{sr:.2f} deg / {st:.1f} mm ({which})" if sr else "-"])
+        if label == m:
+            ref_rows.append([f"`{m}`", f"`{refs[m]['method']}`",
+                             f"{sr:.2f} deg / {st:.1f} mm ({which})" if sr else "-"])
     df = pd.concat(parts).sort_index()
     fig9 = out / f"fig9_{SHORT[rs.name]}.png"
     sub.fig9(df, METHODS, fig9, f"{rs.name}: {n_subsets} random subsets per board count")
@@ -194,11 +198,19 @@ def _subset_md(rs, obs, rows, out: Path, images: dict, n_subsets: int, n_jobs: i
           "Valid rate, each method against the all-board answer of the best held-out method other than itself (no "
           "method is judged against its own answer): within 8 deg / 0.8 m [95% Wilson interval over the subsets], "
           "and within 3 of that answer's 1-sigma; a failure or a refusal counts as invalid:", ""]
-    md += sub.valid_table(df, METHODS) + [""]
+    md += sub.valid_table(df, list(judged)) + [""]
+    if T_prior is not None:
+        md += [f"`{sub.PRIOR_LABEL}`: `{sub.PRIOR_METHOD}` given a rough guess of the mounting, as a user with a tape "
+               f"measure has one: for each subset the reference answer of `{sub.PRIOR_METHOD}` with a rotation error "
+               f"drawn from N(0, {sub.PRIOR_SIGMA_DEG:g} deg) about each axis and a translation error from N(0, "
+               f"{sub.PRIOR_SIGMA_MM:g} mm) along each (seeded by the set and the subset), given with those sigmas "
+               f"(`calibrate(obs, \"{sub.PRIOR_METHOD}\", prior=...)`). Where the data leave a tie, the prior decides; "
+               f"alone, the guess is within {sub.VALID_DEG:g} deg / {sub.VALID_M:g} m of the reference in "
+               f"{100 * sub.guesses_valid(SHORT[rs.name], df, T_prior):.0f}% of the subsets.", ""]
     md += ["References:", ""] + md_table(["method judged", "reference", "its 1-sigma"], ref_rows, "lll") + [""]
     md += _fig8(rs, obs, df, out, images)
     rates = {m: {int(k): float(d["valid"].mean()) for k, d in df[df["method"] == m].groupby("n_boards")}
-             for m in METHODS}
+             for m in judged}
     return md, {"reference": {m: r["method"] for m, r in refs.items()}, "valid": rates}
 
 

@@ -21,7 +21,9 @@ import pandas as pd
 import calib_core
 from calib_core.data.io import observations_to_dict
 from calib_core.data.observations import Observations
-from calib_core.geometry.metrics import pose_errors
+from calib_core.geometry.metrics import is_valid, pose_errors
+from calib_core.geometry.mounting import MountingPrior
+from calib_core.geometry.transforms import rotvec_to_matrix
 from rig.markdown import md_table
 
 from ..summary.intervals import wilson_interval
@@ -32,6 +34,12 @@ VALID_DEG, VALID_M = 8.0, 0.8
 """The paper's validity thresholds (docs/METHOD.md eq. 13-14)."""
 SIGMAS = 3.0
 """The stricter validity: within this many of the reference answer's 1-sigma (rotation and translation)."""
+PRIOR_METHOD = "lidarcam"
+PRIOR_SIGMA_DEG, PRIOR_SIGMA_MM = 10.0, 50.0
+"""The rough mounting guess the experiment also gives ``PRIOR_METHOD`` (``drawn_prior``): 1-sigma per axis, degrees
+and millimetres, as a tape measure and a protractor give it."""
+PRIOR_LABEL = f"{PRIOR_METHOD} + mounting prior"
+"""How the rows of ``PRIOR_METHOD`` run with that guess are named (a row label, not a registered method)."""
 
 
 def theta_mu(T: np.ndarray) -> tuple[float, float]:
@@ -47,12 +55,35 @@ def subsets(name: str, n_boards: int, counts=BOARD_COUNTS, n: int = N_SUBSETS, s
             for _ in range(n)]
 
 
-def _run(obs: Observations, subset: tuple[int, ...], methods) -> list[dict]:
+def drawn_prior(name: str, subset: tuple[int, ...], T_ref: np.ndarray, seed: int = 0) -> MountingPrior:
+    """A user's rough guess of the mounting for one subset: ``T_ref`` (4,4, ``T_lidar_cam``) with a rotation error
+    drawn from N(0, ``PRIOR_SIGMA_DEG``) about each axis (a rotation vector, applied on the left) and a translation
+    error from N(0, ``PRIOR_SIGMA_MM``) along each, stated with those sigmas; seeded by ``seed``, the data set's
+    name and the subset, so every run and worker draws the same guess."""
+    rng = np.random.default_rng([seed, zlib.crc32(name.encode()), zlib.crc32(" ".join(map(str, subset)).encode())])
+    w = rng.normal(0.0, np.radians(PRIOR_SIGMA_DEG), 3)
+    dt = rng.normal(0.0, PRIOR_SIGMA_MM / 1000, 3)
+    T = np.array(T_ref, float)
+    T[:3, :3] = rotvec_to_matrix(w) @ T[:3, :3]
+    T[:3, 3] += dt
+    return MountingPrior(T, np.radians(PRIOR_SIGMA_DEG), PRIOR_SIGMA_MM / 1000)
+
+
+def guesses_valid(name: str, df: pd.DataFrame, T_ref: np.ndarray, seed: int = 0) -> float:
+    """The share of the subsets in ``df`` whose drawn guess (``drawn_prior``) is itself valid against ``T_ref``."""
+    subs = [tuple(int(i) for i in str(s).split()) for s in df["subset"].unique()]
+    ok = [is_valid(*pose_errors(drawn_prior(name, s, T_ref, seed).T_lidar_cam, T_ref), VALID_DEG, VALID_M)
+          for s in subs]
+    return float(np.mean(ok)) if ok else math.nan
+
+
+def _run(obs: Observations, subset: tuple[int, ...], methods, prior: MountingPrior | None = None) -> list[dict]:
     out = []
     sub = obs.subset(list(subset))
-    for m in methods:
-        res = calib_core.calibrate(sub, m)
-        row = {"n_boards": len(subset), "subset": " ".join(map(str, subset)), "method": m, "ok": res.ok,
+    runs = [(m, m, None) for m in methods] + ([(PRIOR_LABEL, PRIOR_METHOD, prior)] if prior is not None else [])
+    for label, m, p in runs:
+        res = calib_core.calibrate(sub, m) if p is None else calib_core.calibrate(sub, m, prior=p)
+        row = {"n_boards": len(subset), "subset": " ".join(map(str, subset)), "method": label, "ok": res.ok,
                "seconds": res.seconds, "theta_R_deg": math.nan, "mu_t_m": math.nan, "T": ""}
         if res.ok:
             row["theta_R_deg"], row["mu_t_m"] = theta_mu(res.T_lidar_cam)
@@ -62,15 +93,19 @@ def _run(obs: Observations, subset: tuple[int, ...], methods) -> list[dict]:
 
 
 def run_subsets(name: str, obs: Observations, methods, out: Path, n_jobs: int = 2, n: int = N_SUBSETS,
-                seed: int = 0) -> pd.DataFrame:
-    """Every method on every subset of ``subsets(...)``; stored in ``out/subsets_<name>.csv`` with a key of the data
-    and settings and of the library's code (``engine.fingerprint``), read back instead of rerun when it matches."""
+                seed: int = 0, T_prior: np.ndarray | None = None) -> pd.DataFrame:
+    """Every method on every subset of ``subsets(...)``, and with ``T_prior`` (4,4) also ``PRIOR_METHOD`` given a
+    rough guess drawn around it (``drawn_prior``, rows ``PRIOR_LABEL``); stored in ``out/subsets_<name>.csv`` with
+    a key of the data and settings and of the library's code (``engine.fingerprint``), read back instead of rerun
+    when it matches."""
     from joblib import Parallel, delayed
 
     from ..engine.fingerprint import package_hash
 
+    prior = None if T_prior is None else [np.round(np.asarray(T_prior, float), 12).tolist(), PRIOR_METHOD,
+                                          PRIOR_SIGMA_DEG, PRIOR_SIGMA_MM]
     key = hashlib.sha256(json.dumps([observations_to_dict(obs)["boards"], list(methods), n, seed,
-                                     list(BOARD_COUNTS), package_hash("calib_core")], sort_keys=True,
+                                     list(BOARD_COUNTS), package_hash("calib_core"), prior], sort_keys=True,
                                     default=str).encode()).hexdigest()[:16]
     path = out / f"subsets_{name}.csv"
     if path.exists():
@@ -80,7 +115,9 @@ def run_subsets(name: str, obs: Observations, methods, out: Path, n_jobs: int = 
             return df
     jobs = subsets(name, obs.n_boards, n=n, seed=seed)
     t0 = time.perf_counter()
-    parts = Parallel(n_jobs=n_jobs, batch_size=4)(delayed(_run)(obs, s, methods) for s in jobs)
+    priors = [None if T_prior is None else drawn_prior(name, s, T_prior, seed) for s in jobs]
+    parts = Parallel(n_jobs=n_jobs, batch_size=4)(delayed(_run)(obs, s, methods, p)
+                                                  for s, p in zip(jobs, priors, strict=True))
     df = pd.DataFrame([r for p in parts for r in p])
     df.insert(0, "key", key)
     df.to_csv(path, index=False)

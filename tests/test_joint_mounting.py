@@ -1,0 +1,66 @@
+"""The mounting prior in the joint model: its rows' gradient, the posterior's mode between the data's answer and
+the prior's pose, and at three boards an answer that keeps fitting the data when the guess is rough."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calib_core import calibrate
+from calib_core.data.residuals import perturb
+from calib_core.geometry.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
+from calib_core.geometry.mounting import MountingPrior
+from calib_core.refine.joint import joint_refine, mounting_cost, with_mounting
+from simulate import SimOptions, generate
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_mounting_rows_gradient_and_information_match_finite_differences(seed):
+    rng = np.random.default_rng(seed)
+    T0 = perturb(np.eye(4), rng.normal(scale=[0.5] * 3 + [0.2] * 3))
+    T = perturb(T0, rng.normal(scale=[0.3] * 3 + [0.1] * 3))
+    prior = MountingPrior(T0, np.radians(rng.uniform(2, 20)), rng.uniform(0.01, 0.1))
+    zero = (np.zeros(6), np.zeros((2, 6)), np.zeros((6, 6)), np.zeros((2, 6, 6)), np.eye(6)[None].repeat(2, 0))
+    g, _, H, _, _ = with_mounting(zero, prior, T)
+    h = 1e-6
+    fd = [(mounting_cost(prior, perturb(T, h * e)) - mounting_cost(prior, perturb(T, -h * e))) / (2 * h)
+          for e in np.eye(6)]
+    np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-6)
+    J = prior.jacobian(T)
+    np.testing.assert_allclose(H, J.T @ J)
+    assert mounting_cost(None, T) == 0.0 and np.isclose(mounting_cost(prior, T0), 0.0, atol=1e-20)
+
+
+@pytest.mark.parametrize("trial", range(3))
+def test_joint_mode_between_the_data_and_the_prior(trial):
+    obs = generate(SimOptions(n_boards=5, pose_mode="pixel"), seed=3, trial=trial)
+    T0 = obs.T_lidar_cam_true
+    plain = joint_refine(obs, T0)
+    away = perturb(plain.T_lidar_cam, np.r_[0.05, -0.03, 0.04, 0.03, -0.02, 0.02])
+    weak = joint_refine(obs, T0, mounting=MountingPrior(away, np.radians(90), 100.0))
+    e_R, e_t = pose_errors(weak.T_lidar_cam, plain.T_lidar_cam)   # the same optimum, to the solver's tolerance
+    assert e_R < 0.05 * sigma_rot_deg(plain.covariance) and e_t < 0.05 * sigma_trans_m(plain.covariance), (e_R, e_t)
+    strong = joint_refine(obs, T0, mounting=MountingPrior(away, np.radians(1e-4), 1e-6))
+    assert pose_errors(strong.T_lidar_cam, away)[0] < 1e-3 and pose_errors(strong.T_lidar_cam, away)[1] < 1e-5
+    mid = joint_refine(obs, T0, mounting=MountingPrior(away, np.radians(0.5), 0.01))
+    d_data, d_prior = pose_errors(mid.T_lidar_cam, plain.T_lidar_cam), pose_errors(mid.T_lidar_cam, away)
+    total = pose_errors(plain.T_lidar_cam, away)
+    assert d_data[0] < total[0] and d_prior[0] < total[0] and d_data[1] < total[1] and d_prior[1] < total[1]
+
+
+def test_a_rough_guess_at_three_boards_does_not_pull_the_answer_off_the_data():
+    """A guess a few of its sigmas off, where three boards leave a direction weak: the answer is the posterior's
+    mode, which fits the boards (the verdict finds them consistent), not a linear step towards the guess."""
+    refused, off = 0, []
+    for trial in range(12):
+        obs = generate(SimOptions(n_boards=3, pose_mode="pixel"), seed=21, trial=trial)
+        rng = np.random.default_rng(trial)
+        guess = perturb(obs.T_lidar_cam_true, np.r_[rng.normal(scale=np.radians(15), size=3),
+                                                    rng.normal(scale=0.075, size=3)])
+        res = calibrate(obs, "lidarcam", prior=MountingPrior(guess, np.radians(10), 0.05))
+        if not res.ok:
+            refused += "contradict" in res.reason
+            continue
+        off.append(pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)[0])
+    assert refused == 0, refused
+    assert len(off) >= 7 and np.median(off) < 3.0, off
