@@ -144,11 +144,16 @@ def zp_hypotheses(obs: Observations, rng: np.random.Generator, n_subsets: int = 
 
 
 def hypotheses(obs: Observations, sigma_m: float, outline_sigma_m: float, *, use_zhang_pless: bool = True,
-               **solver_options) -> Hypotheses:
+               guess: np.ndarray | None = None, **solver_options) -> Hypotheses:
     """Every hypothesis of the consensus search with its per-board statistics (``consensus.board_statistics`` at
-    range noise ``sigma_m``)."""
+    range noise ``sigma_m``). ``guess``: a (4,4) pose known before the data (a mounting prior's), one hypothesis
+    more, computed from no board."""
     T, src, q, exhaustive, n_tri = triple_hypotheses(obs, sigma_m, outline_sigma_m, solver_options)
     reasons: list[str] = [] if len(T) else [f"minimal solver: {n_tri} triples, no real solution"]
+    if guess is not None:
+        G = np.asarray(guess, float)[None]
+        T, src = np.concatenate([T, G]), np.concatenate([src, np.zeros((1, obs.n_boards), bool)])
+        q = np.concatenate([q, board_statistics(obs, G, sigma_m, outline_sigma_m)])
     if use_zhang_pless:
         Tz, sz, rz = zp_hypotheses(obs, np.random.default_rng(data_seed(obs) + 1))
         reasons += rz

@@ -128,9 +128,11 @@ def local_optimise(obs: Observations, T0: np.ndarray, q0: np.ndarray, sigma_m: f
 
 
 def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_m: float | None,
-                     outline_sigma_m: float, options: ConsensusOptions | None = None) -> Search:
+                     outline_sigma_m: float, options: ConsensusOptions | None = None,
+                     guess: np.ndarray | None = None) -> Search:
     """On ``obs`` (already trimmed, ``trim`` says how): keep the boards with a line-like scan, search hypotheses
-    and the consensus set among them (noise ``range_sigma_m``, default the scan lines' RMS estimate)."""
+    and the consensus set among them (noise ``range_sigma_m``, default the scan lines' RMS estimate); ``guess``
+    (4,4): a mounting prior's pose, one hypothesis more (``hypotheses``)."""
     options = options or ConsensusOptions()
     lines = scan_lines(obs)
     good = np.flatnonzero(lines.line_like)
@@ -140,7 +142,8 @@ def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_
                            + "; ".join(f"board {r['index']}: {r['reason']}" for r in rejected))
     obs_g = obs.subset(good)
     sigma = range_sigma(obs_g, range_sigma_m)
-    H = hypotheses(obs_g, sigma, outline_sigma_m, use_zhang_pless=options.use_zhang_pless, **dict(options.solver))
+    H = hypotheses(obs_g, sigma, outline_sigma_m, use_zhang_pless=options.use_zhang_pless, guess=guess,
+                   **dict(options.solver))
     if len(H.T) == 0:
         raise SolveFailure("no candidate: " + "; ".join(H.reasons))
     used = np.ones(len(good), bool)

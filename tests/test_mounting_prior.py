@@ -1,5 +1,6 @@
-"""The mounting prior in the joint model: its rows' gradient, the posterior's mode between the data's answer and
-the prior's pose, and at three boards an answer that keeps fitting the data when the guess is rough."""
+"""The mounting prior in the joint model and in the search: its rows' gradient, the posterior's mode between the
+data's answer and the prior's pose, at three boards an answer that keeps fitting the data when the guess is rough,
+and the guess as a start where the minimal solver finds none."""
 
 from __future__ import annotations
 
@@ -64,3 +65,22 @@ def test_a_rough_guess_at_three_boards_does_not_pull_the_answer_off_the_data():
         off.append(pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)[0])
     assert refused == 0, refused
     assert len(off) >= 7 and np.median(off) < 3.0, off
+
+
+def test_the_guess_is_a_start_where_the_minimal_solver_has_none():
+    from calib_core.robust.hypotheses import hypotheses
+
+    answered = 0
+    for trial in (3, 7, 9):  # three boards whose triple has no real solution
+        obs = generate(SimOptions(n_boards=3, pose_mode="pixel"), seed=21, trial=trial)
+        assert len(hypotheses(obs, 0.01, 0.1).T) == 0
+        guess = perturb(obs.T_lidar_cam_true, np.r_[np.radians([6.0, -4.0, 5.0]), 0.04, -0.03, 0.02])
+        H = hypotheses(obs, 0.01, 0.1, guess=guess)
+        assert len(H.T) == 1 and np.array_equal(H.T[0], guess) and H.within(np.zeros(3, bool))[0]
+        assert "no candidate" in calibrate(obs, "lidarcam").reason
+        res = calibrate(obs, "lidarcam", prior=MountingPrior(guess, np.radians(10), 0.05))
+        if res.ok:
+            answered += 1
+            # nearer the truth than the guess: the data moved it
+            assert pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)[1] < pose_errors(guess, obs.T_lidar_cam_true)[1]
+    assert answered >= 2
