@@ -134,3 +134,19 @@ def test_the_deferred_stop_rule_stops_some_polishes():
         polish_many(obs, T0, 100, ScoreOptions(), 0.02, halt, done)
         stops += count["stop"]
     assert stops > 0
+
+
+def test_a_start_already_at_the_optimum_is_returned_as_least_squares_returns_it():
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(12, 3))
+    x_opt = rng.normal(size=3)
+    b = A @ x_opt                                   # zero residual at x_opt: zero gradient, no step taken
+
+    def fun(idx, X):
+        return X @ A.T - b, np.repeat(A[None], len(X), axis=0)
+
+    X0 = np.array([x_opt, x_opt + 1.0, x_opt])      # optimal, not, optimal: all three answered
+    X = least_squares_many(fun, X0, 100)
+    ref = [least_squares(lambda x: A @ x - b, x0, jac=lambda x: A, method="trf").x for x0 in X0]
+    np.testing.assert_array_equal(X[[0, 2]], X0[[0, 2]])
+    np.testing.assert_allclose(X, ref, atol=1e-12)

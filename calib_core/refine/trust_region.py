@@ -160,7 +160,7 @@ def least_squares_many(fun: Callable, X0: np.ndarray, max_nfev: int, halt: Halt 
         raise ValueError("Residuals are not finite in the initial point.")
     gens = [_one_start(x, f, J, max_nfev) for x, f, J in zip(X0, F0, J0, strict=True)]
     run = _Runs(len(X0), halt, done)
-    req = {i: next(g) for i, g in enumerate(gens)}
+    req = {i: _send(g, None, run, i) for i, g in enumerate(gens)}  # a start already optimal returns at once
     while True:
         for i in [i for i in req if not run.halted(i)]:
             r = req[i]
