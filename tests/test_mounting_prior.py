@@ -11,7 +11,8 @@ from calib_core import calibrate
 from calib_core.data.residuals import perturb
 from calib_core.geometry.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
 from calib_core.geometry.mounting import MountingPrior
-from calib_core.refine.joint import joint_refine, mounting_cost, with_mounting
+from calib_core.refine.joint import joint_refine
+from calib_core.refine.joint_mounting import mounting_cost, with_mounting
 from simulate import SimOptions, generate
 
 

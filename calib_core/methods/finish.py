@@ -17,7 +17,8 @@ from ..errors import JointError, SolveFailure, UncertaintyError
 from ..geometry.mounting import MountingPrior, params_from_T, parse_fixed, with_units
 from ..geometry.transforms import skew
 from ..refine.dispersion import widened_covariance
-from ..refine.joint import JointOptions, joint_step
+from ..refine.joint import JointOptions
+from ..refine.joint_step import joint_step
 from ..refine.partial import calibrate_fixed, fixed_starts
 from ..refine.refine import F_SCALE_SIGMAS
 from ..refine.uncertainty import inverse_information, range_board_scores, refinement_covariance
@@ -61,7 +62,7 @@ NO_CORNERS = "no image corners"
 def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, loss: str,
               options: JointOptions | None = None, names=None,
               mounting: MountingPrior | None = None) -> tuple[tuple | None, str | None]:
-    """The joint step (``refine.joint.joint_step``) from ``T``: ((T, covariance, info), None) when it applies and
+    """The joint step (``refine.joint_step.joint_step``) from ``T``: ((T, covariance, info), None) when it applies and
     succeeds; (None, why) otherwise (``why`` None when the corners are switched off). ``names``: the boards' names
     in its warnings (default their index in ``obs``); ``mounting``: a mounting prior in its cost (the covariance
     stays the data's: ``with_prior`` adds the prior's information)."""

@@ -89,7 +89,7 @@ go to ``X``."""
 
 def joint_method(base: Method) -> Method:
     """The method ``base.name + "+joint"``: run ``base``, then the joint maximum likelihood over the image corners
-    and the ranges from its answer (``refine.joint.joint_step``; options ``JOINT_OPTIONS``, ``f_scale_sigmas`` in noise
+    and the ranges from its answer (``refine.joint_step``; options ``JOINT_OPTIONS``, ``f_scale_sigmas`` in noise
     stds), with the extrinsic's covariance, board poses marginalised. Without corners on every board it is
     ``X+ml`` and says so in ``info["warnings"]`` (its covariance ignores the camera's noise)."""
     def func(obs: Observations, **options):

@@ -30,8 +30,8 @@ from ..errors import JointError, ObservationError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.mounting import MountingPrior
 from ..geometry.transforms import rotvec_to_matrix
-from .dispersion import widened_covariance
-from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS, IntrinsicsPrior, augmented_blocks
+from .joint_intrinsics import IntrinsicsPrior, augmented_blocks
+from .joint_mounting import mounting_cost, with_mounting
 from .joint_outline import has_outline_rows, outline_cost, with_outline
 from .joint_residuals import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 from .refine import F_SCALE_SIGMAS, robust_cost
@@ -152,23 +152,6 @@ def _blocks(obs, offsets, weighted, w, prior, k):
                             prior.residuals(k), prior.std)
 
 
-def with_mounting(blocks: tuple, mounting: MountingPrior, T_e: np.ndarray) -> tuple:
-    """The Gauss-Newton blocks (``_normal_equations``' order) with the mounting prior's rows added to the
-    extrinsic's (its first six global parameters)."""
-    g_e, g_b, H_ee, H_eb, H_bb = blocks
-    J, r = mounting.jacobian(T_e), mounting.residuals(T_e)
-    g_e, H_ee = g_e.copy(), H_ee.copy()
-    g_e[:6] += J.T @ r
-    H_ee[:6, :6] += J.T @ J
-    return g_e, g_b, H_ee, H_eb, H_bb
-
-
-def mounting_cost(mounting: MountingPrior | None, T_e: np.ndarray) -> float:
-    """Minus the mounting prior's log-density at ``T_e`` (up to a constant): half its squared residuals; 0 without
-    one."""
-    return 0.0 if mounting is None else 0.5 * float(np.sum(mounting.residuals(T_e) ** 2))
-
-
 def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL, prior=None, k=None, outline=False,
            mounting=None):
     """Levenberg-Marquardt on the joint cost, each step by the Schur complement (linear in the boards); robust
@@ -236,7 +219,7 @@ class JointResult:
     camera: Camera | None = None
 
 
-def _estimate_sigmas(obs, T_e, T_b, n_params_boards: int, camera=None):
+def estimate_sigmas(obs, T_e, T_b, n_params_boards: int, camera=None):
     ec = corner_residuals(obs, T_b, camera=camera)
     er = joint_range_residuals(obs, T_e, T_b)
     return (max(residual_sigma(ec, n_params_boards), CORNER_SIGMA_FLOOR_PX),
@@ -264,7 +247,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         JointError: no corners or camera; UncertaintyError: the joint information is singular.
     """
     T_e, T_b = np.asarray(T0, float), board_poses(obs)
-    est_c, _ = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards)
+    est_c, _ = estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards)
     # start weights from each sensor alone, floored so that neither sensor swamps the other before the solve
     sc = corner_sigma_px if corner_sigma_px is not None else max(est_c, START_CORNER_SIGMA_PX)
     sr = range_sigma_m if range_sigma_m is not None else max(range_sigma(obs), START_RANGE_SIGMA_M)
@@ -274,7 +257,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         T_e, T_b, _, nit, converged, k = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter,
                                                 prior=prior, k=k, outline=outline, mounting=mounting)
         cam = None if prior is None else prior.camera_at(k)
-        new_c, new_r = _estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards, cam)
+        new_c, new_r = estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards, cam)
         new_c = corner_sigma_px if corner_sigma_px is not None else new_c
         new_r = range_sigma_m if range_sigma_m is not None else new_r
         done = abs(new_c / sc - 1) < sigma_rtol and abs(new_r / sr - 1) < sigma_rtol
@@ -385,39 +368,3 @@ def joint_crlb(obs: Observations, range_sigma_m: float, corner_sigma_px: float, 
     T_b = board_poses(obs) if T_cam_board is None else np.asarray(T_cam_board, float)
     cov = marginal_covariance(obs, T_lidar_cam, T_b, corner_sigma_px, range_sigma_m)
     return Crlb(sigma_rot_deg(cov), sigma_trans_m(cov), cov)
-
-
-def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
-               range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
-               max_iter: int = MAX_ITER, widen: bool = True, names=None,
-               outline: bool = False, mounting: MountingPrior | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
-    """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
-    (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
-    ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
-    ``info["intrinsics"]`` (``EXACT_INTRINSICS`` or ``ESTIMATED_INTRINSICS``) and the noise figures. With
-    ``widen``, ``info["board_dispersion"]`` holds the boards' dispersion test (``refine.dispersion``; boards named by
-    ``names``, default their index) and where it fails the covariance is widened to the boards' spread, with a
-    warning that says so.
-
-    Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
-    """
-    j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
-                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline, mounting=mounting)
-    exact, cov, warnings = j.camera is None, j.covariance, []
-    widen = widen and obs.n_boards > 3  # three boards fit exactly; units: the noise each sensor shows alone
-    if widen:
-        sc = corner_sigma_px if corner_sigma_px is not None else \
-            _estimate_sigmas(obs, j.T_lidar_cam, board_poses(obs), 6 * obs.n_boards, j.camera)[0]
-        sr = range_sigma(obs, range_sigma_m)
-        cov, disp = widened_covariance(cov, *board_scores(obs, j.T_lidar_cam, j.T_cam_board, sc, sr, j.camera))
-        warnings += [disp.warning(names)] if disp.widened else []
-    info = {"covariance_model": JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
-            "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
-            "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m, "corner_rms_px": j.corner_rms_px,
-            "range_rms_m": j.range_rms_m, "joint_cost": j.cost, "joint_iterations": j.iterations,
-            "joint_converged": j.converged, **({"board_dispersion": disp.to_dict(names)} if widen else {})}
-    if not j.converged:
-        warnings.insert(0, f"joint refinement stopped after {max_iter} iterations without converging")
-    if warnings:
-        info["warnings"] = warnings
-    return j.T_lidar_cam, cov, info

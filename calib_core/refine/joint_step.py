@@ -1,0 +1,52 @@
+"""A method's final step when the boards carry image corners: the joint model (``refine.joint``) from the method's
+answer, its covariance through the boards' dispersion test (``refine.dispersion``), and what the result reports of
+both. Frames and units as in ``refine.joint``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..data.lines import range_sigma
+from ..data.observations import Observations
+from ..geometry.mounting import MountingPrior
+from .dispersion import widened_covariance
+from .joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL, MAX_ITER, board_scores, estimate_sigmas, joint_refine
+from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS
+from .joint_residuals import board_poses
+from .refine import F_SCALE_SIGMAS
+
+
+def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
+               range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
+               max_iter: int = MAX_ITER, widen: bool = True, names=None,
+               outline: bool = False, mounting: MountingPrior | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
+    (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
+    ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
+    ``info["intrinsics"]`` (``EXACT_INTRINSICS`` or ``ESTIMATED_INTRINSICS``) and the noise figures. With
+    ``widen``, ``info["board_dispersion"]`` holds the boards' dispersion test (``refine.dispersion``; boards named by
+    ``names``, default their index) and where it fails the covariance is widened to the boards' spread, with a
+    warning that says so.
+
+    Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
+    """
+    j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
+                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline, mounting=mounting)
+    exact, cov, warnings = j.camera is None, j.covariance, []
+    widen = widen and obs.n_boards > 3  # three boards fit exactly; units: the noise each sensor shows alone
+    if widen:
+        sc = corner_sigma_px if corner_sigma_px is not None else \
+            estimate_sigmas(obs, j.T_lidar_cam, board_poses(obs), 6 * obs.n_boards, j.camera)[0]
+        sr = range_sigma(obs, range_sigma_m)
+        cov, disp = widened_covariance(cov, *board_scores(obs, j.T_lidar_cam, j.T_cam_board, sc, sr, j.camera))
+        warnings += [disp.warning(names)] if disp.widened else []
+    info = {"covariance_model": JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
+            "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
+            "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m, "corner_rms_px": j.corner_rms_px,
+            "range_rms_m": j.range_rms_m, "joint_cost": j.cost, "joint_iterations": j.iterations,
+            "joint_converged": j.converged, **({"board_dispersion": disp.to_dict(names)} if widen else {})}
+    if not j.converged:
+        warnings.insert(0, f"joint refinement stopped after {max_iter} iterations without converging")
+    if warnings:
+        info["warnings"] = warnings
+    return j.T_lidar_cam, cov, info
