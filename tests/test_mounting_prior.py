@@ -85,3 +85,24 @@ def test_the_guess_is_a_start_where_the_minimal_solver_has_none():
             # nearer the truth than the guess: the data moved it
             assert pose_errors(res.T_lidar_cam, obs.T_lidar_cam_true)[1] < pose_errors(guess, obs.T_lidar_cam_true)[1]
     assert answered >= 2
+
+
+@pytest.mark.parametrize("mode", ["exact", "pixel"])
+def test_covariance_with_a_prior_holds_the_spread_at_three_boards(mode):
+    """Guesses drawn with the stated sigmas around the truth: every three-board trial answered, and the NEES of the
+    posterior covariance about chi-square(6) (median 5.35)."""
+    from calib_core.geometry.transforms import matrix_to_rotvec
+
+    nees = []
+    for t in range(40):
+        obs = generate(SimOptions(n_boards=3, pose_mode=mode), seed=5, trial=t)
+        rng = np.random.default_rng(1000 + t)
+        G = obs.T_lidar_cam_true
+        guess = perturb(G, np.r_[rng.normal(scale=np.radians(10), size=3), rng.normal(scale=0.05, size=3)])
+        res = calibrate(obs, "lidarcam", prior=MountingPrior(guess, np.radians(10), 0.05))
+        assert res.ok, res.reason
+        T = res.T_lidar_cam
+        d = np.r_[matrix_to_rotvec(G[:3, :3] @ T[:3, :3].T), G[:3, 3] - T[:3, 3]]
+        nees.append(d @ np.linalg.solve(res.covariance, d))
+    assert 3.5 < np.median(nees) < 8.0, np.median(nees)
+    assert np.mean(np.array(nees) > 16.8) < 0.1      # chi-square(6)'s 99% quantile: 1% expected
