@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from calib_core.evaluate.crossval import leave_one_out
-from calib_core.evaluate.held_out import _board_pose_covariance, held_out_joint, held_out_spread, spread_summary
+from calib_core.evaluate.held_out import held_out_joint, held_out_spread, spread_summary
 from calib_core.geometry.transforms import rotvec_to_matrix
+from calib_core.refine.camera_side import board_pose_covariances
 from simulate import SimOptions, generate
 
 
@@ -34,8 +35,7 @@ def test_held_out_residuals_match_their_predicted_spread_with_the_board_pose_ter
 def _shaken(obs, factor, rng):
     """``obs`` with each board pose moved by a draw of ``factor^2`` times its corners' pose covariance."""
     boards = []
-    for i, b in enumerate(obs.boards):
-        C = _board_pose_covariance(obs.subset([i]), 0.5)
+    for b, C in zip(obs.boards, board_pose_covariances(obs, 0.5), strict=True):
         x = rng.multivariate_normal(np.zeros(6), factor**2 * C)
         T = b.T_cam_board.copy()
         T[:3, :3] = rotvec_to_matrix(x[:3]) @ T[:3, :3]

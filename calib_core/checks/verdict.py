@@ -6,7 +6,14 @@ Every answer of ``calibrate`` is tested against its observations, whatever the m
   std: a clipped chi-square per board (each point contributes ``min(z^2, c^2)``, so a few stray points cannot
   condemn a board) against its expectation under Gaussian noise, with room for a quarter of the points to be
   outliers; the noise std is estimated robustly from the scan lines alone (median absolute deviation, no
-  extrinsic, ``calib_core.data.lines``), plus a floor ``POSE_FLOOR_M`` for the camera-side board poses;
+  extrinsic, ``calib_core.data.lines``), plus a floor ``POSE_FLOOR_M`` for the camera-side board poses; where the
+  boards carry image corners, the camera side's error of each board's plane is modelled as well: the residuals
+  are taken after the board's pose moves within its covariance from its corners and the stated intrinsics'
+  1-sigma, and the move's cost is added to the board's chi-square (``calib_core.refine.camera_side.pose_explained``:
+  the board's residuals against ``sigma^2 I + J C J^T``; a plane error shared by all of a board's points is not
+  independent noise, and counted as such a far board's 3-sigma plane offset condemns the truth); a move beyond
+  that covariance (``d^T C^-1 d`` over the chi-square(6) quantile of the range test's tail probability)
+  contradicts the answer on its own;
 - the board outline (exact outlines only, ``outline_kind``): scan points mapped into their board's frame must lie on
   the board (at most a quarter of a
   board's inlier points outside it by more than the tolerance);
@@ -23,11 +30,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 
 from ..data.lines import MIN_SPREAD_M, range_sigma
 from ..data.observations import MIN_RANGE_M, Observations, ScanData
 from ..data.residuals import outside_outline, points_in_boards, range_residuals
+from ..refine.camera_side import pose_explained
 
 CLIP_Z = 3.0
 """Residuals beyond this many noise stds count as ``CLIP_Z^2`` in the clipped chi-square."""
@@ -35,6 +44,9 @@ OUTLIER_ALLOWANCE = 0.25
 """Fraction of a board's points that may be outliers before its clipped chi-square contradicts the answer."""
 CHI2_SIGMAS = 5.0
 """Standard deviations of the clipped chi-square above its mean at which a board contradicts the answer."""
+MOVE_CHI2_LIMIT = float(chi2_dist.isf(2 * norm.sf(CHI2_SIGMAS), 6))
+"""A board whose pose must move by more than this (``d^T C^-1 d``, its camera-side covariance) to fit the answer
+contradicts it: the chi-square(6) quantile at the two-sided tail probability of ``CHI2_SIGMAS`` (about 40)."""
 POSE_FLOOR_M = 0.01
 """Spread (metres) added in quadrature to the range noise for errors of the camera-side board planes."""
 OUTLINE_TOL_SIGMAS = 4.0
@@ -106,12 +118,14 @@ def board_depths(obs: Observations) -> np.ndarray:
 def board_tests(obs: Observations, T: np.ndarray, sigma: float) -> list[dict]:
     """Per board, the statistics of the tests of ``T`` (see the module docstring); ``bad`` lists failed tests."""
     T = np.asarray(T, float)
+    keep = np.linalg.norm(obs.scan_data.points, axis=1) > MIN_RANGE_M
     data = measured_points(obs)
-    z = range_residuals(T, data) / sigma
+    r, moved = pose_explained(obs, T, range_residuals(T, data), keep, sigma)
+    z = r / sigma
     q = np.minimum(z**2, CLIP_Z**2)
     N = obs.n_boards
     K = np.bincount(data.board, minlength=N)
-    chi2 = np.bincount(data.board, weights=q, minlength=N)
+    chi2 = np.bincount(data.board, weights=q, minlength=N) + moved
     limit = K * CHI2_MEAN + CHI2_SIGMAS * np.sqrt(K * CHI2_VAR) + OUTLIER_ALLOWANCE * K * (CLIP_Z**2 - CHI2_MEAN)
     depth = board_depths(obs)
     R, t = T[:3, :3], T[:3, 3]
@@ -123,10 +137,13 @@ def board_tests(obs: Observations, T: np.ndarray, sigma: float) -> list[dict]:
         zi = z[sel]
         st = {"board": i, "n_points": int(K[i]), "chi2": float(chi2[i]), "chi2_limit": float(limit[i]),
               "median_abs_z": float(np.median(np.abs(zi))) if len(zi) else float("nan"),
-              "depth_m": float(depth[i]), "bad": []}
+              "depth_m": float(depth[i]), "pose_move_chi2": float(moved[i]), "bad": []}
         if K[i] and chi2[i] > limit[i]:
             st["bad"].append(f"range residuals {st['median_abs_z']:.1f} sigma (median; sigma {1000 * sigma:.0f} mm, "
                              f"clipped chi-square {chi2[i]:.0f} > {limit[i]:.0f} over {K[i]} points)")
+        if moved[i] > MOVE_CHI2_LIMIT:
+            st["bad"].append(f"its plane fits the answer only moved beyond what its corners and intrinsics allow "
+                             f"(pose move chi-square {moved[i]:.0f} > {MOVE_CHI2_LIMIT:.0f})")
         pts = inb[i][0]
         keep = (np.linalg.norm(b.scan, axis=1) > MIN_RANGE_M)
         inl = np.abs(zi) < CLIP_Z

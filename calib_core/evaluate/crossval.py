@@ -11,7 +11,7 @@ Where the method reports a covariance, the held-out residuals are also scored in
 (``held_out.held_out_spread``: range noise, the fold's extrinsic covariance and the board pose's from its corners);
 where the boards carry image corners, the joint held-out residual (``held_out.held_out_joint``: the held-out
 board's pose re-estimated from its corners and its scan given the fold's extrinsic), in units of the data's noise
-(range: ``range_sigma_m``; corners: ``held_out.corner_noise_px``, from the boards' own pose fits).
+(range: ``range_sigma_m``; corners: ``refine.camera_side.corner_noise_px``, from the boards' own pose fits).
 """
 
 from __future__ import annotations
@@ -26,7 +26,8 @@ from ..data.observations import Observations
 from ..data.residuals import plane_residuals
 from ..entry import calibrate
 from ..errors import JointError, UncertaintyError
-from .held_out import HeldOutSpread, corner_noise_px, held_out_joint, held_out_spread, spread_summary
+from ..refine.camera_side import corner_noise_px
+from .held_out import HeldOutSpread, held_out_joint, held_out_spread, spread_summary
 
 
 @dataclass(frozen=True, eq=False)

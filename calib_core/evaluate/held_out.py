@@ -19,30 +19,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq, least_squares
 
-from ..data.lines import residual_sigma
 from ..data.observations import Observations
 from ..data.residuals import range_residuals
+from ..refine.camera_side import board_pose_covariances
 from ..refine.joint import board_poses, corner_residuals, joint_range_residuals, scan_data_at
-from ..refine.uncertainty import inverse_information
 
 GAUSS_Q90 = 1.6449
 """The 90% quantile of ``|z|`` for a standard normal ``z``."""
 MAX_BOARD_FACTOR = 1000.0
 """Upper end of the search for the factor on the board poses' sigmas that explains the held-out residuals."""
-
-
-def corner_noise_px(obs: Observations) -> float:
-    """Corner noise std (pixels) from the boards' own pose fits: the RMS reprojection error at the observed board
-    poses with ``2J - 6N`` degrees of freedom (no extrinsic involved)."""
-    return residual_sigma(corner_residuals(obs, board_poses(obs)), 6 * obs.n_boards)
-
-
-def _board_pose_covariance(obs1: Observations, corner_sigma_px: float) -> np.ndarray:
-    """(6,6) covariance of a single board's pose (rotation rad, translation m, ``refine.joint`` parameters) from its
-    corners alone."""
-    _, Jc = corner_residuals(obs1, board_poses(obs1), jacobian=True)
-    Jc = Jc.reshape(-1, 6)
-    return inverse_information(Jc.T @ Jc / corner_sigma_px**2, 1e-12)
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,7 +52,7 @@ def held_out_spread(obs: Observations, i: int, T_lidar_cam: np.ndarray, covarian
     B = np.zeros_like(A)
     if corner_sigma_px is not None and o1.boards[0].corners_px is not None and o1.camera is not None:
         _, _, Jb = joint_range_residuals(o1, T, board_poses(o1), jacobian=True)
-        B = Jb @ _board_pose_covariance(o1, corner_sigma_px) @ Jb.T
+        B = Jb @ board_pose_covariances(o1, corner_sigma_px, intrinsics=False)[0] @ Jb.T
     return HeldOutPart(r, A, B)
 
 
