@@ -68,27 +68,34 @@ def _planes_lidar(T: np.ndarray, data: ScanData):
     return np.take(m, data.board, axis=-2), np.take(c, data.board, axis=-1)
 
 
-def plane_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
+def plane_residuals(T: np.ndarray, data: ScanData, jacobian: bool | str = False):
     """Signed point-to-plane distances (metres) of every scan point to its board plane, in the lidar frame.
 
     ``e_k = m_i . (p_k - t) - d_i`` with ``m_i = R n_i``. ``T``: one (4,4) ``T_lidar_cam`` -> (K,), or a batch
-    (M,4,4) -> (M,K). With ``jacobian`` (one ``T`` only), also (K,6) de/d(w, dt) at ``T``.
+    (M,4,4) -> (M,K). With ``jacobian`` (one ``T`` only), also (K,6) de/d(w, dt) at ``T`` (``"later"``: a function
+    of no arguments giving it).
     """
     mk, c = _planes_lidar(T, data)
     e = np.einsum("...kj,kj->...k", mk, data.points) - c
     if not jacobian:
         return e
-    q = data.points - T[:3, 3]
-    return e, np.concatenate([np.cross(mk, q), -mk], axis=1)
+    J = functools.partial(_plane_jacobian, T, mk, data.points)
+    return e, (J if jacobian == "later" else J())
 
 
-def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
+def _plane_jacobian(T: np.ndarray, mk: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``plane_residuals``' Jacobian (K,6) at one ``T`` from its lidar-frame normals ``mk`` (K,3) and scan points."""
+    return np.concatenate([np.cross(mk, points - T[:3, 3]), -mk], axis=1)
+
+
+def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool | str = False):
     """Range residuals (metres): measured range minus the range at which the beam meets its board plane.
 
     The lidar noise is along each beam, so this is the likelihood's residual. Beam ``b = p/|p|``, measured
     range ``r = |p|``, predicted ``r* = (d_i + m_i . t) / (m_i . b)``; ``e = r - r*`` (``m . b`` clamped at
     ``MIN_BEAM_INCIDENCE``). ``T``: one (4,4) -> (K,), or a batch (M,4,4) -> (M,K). With ``jacobian``, also
-    (K,6) de/d(w, dt), or (M,K,6) for a batch.
+    (K,6) de/d(w, dt), or (M,K,6) for a batch; with ``jacobian="later"``, a function of no arguments giving it
+    (the same numbers, computed only when asked: a rejected step of an optimisation needs none).
     """
     mk, num = _planes_lidar(T, data)
     r, b = data.ranges, data.beams
@@ -98,6 +105,12 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     e = r - r_star
     if not jacobian:
         return e
+    J = functools.partial(_range_jacobian, T, mk, mb, r_star, b)
+    return e, (J if jacobian == "later" else J())
+
+
+def _range_jacobian(T: np.ndarray, mk: np.ndarray, mb: np.ndarray, r_star: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``range_residuals``' Jacobian (...,K,6) from its normals ``mk``, ``m . b``, predicted ranges and beams."""
     # with dm = w x m: d(num)/dw = m x t and d(mb)/dw = m x b, so de/dw = (m x b num / mb - m x t) / mb
     # = m x (p* - t) / mb, with p* = (num / mb) b the point where the beam meets the plane; de/d(dt) = -m / mb
     p_t = r_star[..., None] * b - T[..., None, :3, 3]                                  # p* - t
@@ -105,7 +118,7 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     _cross_into(J[..., :3], mk, p_t)
     np.negative(mk, out=J[..., 3:])
     J /= mb[..., None]
-    return e, J
+    return J
 
 
 def range_linearised(T: np.ndarray, data: ScanData) -> tuple[np.ndarray, np.ndarray]:
@@ -208,11 +221,12 @@ def _edge_groups(obs: Observations) -> list[tuple]:
     return groups
 
 
-def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None,
-                      ends: np.ndarray | None = None):
+def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool | str = False,
+                      frames: tuple | None = None, ends: np.ndarray | None = None):
     """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (docs/METHOD.md eq. 8-12);
     with ``gradient`` also (M,N,2,3) their gradients in the endpoints' board-frame coordinates (the pairing of
-    endpoints with edges held fixed: it is piecewise constant). ``frames``: the candidates' ``board_frames``;
+    endpoints with edges held fixed: it is piecewise constant); ``gradient="later"``: a function of no arguments
+    giving them. ``frames``: the candidates' ``board_frames``;
     ``ends``: the (M,N,2,3) endpoints in their boards' frames (``endpoints_in_board``), when the caller has them.
 
     Each endpoint is paired with the board edge nearest to it (point-to-line distance), the two endpoints
@@ -224,7 +238,7 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
     """
     P = endpoints_in_board(obs, candidates, frames) if ends is None else ends  # (M,N,2,3)
     M, N = P.shape[:2]
-    out, grad = np.zeros((M, N, 2)), np.zeros((M, N, 2, 3))
+    out, kept = np.zeros((M, N, 2)), []
     for idx, a, L, nrm, a_nrm, a2, a3 in obs.derived("residuals.edge_vertex_groups", _edge_groups):
         V, n = a.shape[1], len(idx)
         Pi = P[:, idx]
@@ -242,12 +256,27 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
         k[..., 0], k[..., 1] = np.divmod(np.argmin(pair.reshape(M, n, V * V), axis=-1), V)
         at = k.ravel() + np.arange(0, err.size, V)                           # flat index of each one's edge
         out[:, idx] = err.ravel()[at].reshape(M, n, 2)
-        if gradient:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, summed over the paired edge's two vertices
-            board = np.arange(n)[:, None]
-            d_a = np.maximum(da.ravel()[at], 1e-300).reshape(M, n, 2, 1)
-            d_b = np.maximum(db.ravel()[at], 1e-300).reshape(M, n, 2, 1)
-            grad[:, idx] = (Pi - a3[board, k]) / d_a + (Pi - a3[board, nxt[k]]) / d_b
-    return (out, grad) if gradient else out
+        if gradient:
+            kept.append((idx, Pi, a3, k, nxt, da.ravel()[at], db.ravel()[at]))
+    if not gradient:
+        return out
+    grad = functools.partial(_edge_gradients, (M, N, 2, 3), kept)
+    return out, (grad if gradient == "later" else grad())
+
+
+def _edge_gradients(shape: tuple, kept: list[tuple]) -> np.ndarray:
+    """``point_line_errors``' gradients (M,N,2,3) from each vertex-count group's boards, board-frame endpoints
+    (M,n,2,3), vertices (n,V,3), paired edges (M,n,2), next-vertex map and distances to the paired edge's two
+    vertices (M*n*2,)."""
+    grad = np.zeros(shape)
+    M = shape[0]
+    for idx, Pi, a3, k, nxt, da, db in kept:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, over the edge's two vertices
+        n = len(idx)
+        board = np.arange(n)[:, None]
+        d_a = np.maximum(da, 1e-300).reshape(M, n, 2, 1)
+        d_b = np.maximum(db, 1e-300).reshape(M, n, 2, 1)
+        grad[:, idx] = (Pi - a3[board, k]) / d_a + (Pi - a3[board, nxt[k]]) / d_b
+    return grad
 
 
 def take_last(a: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -290,23 +319,37 @@ def scan_points_in_boards(obs: Observations, candidates: np.ndarray, rows: int =
     return out
 
 
-def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None,
-                     points: np.ndarray | None = None):
+def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool | str = False,
+                     frames: tuple | None = None, points: np.ndarray | None = None):
     """(M,K) distance (metres) of every scan point outside its board's exact outline under every candidate (0
     inside, and on boards without an exact outline; ``outside_outline`` per group of boards sharing one); with
-    ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y). ``frames``: the candidates'
-    ``board_frames``; ``points``: the (M,K,2) points in their boards' frames, when the caller has them."""
+    ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y) (``"later"``: a function of no
+    arguments giving it). ``frames``: the candidates' ``board_frames``; ``points``: the (M,K,2) points in their
+    boards' frames, when the caller has them."""
     P = scan_points_in_boards(obs, candidates, rows=2, frames=frames) if points is None else points
     groups = obs.derived("residuals.outline_point_groups", _outline_point_groups)
     if len(groups) == 1 and groups[0][0].all():                             # one outline for every board
         return outside_outline(P, groups[0][1], gradient=gradient)
-    out, grad = np.zeros(P.shape[:2]), np.zeros(P.shape)
+    out, parts = np.zeros(P.shape[:2]), []
     for sel, outline in groups:
         if gradient:
-            out[:, sel], grad[:, sel] = outside_outline(P[:, sel], outline, gradient=True)
+            out[:, sel], g = outside_outline(P[:, sel], outline, gradient="later")
+            parts.append((sel, g))
         else:
             out[:, sel] = outside_outline(P[:, sel], outline)
-    return (out, grad) if gradient else out
+    if not gradient:
+        return out
+    grad = functools.partial(_outline_gradients, P.shape, parts)
+    return out, (grad if gradient == "later" else grad())
+
+
+def _outline_gradients(shape: tuple, parts: list[tuple]) -> np.ndarray:
+    """``outside_outlines``' gradient (M,K,2) from each group's scan-point mask and ``outside_outline`` gradient
+    function."""
+    grad = np.zeros(shape)
+    for sel, g in parts:
+        grad[:, sel] = g()
+    return grad
 
 
 def _outline_point_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -314,9 +357,10 @@ def _outline_point_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarra
     return [(np.isin(obs.scan_data.board, idx), outline) for idx, outline in outline_groups(obs)]
 
 
-def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool = False):
+def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool | str = False):
     """Distance (metres) of 2D points ``xy`` (...,2) outside the simple polygon ``outline`` (V,2); 0 inside. With
-    ``gradient`` also (...,2) its gradient in ``xy``: the unit vector from the nearest point of the outline.
+    ``gradient`` also (...,2) its gradient in ``xy``: the unit vector from the nearest point of the outline
+    (``"later"``: a function of no arguments giving it).
     (The work runs edge by edge along the first axis, the points along the others: short reductions over the
     edges are then elementwise.)"""
     V = len(outline)
@@ -334,10 +378,17 @@ def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool = False)
     out = np.where(inside, 0.0, dist)
     if not gradient:
         return out
+    g = functools.partial(_outline_gradient, ox, oy, d2, dist, inside)
+    return out, (g if gradient == "later" else g())
+
+
+def _outline_gradient(ox: np.ndarray, oy: np.ndarray, d2: np.ndarray, dist: np.ndarray,
+                      inside: np.ndarray) -> np.ndarray:
+    """``outside_outline``'s gradient (...,2) from the offsets (V,...) of the points from each edge's nearest point,
+    their squares' sum, the distances to the outline and the inside mask (...)."""
     k = np.argmin(d2, axis=0).ravel() * dist.size + np.arange(dist.size)       # flat index of the nearest edge
     nearest = np.stack([ox.ravel()[k], oy.ravel()[k]], axis=-1).reshape(dist.shape + (2,))
-    g = np.where((inside | (dist == 0))[..., None], 0.0, nearest / np.where(dist > 0, dist, 1.0)[..., None])
-    return out, g
+    return np.where((inside | (dist == 0))[..., None], 0.0, nearest / np.where(dist > 0, dist, 1.0)[..., None])
 
 
 @functools.lru_cache(maxsize=64)
