@@ -206,8 +206,8 @@ def _board_slices(obs: Observations) -> list[slice]:
 
 def _edge_groups(obs: Observations) -> list[tuple]:
     """Per vertex count V of the boards' outlines: the boards (n,), their vertices ``q_k`` (n,V,2), edge lengths
-    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V)), and the
-    vertices in the board frame (n,V,3) (z = 0)."""
+    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V)), the
+    vertices in the board frame (n,V,3) (z = 0), the next vertex's index (V,) and the vertex indices (V,)."""
     counts = np.array([0 if b.outline is None else len(b.outline) for b in obs.boards])
     groups = []
     for V in np.unique(counts[counts > 0]):
@@ -217,7 +217,8 @@ def _edge_groups(obs: Observations) -> list[tuple]:
         L = np.linalg.norm(edge, axis=-1)
         nrm = np.stack([-edge[..., 1], edge[..., 0]], axis=-1) / L[..., None]
         groups.append((idx, a, L[None, :, None], nrm, np.sum(a * nrm, axis=-1)[None, :, None],
-                       np.sum(a**2, axis=-1)[None, :, None], np.concatenate([a, np.zeros(a.shape[:2] + (1,))], -1)))
+                       np.sum(a**2, axis=-1)[None, :, None], np.concatenate([a, np.zeros(a.shape[:2] + (1,))], -1),
+                       np.arange(1, V + 1) % V, np.arange(V)))
     return groups
 
 
@@ -239,19 +240,18 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
     P = endpoints_in_board(obs, candidates, frames) if ends is None else ends  # (M,N,2,3)
     M, N = P.shape[:2]
     out, kept = np.zeros((M, N, 2)), []
-    for idx, a, L, nrm, a_nrm, a2, a3 in obs.derived("residuals.edge_vertex_groups", _edge_groups):
+    for idx, a, L, nrm, a_nrm, a2, a3, nxt, vertex in obs.derived("residuals.edge_vertex_groups", _edge_groups):
         V, n = a.shape[1], len(idx)
-        Pi = P[:, idx]
+        Pi = P if n == N else P[:, idx]                                      # one group: every board, in order
         xy, z2 = Pi[..., :2], Pi[..., 2:3] ** 2                               # (M,n,2,2), (M,n,2,1)
         # |p - q_k| from the expansion |xy|^2 - 2 xy.q_k + |q_k|^2 + z^2; |p - q_{k+1}| is its roll
         d2 = (xy[..., 0] ** 2 + xy[..., 1] ** 2)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a) + a2 + z2
         da = np.sqrt(np.maximum(d2, 0.0))                                    # (M,n,2,V)
-        nxt = np.arange(1, V + 1) % V                                        # k -> k + 1 (mod V)
         db = da[..., nxt]                                                    # |p - q_{k+1}|
         err = da + db - L
         dist = np.sqrt((np.einsum("mnkc,nvc->mnkv", xy, nrm) - a_nrm) ** 2 + z2)  # point-to-line distances
         pair = dist[:, :, 0, :, None] + dist[:, :, 1, None, :]              # (M,n,V,V)
-        pair[..., np.arange(V), np.arange(V)] = np.inf                       # the two edges differ
+        pair[..., vertex, vertex] = np.inf                                   # the two edges differ
         k = np.empty((M, n, 2), int)                                         # each endpoint's edge
         k[..., 0], k[..., 1] = np.divmod(np.argmin(pair.reshape(M, n, V * V), axis=-1), V)
         at = k.ravel() + np.arange(0, err.size, V)                           # flat index of each one's edge
@@ -363,10 +363,8 @@ def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool | str = 
     (``"later"``: a function of no arguments giving it).
     (The work runs edge by edge along the first axis, the points along the others: short reductions over the
     edges are then elementwise.)"""
-    V = len(outline)
-    shape = (V,) + (1,) * (xy.ndim - 1)
-    ax, ay, abx, aby, inv_len2, by, slope = (e.reshape(shape) for e in
-                                             _edges(np.ascontiguousarray(outline, float).tobytes(), V))
+    ax, ay, abx, aby, inv_len2, by, slope = _edges(np.ascontiguousarray(outline, float).tobytes(), len(outline),
+                                                   xy.ndim - 1)
     x, y = xy[..., 0], xy[..., 1]
     wx, wy = x - ax, y - ay                                                     # (V,...) from each edge's start
     s = np.clip((wx * abx + wy * aby) * inv_len2, 0.0, 1.0)
@@ -391,11 +389,12 @@ def _outline_gradient(ox: np.ndarray, oy: np.ndarray, d2: np.ndarray, dist: np.n
     return np.where((inside | (dist == 0))[..., None], 0.0, nearest / np.where(dist > 0, dist, 1.0)[..., None])
 
 
-@functools.lru_cache(maxsize=64)
-def _edges(outline: bytes, V: int) -> tuple[np.ndarray, ...]:
+@functools.lru_cache(maxsize=256)
+def _edges(outline: bytes, V: int, ndim: int = 0) -> tuple[np.ndarray, ...]:
     """The edges ``a_k -> b_k`` of an outline (V,2) given as bytes: ``a_x, a_y``, ``b - a``, ``1 / |b - a|^2`` (0 for a
     zero-length edge, whose nearest point is then ``a_k``), ``b_y`` and the edge's ``dx/dy`` (0 where it is
-    horizontal: such an edge is never crossed); each (V,), kept per outline."""
+    horizontal: such an edge is never crossed); each (V,) followed by ``ndim`` unit axes (to broadcast against
+    points of ``ndim`` axes), kept per outline and ``ndim``."""
     a = np.frombuffer(outline, float).reshape(V, 2)
     b = np.roll(a, -1, axis=0)
     ab = b - a
@@ -403,6 +402,7 @@ def _edges(outline: bytes, V: int) -> tuple[np.ndarray, ...]:
     out = (a[:, 0].copy(), a[:, 1].copy(), ab[:, 0].copy(), ab[:, 1].copy(),
            np.divide(1.0, len2, out=np.zeros(V), where=len2 > 0), b[:, 1].copy(),
            np.divide(ab[:, 0], ab[:, 1], out=np.zeros(V), where=ab[:, 1] != 0))
+    out = tuple(v.reshape((V,) + (1,) * ndim) for v in out)
     for v in out:
         v.setflags(write=False)
     return out
