@@ -16,6 +16,7 @@ import numpy as np
 
 from ..geometry.transforms import rotvec_to_matrix
 from .observations import Observations, ScanData
+from .outline_distance import outside_outline
 
 
 def perturb(T0: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -68,27 +69,34 @@ def _planes_lidar(T: np.ndarray, data: ScanData):
     return np.take(m, data.board, axis=-2), np.take(c, data.board, axis=-1)
 
 
-def plane_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
+def plane_residuals(T: np.ndarray, data: ScanData, jacobian: bool | str = False):
     """Signed point-to-plane distances (metres) of every scan point to its board plane, in the lidar frame.
 
     ``e_k = m_i . (p_k - t) - d_i`` with ``m_i = R n_i``. ``T``: one (4,4) ``T_lidar_cam`` -> (K,), or a batch
-    (M,4,4) -> (M,K). With ``jacobian`` (one ``T`` only), also (K,6) de/d(w, dt) at ``T``.
+    (M,4,4) -> (M,K). With ``jacobian`` (one ``T`` only), also (K,6) de/d(w, dt) at ``T`` (``"later"``: a function
+    of no arguments giving it).
     """
     mk, c = _planes_lidar(T, data)
     e = np.einsum("...kj,kj->...k", mk, data.points) - c
     if not jacobian:
         return e
-    q = data.points - T[:3, 3]
-    return e, np.concatenate([np.cross(mk, q), -mk], axis=1)
+    J = functools.partial(_plane_jacobian, T, mk, data.points)
+    return e, (J if jacobian == "later" else J())
 
 
-def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
+def _plane_jacobian(T: np.ndarray, mk: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``plane_residuals``' Jacobian (K,6) at one ``T`` from its lidar-frame normals ``mk`` (K,3) and scan points."""
+    return np.concatenate([np.cross(mk, points - T[:3, 3]), -mk], axis=1)
+
+
+def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool | str = False):
     """Range residuals (metres): measured range minus the range at which the beam meets its board plane.
 
     The lidar noise is along each beam, so this is the likelihood's residual. Beam ``b = p/|p|``, measured
     range ``r = |p|``, predicted ``r* = (d_i + m_i . t) / (m_i . b)``; ``e = r - r*`` (``m . b`` clamped at
     ``MIN_BEAM_INCIDENCE``). ``T``: one (4,4) -> (K,), or a batch (M,4,4) -> (M,K). With ``jacobian``, also
-    (K,6) de/d(w, dt), or (M,K,6) for a batch.
+    (K,6) de/d(w, dt), or (M,K,6) for a batch; with ``jacobian="later"``, a function of no arguments giving it
+    (the same numbers, computed only when asked: a rejected step of an optimisation needs none).
     """
     mk, num = _planes_lidar(T, data)
     r, b = data.ranges, data.beams
@@ -98,6 +106,12 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     e = r - r_star
     if not jacobian:
         return e
+    J = functools.partial(_range_jacobian, T, mk, mb, r_star, b)
+    return e, (J if jacobian == "later" else J())
+
+
+def _range_jacobian(T: np.ndarray, mk: np.ndarray, mb: np.ndarray, r_star: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``range_residuals``' Jacobian (...,K,6) from its normals ``mk``, ``m . b``, predicted ranges and beams."""
     # with dm = w x m: d(num)/dw = m x t and d(mb)/dw = m x b, so de/dw = (m x b num / mb - m x t) / mb
     # = m x (p* - t) / mb, with p* = (num / mb) b the point where the beam meets the plane; de/d(dt) = -m / mb
     p_t = r_star[..., None] * b - T[..., None, :3, 3]                                  # p* - t
@@ -105,7 +119,7 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool = False):
     _cross_into(J[..., :3], mk, p_t)
     np.negative(mk, out=J[..., 3:])
     J /= mb[..., None]
-    return e, J
+    return J
 
 
 def range_linearised(T: np.ndarray, data: ScanData) -> tuple[np.ndarray, np.ndarray]:
@@ -193,8 +207,8 @@ def _board_slices(obs: Observations) -> list[slice]:
 
 def _edge_groups(obs: Observations) -> list[tuple]:
     """Per vertex count V of the boards' outlines: the boards (n,), their vertices ``q_k`` (n,V,2), edge lengths
-    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V)), and the
-    vertices in the board frame (n,V,3) (z = 0)."""
+    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V)), the
+    vertices in the board frame (n,V,3) (z = 0), the next vertex's index (V,) and the vertex indices (V,)."""
     counts = np.array([0 if b.outline is None else len(b.outline) for b in obs.boards])
     groups = []
     for V in np.unique(counts[counts > 0]):
@@ -204,15 +218,17 @@ def _edge_groups(obs: Observations) -> list[tuple]:
         L = np.linalg.norm(edge, axis=-1)
         nrm = np.stack([-edge[..., 1], edge[..., 0]], axis=-1) / L[..., None]
         groups.append((idx, a, L[None, :, None], nrm, np.sum(a * nrm, axis=-1)[None, :, None],
-                       np.sum(a**2, axis=-1)[None, :, None], np.concatenate([a, np.zeros(a.shape[:2] + (1,))], -1)))
+                       np.sum(a**2, axis=-1)[None, :, None], np.concatenate([a, np.zeros(a.shape[:2] + (1,))], -1),
+                       np.arange(1, V + 1) % V, np.arange(V)))
     return groups
 
 
-def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None,
-                      ends: np.ndarray | None = None):
+def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool | str = False,
+                      frames: tuple | None = None, ends: np.ndarray | None = None):
     """(M,N,2) point-line errors (metres) of the two scan endpoints of every board (docs/METHOD.md eq. 8-12);
     with ``gradient`` also (M,N,2,3) their gradients in the endpoints' board-frame coordinates (the pairing of
-    endpoints with edges held fixed: it is piecewise constant). ``frames``: the candidates' ``board_frames``;
+    endpoints with edges held fixed: it is piecewise constant); ``gradient="later"``: a function of no arguments
+    giving them. ``frames``: the candidates' ``board_frames``;
     ``ends``: the (M,N,2,3) endpoints in their boards' frames (``endpoints_in_board``), when the caller has them.
 
     Each endpoint is paired with the board edge nearest to it (point-to-line distance), the two endpoints
@@ -224,30 +240,44 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
     """
     P = endpoints_in_board(obs, candidates, frames) if ends is None else ends  # (M,N,2,3)
     M, N = P.shape[:2]
-    out, grad = np.zeros((M, N, 2)), np.zeros((M, N, 2, 3))
-    for idx, a, L, nrm, a_nrm, a2, a3 in obs.derived("residuals.edge_vertex_groups", _edge_groups):
+    out, kept = np.zeros((M, N, 2)), []
+    for idx, a, L, nrm, a_nrm, a2, a3, nxt, vertex in obs.derived("residuals.edge_vertex_groups", _edge_groups):
         V, n = a.shape[1], len(idx)
-        Pi = P[:, idx]
+        Pi = P if n == N else P[:, idx]                                      # one group: every board, in order
         xy, z2 = Pi[..., :2], Pi[..., 2:3] ** 2                               # (M,n,2,2), (M,n,2,1)
         # |p - q_k| from the expansion |xy|^2 - 2 xy.q_k + |q_k|^2 + z^2; |p - q_{k+1}| is its roll
         d2 = (xy[..., 0] ** 2 + xy[..., 1] ** 2)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a) + a2 + z2
         da = np.sqrt(np.maximum(d2, 0.0))                                    # (M,n,2,V)
-        nxt = np.arange(1, V + 1) % V                                        # k -> k + 1 (mod V)
         db = da[..., nxt]                                                    # |p - q_{k+1}|
         err = da + db - L
         dist = np.sqrt((np.einsum("mnkc,nvc->mnkv", xy, nrm) - a_nrm) ** 2 + z2)  # point-to-line distances
         pair = dist[:, :, 0, :, None] + dist[:, :, 1, None, :]              # (M,n,V,V)
-        pair[..., np.arange(V), np.arange(V)] = np.inf                       # the two edges differ
+        pair[..., vertex, vertex] = np.inf                                   # the two edges differ
         k = np.empty((M, n, 2), int)                                         # each endpoint's edge
         k[..., 0], k[..., 1] = np.divmod(np.argmin(pair.reshape(M, n, V * V), axis=-1), V)
         at = k.ravel() + np.arange(0, err.size, V)                           # flat index of each one's edge
         out[:, idx] = err.ravel()[at].reshape(M, n, 2)
-        if gradient:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, summed over the paired edge's two vertices
-            board = np.arange(n)[:, None]
-            d_a = np.maximum(da.ravel()[at], 1e-300).reshape(M, n, 2, 1)
-            d_b = np.maximum(db.ravel()[at], 1e-300).reshape(M, n, 2, 1)
-            grad[:, idx] = (Pi - a3[board, k]) / d_a + (Pi - a3[board, nxt[k]]) / d_b
-    return (out, grad) if gradient else out
+        if gradient:
+            kept.append((idx, Pi, a3, k, nxt, da.ravel()[at], db.ravel()[at]))
+    if not gradient:
+        return out
+    grad = functools.partial(_edge_gradients, (M, N, 2, 3), kept)
+    return out, (grad if gradient == "later" else grad())
+
+
+def _edge_gradients(shape: tuple, kept: list[tuple]) -> np.ndarray:
+    """``point_line_errors``' gradients (M,N,2,3) from each vertex-count group's boards, board-frame endpoints
+    (M,n,2,3), vertices (n,V,3), paired edges (M,n,2), next-vertex map and distances to the paired edge's two
+    vertices (M*n*2,)."""
+    grad = np.zeros(shape)
+    M = shape[0]
+    for idx, Pi, a3, k, nxt, da, db in kept:  # d|p - q_k|/dp = (p - q_k) / |p - q_k|, over the edge's two vertices
+        n = len(idx)
+        board = np.arange(n)[:, None]
+        d_a = np.maximum(da, 1e-300).reshape(M, n, 2, 1)
+        d_b = np.maximum(db, 1e-300).reshape(M, n, 2, 1)
+        grad[:, idx] = (Pi - a3[board, k]) / d_a + (Pi - a3[board, nxt[k]]) / d_b
+    return grad
 
 
 def take_last(a: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -290,71 +320,42 @@ def scan_points_in_boards(obs: Observations, candidates: np.ndarray, rows: int =
     return out
 
 
-def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool = False, frames: tuple | None = None,
-                     points: np.ndarray | None = None):
+def outside_outlines(obs: Observations, candidates: np.ndarray, gradient: bool | str = False,
+                     frames: tuple | None = None, points: np.ndarray | None = None):
     """(M,K) distance (metres) of every scan point outside its board's exact outline under every candidate (0
     inside, and on boards without an exact outline; ``outside_outline`` per group of boards sharing one); with
-    ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y). ``frames``: the candidates'
-    ``board_frames``; ``points``: the (M,K,2) points in their boards' frames, when the caller has them."""
+    ``gradient`` also (M,K,2) its gradient in the point's board-frame (x, y) (``"later"``: a function of no
+    arguments giving it). ``frames``: the candidates' ``board_frames``; ``points``: the (M,K,2) points in their
+    boards' frames, when the caller has them."""
     P = scan_points_in_boards(obs, candidates, rows=2, frames=frames) if points is None else points
     groups = obs.derived("residuals.outline_point_groups", _outline_point_groups)
     if len(groups) == 1 and groups[0][0].all():                             # one outline for every board
         return outside_outline(P, groups[0][1], gradient=gradient)
-    out, grad = np.zeros(P.shape[:2]), np.zeros(P.shape)
+    out, parts = np.zeros(P.shape[:2]), []
     for sel, outline in groups:
         if gradient:
-            out[:, sel], grad[:, sel] = outside_outline(P[:, sel], outline, gradient=True)
+            out[:, sel], g = outside_outline(P[:, sel], outline, gradient="later")
+            parts.append((sel, g))
         else:
             out[:, sel] = outside_outline(P[:, sel], outline)
-    return (out, grad) if gradient else out
+    if not gradient:
+        return out
+    grad = functools.partial(_outline_gradients, P.shape, parts)
+    return out, (grad if gradient == "later" else grad())
+
+
+def _outline_gradients(shape: tuple, parts: list[tuple]) -> np.ndarray:
+    """``outside_outlines``' gradient (M,K,2) from each group's scan-point mask and ``outside_outline`` gradient
+    function."""
+    grad = np.zeros(shape)
+    for sel, g in parts:
+        grad[:, sel] = g()
+    return grad
 
 
 def _outline_point_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]:
     """(scan-point mask, outline) of each group of ``outline_groups``."""
     return [(np.isin(obs.scan_data.board, idx), outline) for idx, outline in outline_groups(obs)]
-
-
-def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool = False):
-    """Distance (metres) of 2D points ``xy`` (...,2) outside the simple polygon ``outline`` (V,2); 0 inside. With
-    ``gradient`` also (...,2) its gradient in ``xy``: the unit vector from the nearest point of the outline.
-    (The work runs edge by edge along the first axis, the points along the others: short reductions over the
-    edges are then elementwise.)"""
-    V = len(outline)
-    shape = (V,) + (1,) * (xy.ndim - 1)
-    ax, ay, abx, aby, inv_len2, by, slope = (e.reshape(shape) for e in
-                                             _edges(np.ascontiguousarray(outline, float).tobytes(), V))
-    x, y = xy[..., 0], xy[..., 1]
-    wx, wy = x - ax, y - ay                                                     # (V,...) from each edge's start
-    s = np.clip((wx * abx + wy * aby) * inv_len2, 0.0, 1.0)
-    ox, oy = wx - s * abx, wy - s * aby                                         # from the nearest point of each edge
-    d2 = ox**2 + oy**2
-    dist = np.sqrt(d2.min(axis=0))
-    crosses = (ay > y) != (by > y)                                              # even-odd rule
-    inside = np.logical_xor.reduce(crosses & (x < ax + wy * slope), axis=0)
-    out = np.where(inside, 0.0, dist)
-    if not gradient:
-        return out
-    k = np.argmin(d2, axis=0).ravel() * dist.size + np.arange(dist.size)       # flat index of the nearest edge
-    nearest = np.stack([ox.ravel()[k], oy.ravel()[k]], axis=-1).reshape(dist.shape + (2,))
-    g = np.where((inside | (dist == 0))[..., None], 0.0, nearest / np.where(dist > 0, dist, 1.0)[..., None])
-    return out, g
-
-
-@functools.lru_cache(maxsize=64)
-def _edges(outline: bytes, V: int) -> tuple[np.ndarray, ...]:
-    """The edges ``a_k -> b_k`` of an outline (V,2) given as bytes: ``a_x, a_y``, ``b - a``, ``1 / |b - a|^2`` (0 for a
-    zero-length edge, whose nearest point is then ``a_k``), ``b_y`` and the edge's ``dx/dy`` (0 where it is
-    horizontal: such an edge is never crossed); each (V,), kept per outline."""
-    a = np.frombuffer(outline, float).reshape(V, 2)
-    b = np.roll(a, -1, axis=0)
-    ab = b - a
-    len2 = np.sum(ab**2, axis=1)
-    out = (a[:, 0].copy(), a[:, 1].copy(), ab[:, 0].copy(), ab[:, 1].copy(),
-           np.divide(1.0, len2, out=np.zeros(V), where=len2 > 0), b[:, 1].copy(),
-           np.divide(ab[:, 0], ab[:, 1], out=np.zeros(V), where=ab[:, 1] != 0))
-    for v in out:
-        v.setflags(write=False)
-    return out
 
 
 def board_frame_rows(obs: Observations, T: np.ndarray, points: np.ndarray, board: np.ndarray,

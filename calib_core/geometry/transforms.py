@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -93,8 +95,9 @@ def skew(v: np.ndarray) -> np.ndarray:
 def so3_left_jacobian(w: np.ndarray) -> np.ndarray:
     """Left Jacobian ``J_l(w)`` of SO(3) (``w`` a rotation vector, radians): ``exp(w + dw) = exp(J_l(w) dw) exp(w)``
     to first order."""
-    th = float(np.linalg.norm(w))
+    w = np.asarray(w, dtype=float)
+    th = math.sqrt(w.dot(w))  # numpy.linalg.norm's root of w . w; the coefficients below as Python floats
     W = skew(w)
     if th < 1e-8:
         return np.eye(3) + 0.5 * W
-    return np.eye(3) + (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * (W @ W)
+    return np.eye(3) + (1 - math.cos(th)) / th**2 * W + (th - math.sin(th)) / th**3 * (W @ W)

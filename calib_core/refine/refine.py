@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -84,21 +85,28 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
     T0 = np.asarray(T0, float)
     if prior is not None:
         fn = _with_prior(fn, prior, float(prior_scale_m))
-    last: dict = {}  # the latest step: its pose, residuals and Jacobian (both computed in one pass)
+    last: dict = {}  # the latest step: its pose, residuals and Jacobian (computed when first asked for)
 
     def at(x):
         if not np.array_equal(last.get("x"), x):
             T = perturb(T0, x)
-            last.update(x=x.copy(), T=T, eJ=fn(T, data, jacobian=True))
+            e, J = fn(T, data, jacobian="later")  # a rejected step needs no Jacobian
+            last.update(x=x.copy(), T=T, e=e, J=J)
         return last
 
+    def linearised(x):
+        step = at(x)
+        if callable(step["J"]):
+            step["J"] = step["J"]()
+        return step["e"], step["J"]
+
     def fun(x):  # a copy: MINPACK keeps the first array it is given as its work space
-        return at(x)["eJ"][0].copy()
+        return at(x)["e"].copy()
 
     def jac(x):
         # d/dx of f(exp(w) R0): the left-perturbation Jacobian at the current pose times the left
         # Jacobian of SO(3) at w (exp(w + dw) = exp(J_l(w) dw) exp(w) to first order).
-        J = at(x)["eJ"][1].copy()
+        J = linearised(x)[1].copy()
         J[:, :3] = J[:, :3] @ so3_left_jacobian(x[:3])
         return J
 
@@ -110,20 +118,27 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
         sol = least_squares(fun, np.zeros(6), jac=jac, method="trf", loss=loss, f_scale=f_scale,
                             max_nfev=max_nfev, x_scale=x_scale if x_scale is not None else "jac")
         x, success, message, nfev, cost = sol.x, bool(sol.success), str(sol.message), int(sol.nfev), float(sol.cost)
-    step = at(x)
-    T, (e, J) = step["T"], step["eJ"]
+    e, J = linearised(x)
+    T = at(x)["T"]
     K = len(data.points)
     return RefineResult(T, robust_cost(e) if cost is None else cost, robust_cost(e0, loss, f_scale), e[:K], J[:K],
                         success, message, nfev)
 
 
 def _with_prior(fn, prior: MountingPrior, scale_m: float):
-    """``fn(T, data, jacobian=True)`` with the prior's residuals and Jacobian (times ``scale_m``) appended."""
-    def both(T, data, jacobian=False):
-        e, J = fn(T, data, jacobian=True)
-        return np.concatenate([e, scale_m * prior.residuals(T)]), np.concatenate([J, scale_m * prior.jacobian(T)])
+    """``fn(T, data, jacobian=...)`` (``True`` or ``"later"``) with the prior's residuals and Jacobian (times
+    ``scale_m``) appended."""
+    def both(T, data, jacobian=True):
+        e, J = fn(T, data, jacobian="later")
+        J_all = functools.partial(_stacked, J, lambda: scale_m * prior.jacobian(T))
+        return np.concatenate([e, scale_m * prior.residuals(T)]), (J_all if jacobian == "later" else J_all())
 
     return both
+
+
+def _stacked(*parts) -> np.ndarray:
+    """The rows of every part's answer, one under the other (each part a function of no arguments)."""
+    return np.concatenate([p() for p in parts])
 
 
 LM_TOLERANCE = 1e-8

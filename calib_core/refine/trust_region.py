@@ -103,13 +103,20 @@ def _radius(Delta: float, actual: float, predicted: float, step_norm: float, bou
 
 
 def _one_start(x0: np.ndarray, f: np.ndarray, J: np.ndarray, max_nfev: int):
-    """One start's iterations as a generator: it yields ``("eval", x)`` and is sent ``(f, J)`` at ``x``, and yields
-    ``("iter", nit, cost, x)`` after each iteration and is sent whether to stop there; it returns its ``x``."""
+    """One start's iterations as a generator: it yields ``("eval", x)`` and is sent the residuals ``f`` at ``x``,
+    yields ``("jac",)`` and is sent the Jacobian at its last accepted ``x`` (only when it iterates on from there: a
+    rejected step, or a start that stops, needs none), and yields ``("iter", nit, cost, x)`` after each iteration
+    and is sent whether to stop there; it returns its ``x``."""
     x, nfev, Delta, alpha = x0.copy(), 1, norm(x0), 0.0
     Delta = 1.0 if Delta == 0 else Delta
-    cost, g = 0.5 * np.dot(f, f), J.T.dot(f)
+    cost = 0.5 * np.dot(f, f)
     done, iteration = False, 0
     while True:
+        if J is None:  # a step was accepted: its Jacobian, unless the start stops there
+            if done or nfev == max_nfev:
+                return x
+            J = yield ("jac",)
+        g = J.T.dot(f)
         done = done or np.max(np.abs(g)) < TOL
         if done or nfev == max_nfev:
             return x
@@ -121,7 +128,7 @@ def _one_start(x0: np.ndarray, f: np.ndarray, J: np.ndarray, max_nfev: int):
             Js = J.dot(step)
             predicted = -(0.5 * np.dot(Js, Js) + np.dot(step, g))
             x_new = x + step
-            f_new, J_new = yield ("eval", x_new)
+            f_new = yield ("eval", x_new)
             nfev += 1
             step_norm = norm(step)
             if not np.all(np.isfinite(f_new)):
@@ -136,11 +143,16 @@ def _one_start(x0: np.ndarray, f: np.ndarray, J: np.ndarray, max_nfev: int):
             alpha *= Delta / Delta_new
             Delta = Delta_new
         if actual > 0:
-            x, f, J, cost = x_new, f_new, J_new, cost_new
-            g = J.T.dot(f)
+            x, f, J, cost = x_new, f_new, None, cost_new
         iteration += 1
         if (yield ("iter", iteration, cost, x)):
             return x
+
+
+def jacobian(J, rows) -> np.ndarray:
+    """The Jacobians (k',m,n) at rows ``rows`` (k',) of one residual call's points: ``J`` the call's (k,m,n)
+    Jacobians, or a callable giving those of the rows asked (computed only when asked)."""
+    return J(rows) if callable(J) else np.asarray(J)[rows]
 
 
 Halt = Callable[[int, int, float], "bool | None"]
@@ -152,15 +164,19 @@ the start runs on, and the question is asked again, in order, for every iteratio
 def least_squares_many(fun: Callable, X0: np.ndarray, max_nfev: int, halt: Halt | None = None,
                        done: Callable[[int, np.ndarray], None] | None = None) -> np.ndarray:
     """``least_squares(method="trf")`` from every row of ``X0`` (B,n): (B,n) the answers. ``fun(idx, X)`` gives
-    the residuals (k,m) and Jacobians (k,m,n) of starts ``idx`` (k,) at ``X`` (k,n), all at once. ``halt``: see
-    ``Halt``; ``done(start, x)`` is told each start's answer once it is final (starts in any order)."""
+    the residuals (k,m) of starts ``idx`` (k,) at ``X`` (k,n), all at once, and their Jacobians: (k,m,n), or a
+    callable ``jac(rows)`` giving the (k',m,n) Jacobians of the rows ``rows`` (k',) of ``X`` when they are needed
+    (``jacobian``): only where a step is accepted and the start iterates on. ``halt``: see ``Halt``;
+    ``done(start, x)`` is told each start's answer once it is final (starts in any order)."""
     X0 = np.asarray(X0, float)
     F0, J0 = fun(np.arange(len(X0)), X0)
     if not np.all(np.isfinite(F0)):
         raise ValueError("Residuals are not finite in the initial point.")
+    J0 = jacobian(J0, np.arange(len(X0)))
     gens = [_one_start(x, f, J, max_nfev) for x, f, J in zip(X0, F0, J0, strict=True)]
     run = _Runs(len(X0), halt, done)
     req = {i: _send(g, None, run, i) for i, g in enumerate(gens)}  # a start already optimal returns at once
+    last: dict[int, tuple] = {}  # each start's latest residual call: its Jacobians and the start's row there
     while True:
         for i in [i for i in req if not run.halted(i)]:
             r = req[i]
@@ -168,15 +184,30 @@ def least_squares_many(fun: Callable, X0: np.ndarray, max_nfev: int, halt: Halt 
                 r = run.ask(i, r, gens[i])
             req[i] = r
         req = {i: r for i, r in req.items() if r is not None and not run.halted(i)}
+        for i, J in _jacobians([i for i in sorted(req) if req[i][0] == "jac"], last):
+            if not run.halted(i):
+                req[i] = _send(gens[i], J, run, i)
+        req = {i: r for i, r in req.items() if r is not None and not run.halted(i)}
         if not req:
             break
         idx = sorted(req)
         F, J = fun(np.array(idx), np.array([req[i][1] for i in idx]))
         for k, i in enumerate(idx):
             if not run.halted(i):
-                req[i] = _send(gens[i], (F[k], J[k]), run, i)
+                last[i] = (J, k)
+                req[i] = _send(gens[i], F[k], run, i)
     run.settle()
     return run.answers()
+
+
+def _jacobians(starts: list[int], last: dict[int, tuple]):
+    """``(start, J)`` for each of ``starts`` at its latest residual call (``last``), one ``jacobian`` per call."""
+    calls: dict[int, list[int]] = {}
+    for i in starts:
+        calls.setdefault(id(last[i][0]), []).append(i)
+    for group in calls.values():
+        Js = jacobian(last[group[0]][0], np.array([last[i][1] for i in group]))
+        yield from zip(group, Js, strict=True)
 
 
 def _send(gen, value, run: _Runs, i: int):

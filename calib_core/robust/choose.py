@@ -5,6 +5,7 @@ polished on the whole cost; the best is kept. Lidar frame, metres, radians.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -87,16 +88,24 @@ def polish_many(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOp
     kw = {"range_sigma_m": range_sigma_m, **score.kwargs()}
 
     def fun(idx, X):
-        F, J = [], []
-        for i, x in zip(idx, X, strict=True):
-            f, j = lidarcam_linearised(obs, perturb(T0[i], x), **kw)
-            j[:, :3] = j[:, :3] @ so3_left_jacobian(x[:3])
-            F.append(f), J.append(j)
-        return np.array(F), np.array(J)
+        lin = [lidarcam_linearised(obs, T, **kw, jacobian="later") for T in perturb(T0[idx], X)]
+        return np.array([f for f, _ in lin]), functools.partial(_polish_jacobians, [J for _, J in lin], X)
 
     told = None if done is None else (lambda i, x: done(i, perturb(T0[i], x)))
     X = least_squares_many(fun, np.zeros((len(T0), 6)), max_nfev, halt, told)
     return perturb(T0, X)
+
+
+def _polish_jacobians(jacobians: list, X: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(k',n,6) the polish's Jacobians in ``x = (w, dt)`` at rows ``rows`` of the points ``X`` (k,6) of one residual
+    call: ``lidarcam_linearised``'s (its functions ``jacobians``, one per row) times the left Jacobian of SO(3) at
+    the rotation step."""
+    out = []
+    for r in rows:
+        j = jacobians[r]()
+        j[:, :3] = j[:, :3] @ so3_left_jacobian(X[r, :3])
+        out.append(j)
+    return np.array(out)
 
 
 PRUNE_FIRST = 4
