@@ -172,11 +172,16 @@ class Degeneracy:
                         else f"{1000 * s * self.scale_m:.0f} mm") + (FOLD_WORDS if p else ""))
         return ", ".join(out)
 
-    def message(self) -> str:
-        """One sentence: what is not (or poorly) determined and why; for the former, how to calibrate the rest."""
+    def message(self, from_prior: bool = False) -> str:
+        """One sentence: what is not (or poorly) determined and why; for the former, how to calibrate the rest, or
+        with ``from_prior`` that the answer takes them from the mounting prior."""
         if not len(self.directions):
             return "every direction of the extrinsic is determined"
         verb = "is" if len(self.directions) == 1 else "are"
+        if from_prior:
+            return (f"{self._what()} {verb} not determined by these boards ({self.cause}): the answer takes "
+                    f"{'it' if len(self.directions) == 1 else 'them'} from the mounting prior, with the prior's "
+                    "uncertainty")
         if not self.geometric:
             return (f"{self._what()} {verb} poorly determined (1-sigma {self._sigma_words()}): {self.cause}; "
                     "add board poses")

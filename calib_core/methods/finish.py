@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, undetermined_directions
+from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, fixed_key, undetermined_directions
 from ..data.lines import range_sigma
 from ..data.observations import Observations
 from ..data.residuals import range_linearised
@@ -25,13 +25,15 @@ from ..refine.uncertainty import inverse_information, range_board_scores, refine
 
 
 def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str,
-                        range_sigma_m: float | None, options: DegeneracyOptions | None = None) -> Degeneracy:
+                        range_sigma_m: float | None, options: DegeneracyOptions | None = None,
+                        refuse: bool = True) -> Degeneracy:
     """The degeneracy analysis at ``T`` (``checks.degeneracy.undetermined_directions``); a SolveFailure naming
-    the directions the board geometry leaves free, with the analysis and the board-set warnings in its info."""
+    the directions the board geometry leaves free, with the analysis and the board-set warnings in its info
+    (``refuse=False``: the analysis alone, for a caller whose prior determines those directions)."""
     options = options or DegeneracyOptions()
     deg = undetermined_directions(obs, T, range_sigma_m, max_scaled_sigma=options.max_scaled_sigma,
                                   null_conditioning=options.null_conditioning)
-    if not deg.determined:
+    if refuse and not deg.determined:
         raise SolveFailure(f"{who}: {deg.message()}", candidates,
                            {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
     return deg
@@ -106,17 +108,19 @@ def widened_range_covariance(obs: Observations, T: np.ndarray, cov: np.ndarray, 
 def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray], *,
                       residual: str = "range", loss: str = "linear", f_scale_m: float | None = None,
                       f_scale_sigmas: float = F_SCALE_SIGMAS, range_sigma_m: float | None = None,
-                      max_nfev: int = 100) -> tuple[np.ndarray, np.ndarray, dict]:
+                      max_nfev: int = 100,
+                      fixed_sigma: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Calibrate the free mounting parameters with ``fixed`` ones held (``refine.partial``): from the closed-form
     planar start when roll, pitch and z are given, else from ``full_start()`` (a full calibration's answer);
-    refined on ``residual`` (robust scale ``f_scale_m``, default ``f_scale_sigmas`` noise stds). Returns
-    (T_lidar_cam, starts, info)."""
+    refined on ``residual`` (robust scale ``f_scale_m``, default ``f_scale_sigmas`` noise stds); ``fixed_sigma``
+    (6,): the given values' 1-sigma (radians, metres) where they are uncertain. Returns (T_lidar_cam, starts,
+    info)."""
     mask, values = parse_fixed(fixed)
     sigma = range_sigma(obs, range_sigma_m)
     starts = fixed_starts(obs, mask, values, full_start)
     T, info = calibrate_fixed(obs, mask, values, starts, residual=residual, loss=loss,
                               f_scale_m=f_scale_m if f_scale_m is not None else f_scale_sigmas * sigma,
-                              range_sigma_m=range_sigma_m, max_nfev=max_nfev)
+                              range_sigma_m=range_sigma_m, max_nfev=max_nfev, fixed_sigma=fixed_sigma)
     return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "refine_residual": residual,
                                    "refine_loss": str(loss), "warnings": board_set_warnings(obs)}
 
@@ -128,6 +132,15 @@ def with_prior(T: np.ndarray, cov: np.ndarray, prior: MountingPrior) -> np.ndarr
     J = prior.jacobian(T)
     post = np.linalg.inv(np.linalg.inv(cov) + J.T @ J)
     return 0.5 * (post + post.T)
+
+
+def prior_fixed(prior: MountingPrior, deg: Degeneracy) -> tuple[dict, np.ndarray]:
+    """The mounting ``prior``'s values of the axes the boards leave free (``deg.axes``; ``fixed`` keys, degrees
+    and metres) and their 1-sigma (6,) in ``geometry.mounting.PARAMS`` order (radians, metres): the prior's
+    rotation sigma for the angles (its rotation error is isotropic), its translation sigma for x, y, z."""
+    units = with_units(params_from_T(prior.T_lidar_cam))
+    fixed = {fixed_key(a): units[fixed_key(a)] for a in deg.axes}
+    return fixed, np.r_[[prior.sigma_rot_rad] * 3, [prior.sigma_trans_m] * 3]
 
 
 def prior_info(prior: MountingPrior) -> dict:

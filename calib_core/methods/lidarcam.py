@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..checks.degeneracy import degeneracy_warnings, explain_failure
+from ..checks.degeneracy import Degeneracy, board_set_warnings, degeneracy_warnings, explain_failure
 from ..data.observations import Observations
 from ..errors import CalibrationError, SolveFailure
 from ..geometry.mounting import params_from_T, with_units
@@ -31,6 +31,7 @@ from .finish import (
     NO_CORNERS,
     fixed_calibration,
     fold_covariance,
+    prior_fixed,
     prior_info,
     range_covariance,
     refuse_undetermined,
@@ -162,9 +163,11 @@ def finish(found: Found, opts: LidarcamOptions):
     candidates, info)."""
     best, tests, C, sigma_given = found.best, found.tests, found.search.all_candidates, opts.range_sigma_m
     obs_u = tests.obs_used
-    deg = refuse_undetermined(obs_u, best.T, np.concatenate([best.T[None], C]), "lidarcam", sigma_given,
-                              opts.degeneracy)
     prior = opts.score.prior
+    deg = refuse_undetermined(obs_u, best.T, np.concatenate([best.T[None], C]), "lidarcam", sigma_given,
+                              opts.degeneracy, refuse=prior is None)
+    if not deg.determined:              # a mounting prior given: it decides the axes the boards leave free
+        return prior_decides(found, opts, deg)
     joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.refine.loss, options=opts.joint,
                            names=tests.info.get("boards_used"), mounting=prior)
     if joint is not None:
@@ -190,6 +193,25 @@ def finish(found: Found, opts: LidarcamOptions):
                   "sigma_m_selection": found.search.sigma_m,
                   "refine_cost": best.refined.cost, "refine_nfev": best.refined.nfev, **tests.info, "covariance": cov,
                   "conditioning": conditioning(obs_u, T), "warnings": warnings, **jinfo, **alts}
+
+
+def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy):
+    """Where the boards leave axes free (``deg``) and a mounting prior is given: those axes held at the prior's
+    values with its 1-sigma, the others calibrated on the scans (``methods.finish.fixed_calibration``, the range
+    model), the prior's uncertainty carried into the covariance. Axes free only in combination (``deg.aligned``
+    false) cannot be held one by one: refused as without a prior. (T_lidar_cam, candidates, info)."""
+    best, tests, C, prior = found.best, found.tests, found.search.all_candidates, opts.score.prior
+    if not deg.aligned:
+        raise SolveFailure(f"lidarcam: {deg.message()}", np.concatenate([best.T[None], C]),
+                           {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(tests.obs_used)})
+    fixed, sigma = prior_fixed(prior, deg)
+    r = opts.refine
+    T, _, info = fixed_calibration(tests.obs_used, fixed, lambda: best.T, loss=r.loss, f_scale_m=r.f_scale_m,
+                                   f_scale_sigmas=r.f_scale_sigmas, range_sigma_m=opts.range_sigma_m,
+                                   max_nfev=r.max_nfev, fixed_sigma=sigma)
+    warnings = tests.warnings + info.pop("warnings") + [deg.message(from_prior=True)]
+    return T, C, {**tests.info, **info, "prior": prior_info(prior), "covariance_model": RANGE_ONLY_MODEL,
+                  "intrinsics": RANGE_ONLY_INTRINSICS, "degeneracy": deg.to_dict(), "warnings": warnings}
 
 
 def _signature() -> inspect.Signature:

@@ -29,6 +29,8 @@ PLANAR_FIXED = np.array([True, True, False, False, False, True])
 
 FIXED_NOTE = ("fixed parameters are held at the given values, not estimated: their rows and columns of the "
               "covariance are 0")
+PRIOR_FIXED_NOTE = ("the parameters the boards leave free are held at the mounting prior's values, not estimated: "
+                    "their 1-sigma is the prior's, carried through the fit to the others")
 
 
 def _scan_line_normals(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
@@ -120,7 +122,8 @@ def _refine_free(obs: Observations, theta0: np.ndarray, free: np.ndarray, residu
 
 def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.ndarray, starts: list[np.ndarray],
                     *, residual: str = "range", loss: str = "linear", f_scale_m: float = 1.0,
-                    range_sigma_m: float | None = None, max_nfev: int = 100) -> tuple[np.ndarray, dict]:
+                    range_sigma_m: float | None = None, max_nfev: int = 100,
+                    fixed_sigma: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Refine the free mounting parameters from each start (its fixed parameters replaced by the given values)
     and keep the least cost; returns ``T_lidar_cam`` and ``info``.
 
@@ -129,7 +132,10 @@ def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.
     columns for the fixed ones), ``mounting`` (all six values, labelled units), ``mounting_sigma`` (1-sigma of
     the free ones, labelled units), ``fixed`` (the given values, labelled units), ``free`` (their names),
     ``note``, and the refinement's cost and evaluations. ``range_sigma_m=None``: the noise is estimated from the
-    residuals with ``K - free`` degrees of freedom. Raises SolveFailure when no start is given or the free
+    residuals with ``K - free`` degrees of freedom. ``fixed_sigma``: (6,) the 1-sigma of the given values
+    (radians, metres; read at the fixed ones), when they are uncertain (a mounting prior's): the covariance then
+    carries it, to the fixed parameters and through the fit to the free ones (``fixed_propagated``), and has full
+    rank (the answer stays the fit at the given values). Raises SolveFailure when no start is given or the free
     parameters are still not determined.
     """
     fixed_mask = np.asarray(fixed_mask, bool)
@@ -154,14 +160,43 @@ def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.
                            T[None]) from None
     C = np.zeros((6, 6))
     C[np.ix_(free, free)] = C_free
+    if fixed_sigma is not None:
+        C = fixed_propagated(theta, C, fixed_mask, np.asarray(fixed_sigma, float),
+                             lambda t0: _refine_free(obs, t0, free, residual, loss, f_scale_m, max_nfev)[0])
     sig = np.sqrt(np.diag(C))
     units = with_units(theta)
     return T, {"covariance": M @ C @ M.T, "covariance_mounting": C, "mounting": units,
                "mounting_sigma": {k: float(np.degrees(s) if j < 3 else s)
                                   for j, (k, s) in enumerate(zip(UNIT_NAMES, sig, strict=True)) if free[j]},
                "fixed": {k: units[k] for j, k in enumerate(UNIT_NAMES) if fixed_mask[j]},
-               "free": [PARAMS[j] for j in np.flatnonzero(free)], "note": FIXED_NOTE,
+               "free": [PARAMS[j] for j in np.flatnonzero(free)],
+               "note": FIXED_NOTE if fixed_sigma is None else PRIOR_FIXED_NOTE,
                "refine_cost": float(sol.cost), "refine_nfev": int(sol.nfev), "n_starts": len(starts)}
+
+
+GH_NODES, GH_WEIGHTS = np.array([0.0, np.sqrt(3.0), -np.sqrt(3.0)]), np.array([2 / 3, 1 / 6, 1 / 6])
+"""The three-point Gauss-Hermite rule for a standard normal: exact for polynomials up to degree 5."""
+
+
+def fixed_propagated(theta: np.ndarray, C: np.ndarray, fixed_mask: np.ndarray, fixed_sigma: np.ndarray,
+                     refit) -> np.ndarray:
+    """The covariance ``C`` (6x6 over ``mounting.PARAMS``, zero at the fixed ones) with the fixed values' own
+    uncertainty (``fixed_sigma`` at the fixed ones, independent normal) carried through the fit: the fixed values
+    moved over the tensor grid of ``GH_NODES`` (``3^n`` points for ``n`` fixed), the free ones re-fitted from
+    ``theta`` at each (``refit(theta0) -> theta``), and the weighted second moment of the answers about ``theta``
+    (the answer at the given values) added to ``C``. The free parameters do not respond linearly on the scale of
+    a rough prior (boards that leave roll and pitch free meet the scan plane at second order in them, and in
+    their product), which a first-order propagation or one axis at a time misses."""
+    idx = np.flatnonzero(fixed_mask)
+    grid = np.stack(np.meshgrid(*[np.arange(3)] * len(idx), indexing="ij"), axis=-1).reshape(-1, len(idx))
+    D, w = [], []
+    for g in grid:
+        t0 = theta.copy()
+        t0[idx] += GH_NODES[g] * fixed_sigma[idx]
+        D.append((refit(t0) if g.any() else theta) - theta)
+        w.append(np.prod(GH_WEIGHTS[g]))
+    D = np.array(D)
+    return C + (D * np.array(w)[:, None]).T @ D
 
 
 def fixed_starts(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.ndarray, full_start) -> list[np.ndarray]:
