@@ -205,6 +205,8 @@ def _subset_md(rs, obs, rows, out: Path, images: dict, n_subsets: int, n_jobs: i
                f"drawn from N(0, {sub.PRIOR_SIGMA_DEG:g} deg) about each axis and a translation error from N(0, "
                f"{sub.PRIOR_SIGMA_MM:g} mm) along each (seeded by the set and the subset), given with those sigmas "
                f"(`calibrate(obs, \"{sub.PRIOR_METHOD}\", prior=...)`). Where the data leave a tie, the prior decides; "
+               "where the boards leave axes free (every board vertical), the prior's values hold them, so the answer "
+               "is as close as the guess there and its 1-sigma the guess's (the 3-sigma column tests that); "
                f"alone, the guess is within {sub.VALID_DEG:g} deg / {sub.VALID_M:g} m of the reference in "
                f"{100 * sub.guesses_valid(SHORT[rs.name], df, T_prior):.0f}% of the subsets.", ""]
     md += ["References:", ""] + md_table(["method judged", "reference", "its 1-sigma"], ref_rows, "lll") + [""]
