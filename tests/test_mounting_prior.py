@@ -112,26 +112,22 @@ def test_vertical_boards_with_a_prior_hold_roll_pitch_and_height_at_it():
     """Every board vertical leaves roll, pitch and z free: without a prior ``lidarcam`` refuses
     (tests/test_degeneracy.py); with one drawn at its stated sigmas around the truth it holds those at the prior's
     values, calibrates the rest, says so, and its covariance carries the prior's uncertainty through the fit
-    (NEES median below chi-square(6)'s 9: the free parameters' response is not Gaussian, so no tighter claim)."""
+    (NEES median between 1.5 and 9: the free parameters respond to the held ones at second order, not as a Gaussian)."""
     from rigs import vertical_rig
 
     from calib_core.geometry.metrics import nees
 
     rng = np.random.default_rng(5)
     s_rot, s_t = np.radians(5.0), 0.03
-    values, answered = [], 0
+    values = []
     for seed in range(16):
         obs = vertical_rig(seed)
         T_true = obs.T_lidar_cam_true
         guess = perturb(T_true, np.r_[rng.normal(0, s_rot, 3), rng.normal(0, s_t, 3)])
         r = calibrate(obs, "lidarcam", prior=MountingPrior(guess, s_rot, s_t))
-        if not r.ok:            # the consensus finds no three boards that agree: refused, with the reason
-            assert "boards agree" in r.reason
-            continue
-        answered += 1
-        assert any("taken" in w or "from the mounting prior" in w for w in r.warnings)
+        assert r.ok, r.reason
+        assert any("from the mounting prior" in w for w in r.warnings)
         assert sorted(r.info["fixed"]) == ["pitch_deg", "roll_deg", "z_m"]
         assert np.linalg.matrix_rank(r.covariance) == 6
         values.append(nees(r.T_lidar_cam, T_true, r.covariance))
-    assert answered >= 8
     assert 1.5 < np.median(values) < 9.0

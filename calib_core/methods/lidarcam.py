@@ -106,7 +106,7 @@ def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
     obs_t, trim_report = trim(obs, opts.trim)
     search = consensus_search(obs_t, trim_report, range_sigma_m=opts.range_sigma_m,
                               outline_sigma_m=score.outline_sigma_m, options=opts.consensus,
-                              guess=None if score.prior is None else score.prior.T_lidar_cam)
+                              prior=score.prior)
     sigma = search.sigma_m
     best = choose_and_refine(search.obs_used, search.pool, sigma, score, opts.refine, refined=search.refined)
     if best.ties:

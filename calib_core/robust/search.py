@@ -16,6 +16,7 @@ import numpy as np
 from ..data.lines import range_sigma, scan_lines
 from ..data.observations import Observations
 from ..errors import SolveFailure
+from ..geometry.mounting import MountingPrior
 from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine
 from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
@@ -107,16 +108,18 @@ class LocalOptimum:
 
 
 def local_optimise(obs: Observations, T0: np.ndarray, q0: np.ndarray, sigma_m: float, outline_sigma_m: float,
-                   start_all: bool = False) -> LocalOptimum:
+                   start_all: bool = False, prior: MountingPrior | None = None) -> LocalOptimum:
     """Refine ``T0`` on the boards it explains (``q0 < SCORE_TAU``; every board in front of the camera with
-    ``start_all``), re-test every board, repeat until the consensus set is stable."""
+    ``start_all``), re-test every board, repeat until the consensus set is stable. With a mounting ``prior`` each
+    refinement holds it (the posterior's mode): where the boards leave directions free (every board vertical), a
+    refinement without it wanders along them off the boards."""
     used, T, q = (np.isfinite(q0) if start_all else q0 < SCORE_TAU), T0, q0
     s2, r = 1.0, None
     for _ in range(LO_ROUNDS):
         if used.sum() < 3:
             break
         r = refine(obs.scan_data.of_boards(used), T, residual="range", loss=LO_LOSS,
-                   f_scale_m=F_SCALE_SIGMAS * sigma_m)
+                   f_scale_m=F_SCALE_SIGMAS * sigma_m, prior=prior, prior_scale_m=sigma_m)
         T = r.T_lidar_cam
         q = board_statistics(obs, T, sigma_m, outline_sigma_m)[0]
         s2 = inflation(q[used])
@@ -129,10 +132,10 @@ def local_optimise(obs: Observations, T0: np.ndarray, q0: np.ndarray, sigma_m: f
 
 def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_m: float | None,
                      outline_sigma_m: float, options: ConsensusOptions | None = None,
-                     guess: np.ndarray | None = None) -> Search:
+                     prior: MountingPrior | None = None) -> Search:
     """On ``obs`` (already trimmed, ``trim`` says how): keep the boards with a line-like scan, search hypotheses
-    and the consensus set among them (noise ``range_sigma_m``, default the scan lines' RMS estimate); ``guess``
-    (4,4): a mounting prior's pose, one hypothesis more (``hypotheses``)."""
+    and the consensus set among them (noise ``range_sigma_m``, default the scan lines' RMS estimate); ``prior``: a
+    mounting prior, its pose one hypothesis more (``hypotheses``) and held by every local optimisation."""
     options = options or ConsensusOptions()
     lines = scan_lines(obs)
     good = np.flatnonzero(lines.line_like)
@@ -142,14 +145,15 @@ def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_
                            + "; ".join(f"board {r['index']}: {r['reason']}" for r in rejected))
     obs_g = obs.subset(good)
     sigma = range_sigma(obs_g, range_sigma_m)
-    H = hypotheses(obs_g, sigma, outline_sigma_m, use_zhang_pless=options.use_zhang_pless, guess=guess,
+    H = hypotheses(obs_g, sigma, outline_sigma_m, use_zhang_pless=options.use_zhang_pless,
+                   guess=None if prior is None else prior.T_lidar_cam,
                    **dict(options.solver))
     if len(H.T) == 0:
         raise SolveFailure("no candidate: " + "; ".join(H.reasons))
     used = np.ones(len(good), bool)
     optima: list[LocalOptimum] = []
     if options.reject_boards and len(good) >= MIN_TESTABLE:
-        used, optima, rejected = _consensus(obs_g, H, sigma, outline_sigma_m, good, rejected)
+        used, optima, rejected = _consensus(obs_g, H, sigma, outline_sigma_m, good, rejected, prior)
     within = np.flatnonzero(H.within(used))
     cap = POOL_MAX if H.exhaustive else POOL_MAX_SAMPLED
     within = within[np.argsort(msac_cost(H.q[within][:, used]), kind="stable")[:cap]]
@@ -159,7 +163,7 @@ def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_
 
 
 def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m: float, good: np.ndarray,
-               rejected: list):
+               rejected: list, prior: MountingPrior | None = None):
     """Local optimisation of the best starts and the consensus set of the best: (used (N,) bool, the local optima
     (``LocalOptimum``), the rejections so far plus the boards left out)."""
     cost = msac_cost(H.q)
@@ -173,7 +177,7 @@ def _consensus(obs_g: Observations, H: Hypotheses, sigma: float, outline_sigma_m
     for (j, a), first, key, T1 in zip(starts, firsts, keys, heads, strict=True):
         if key in done or _in_basin(T1, first, done):
             continue
-        done[key] = local_optimise(obs_g, H.T[j], H.q[j], sigma, outline_sigma_m, a)
+        done[key] = local_optimise(obs_g, H.T[j], H.q[j], sigma, outline_sigma_m, a, prior)
     results = list(done.values())
     if not results:
         raise SolveFailure("lidarcam: no hypothesis puts the boards in front of the camera", H.T)
