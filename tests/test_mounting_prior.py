@@ -131,3 +131,17 @@ def test_vertical_boards_with_a_prior_hold_roll_pitch_and_height_at_it():
         assert np.linalg.matrix_rank(r.covariance) == 6
         values.append(nees(r.T_lidar_cam, T_true, r.covariance))
     assert 1.5 < np.median(values) < 9.0
+
+
+def test_the_summary_says_which_axes_the_prior_holds():
+    from rigs import vertical_rig
+
+    obs = vertical_rig(3)
+    T = obs.T_lidar_cam_true
+    r = calibrate(obs, "lidarcam", prior=MountingPrior(perturb(T, np.r_[0.03, -0.02, 0.01, 0.02, 0.01, -0.02]),
+                                                       np.radians(5.0), 0.03))
+    lines = r.summary_lines()
+    for k in ("roll_deg", "pitch_deg", "z_m"):
+        line = next(ln for ln in lines if ln.strip().startswith(k))
+        assert "held at the mounting prior's value" in line and "1-sigma" in line
+    assert "held" not in next(ln for ln in lines if ln.strip().startswith("yaw_deg"))

@@ -181,9 +181,12 @@ class CalibrationResult:
                                                         if d["widened"] else "the boards agree with the noise model"))
         if "mounting" in self.info:
             out.append("mounting (camera pose in the lidar frame; degrees and metres):")
+            held = self.info.get("fixed", {})
             for k, v in self.info["mounting"].items():
                 s = self.info["mounting_sigma"].get(k)
-                out.append(f"  {k:>9} = {v: .4f}  " + ("(fixed, given)" if s is None else f"+- {s:.4f} (1-sigma)"))
+                how = "" if k not in held else " (held at the mounting prior's value)" if "prior" in self.info \
+                    else " (fixed, given)"
+                out.append(f"  {k:>9} = {v: .4f}  " + ("" if s is None else f"+- {s:.4f} (1-sigma)") + how)
         if "conditioning" in self.info:
             out.append("conditioning (inverse condition number, 1 = ideal, < 1e-3 poor): "
                        f"{self.info['conditioning']:.2e}")

@@ -134,9 +134,9 @@ def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.
     ``note``, and the refinement's cost and evaluations. ``range_sigma_m=None``: the noise is estimated from the
     residuals with ``K - free`` degrees of freedom. ``fixed_sigma``: (6,) the 1-sigma of the given values
     (radians, metres; read at the fixed ones), when they are uncertain (a mounting prior's): the covariance then
-    carries it, to the fixed parameters and through the fit to the free ones (``fixed_propagated``), and has full
-    rank (the answer stays the fit at the given values). Raises SolveFailure when no start is given or the free
-    parameters are still not determined.
+    carries it, to the fixed parameters and through the fit to the free ones (``fixed_propagated``), so both
+    covariances have full rank and ``mounting_sigma`` holds all six (the answer stays the fit at the given
+    values). Raises SolveFailure when no start is given or the free parameters are still not determined.
     """
     fixed_mask = np.asarray(fixed_mask, bool)
     free = ~fixed_mask
@@ -167,7 +167,8 @@ def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.
     units = with_units(theta)
     return T, {"covariance": M @ C @ M.T, "covariance_mounting": C, "mounting": units,
                "mounting_sigma": {k: float(np.degrees(s) if j < 3 else s)
-                                  for j, (k, s) in enumerate(zip(UNIT_NAMES, sig, strict=True)) if free[j]},
+                                  for j, (k, s) in enumerate(zip(UNIT_NAMES, sig, strict=True))
+                                  if free[j] or fixed_sigma is not None},
                "fixed": {k: units[k] for j, k in enumerate(UNIT_NAMES) if fixed_mask[j]},
                "free": [PARAMS[j] for j in np.flatnonzero(free)],
                "note": FIXED_NOTE if fixed_sigma is None else PRIOR_FIXED_NOTE,
