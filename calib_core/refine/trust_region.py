@@ -73,7 +73,7 @@ def trust_region_step(uf: np.ndarray, s: np.ndarray, V: np.ndarray, Delta: float
         ratio = phi / phi_prime
         alpha_lower = max(alpha_lower, alpha - ratio)
         alpha -= (phi + Delta) * ratio / Delta
-        if np.abs(phi) < rtol * Delta:
+        if abs(phi) < rtol * Delta:
             break
     p = -V.dot(suf / (s**2 + alpha))
     p *= Delta / norm(p)
@@ -84,7 +84,7 @@ def _phi(alpha: float, suf: np.ndarray, s: np.ndarray, Delta: float) -> tuple[fl
     """The norm of the step regularised by ``alpha`` less ``Delta``, and its derivative in ``alpha``."""
     denom = s**2 + alpha
     p_norm = norm(suf / denom)
-    return p_norm - Delta, -np.sum(suf**2 / denom**3) / p_norm
+    return p_norm - Delta, -(suf**2 / denom**3).sum() / p_norm
 
 
 def _radius(Delta: float, actual: float, predicted: float, step_norm: float, bound_hit: bool):
@@ -117,7 +117,7 @@ def _one_start(x0: np.ndarray, f: np.ndarray, J: np.ndarray, max_nfev: int):
                 return x
             J = yield ("jac",)
         g = J.T.dot(f)
-        done = done or np.max(np.abs(g)) < TOL
+        done = done or np.abs(g).max() < TOL
         if done or nfev == max_nfev:
             return x
         U, s, V = thin_svd(J)
@@ -131,7 +131,7 @@ def _one_start(x0: np.ndarray, f: np.ndarray, J: np.ndarray, max_nfev: int):
             f_new = yield ("eval", x_new)
             nfev += 1
             step_norm = norm(step)
-            if not np.all(np.isfinite(f_new)):
+            if not np.isfinite(f_new).all():
                 Delta = 0.25 * step_norm
                 continue
             cost_new = 0.5 * np.dot(f_new, f_new)

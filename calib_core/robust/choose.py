@@ -100,12 +100,14 @@ def _polish_jacobians(jacobians: list, X: np.ndarray, rows: np.ndarray) -> np.nd
     """(k',n,6) the polish's Jacobians in ``x = (w, dt)`` at rows ``rows`` of the points ``X`` (k,6) of one residual
     call: ``lidarcam_linearised``'s (its functions ``jacobians``, one per row) times the left Jacobian of SO(3) at
     the rotation step."""
-    out = []
-    for r in rows:
+    out = None
+    for i, r in enumerate(rows):
         j = jacobians[r]()
-        j[:, :3] = j[:, :3] @ so3_left_jacobian(X[r, :3])
-        out.append(j)
-    return np.array(out)
+        if out is None:
+            out = np.empty((len(rows),) + j.shape)
+        out[i, :, 3:] = j[:, 3:]
+        np.matmul(j[:, :3], so3_left_jacobian(X[r, :3]), out=out[i, :, :3])
+    return np.zeros((0, 0, 6)) if out is None else out
 
 
 PRUNE_FIRST = 4

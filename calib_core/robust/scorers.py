@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import logsumexp
 
+from ..data.chords import lower_bound_boards
 from ..data.observations import Observations
 from ..data.residuals import (
     board_frame_rows,
@@ -331,10 +332,13 @@ def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sig
     out, g_out = outside_outlines(obs, T[None], gradient="later", frames=frames, points=P[..., :2])
     every = len(exact) == obs.n_boards                      # every outline exact: no rows to leave out
     edge, out = (edge[0], out[0]) if every else (edge[0][exact], out[0][on_exact])
-    rc = chord_residuals(obs, T[None], chord_sigma_m, chord_cap, frames)[0]
-    rm = margin_residuals(obs, T[None], margin_sigma_m, frames)[0]
-    rp = prior.residuals(T) if prior is not None else np.zeros(0)
-    res = np.concatenate([rng / range_sigma_m, edge.ravel() / edge_sigma_m, out / outline_sigma_m, rc, rm, rp])
+    parts = [rng / range_sigma_m, edge.ravel() / edge_sigma_m, out / outline_sigma_m]
+    if obs.derived("scorers.has_lower_bound", lambda o: bool(len(lower_bound_boards(o)))):
+        parts += [chord_residuals(obs, T[None], chord_sigma_m, chord_cap, frames)[0],
+                  margin_residuals(obs, T[None], margin_sigma_m, frames)[0]]
+    if prior is not None:
+        parts.append(prior.residuals(T))
+    res = np.concatenate(parts)
     lower = (chord_sigma_m, chord_cap, margin_sigma_m)
     J = functools.partial(_linearised_jacobian, obs, T, frames, J_rng, g_edge, g_out, lower, prior,
                           (range_sigma_m, edge_sigma_m, outline_sigma_m))
@@ -362,8 +366,15 @@ def _linearised_jacobian(obs: Observations, T: np.ndarray, frames: tuple, J_rng,
     _, Jc, _, Jm = lower_bound_rows(obs, T, frames, *lower)
     Jp = prior.jacobian(T) if prior is not None else np.zeros((0, 6))
     range_sigma_m, edge_sigma_m, outline_sigma_m = sigmas
-    return np.concatenate([J_rng() / range_sigma_m, J_ends_out[:n_edge] / edge_sigma_m,
-                           J_ends_out[n_edge:] / outline_sigma_m, Jc, Jm, Jp], axis=0)
+    J_rng = J_rng()
+    # the blocks written in place, one under the other (the rows of a concatenation, without its copy)
+    J = np.empty((len(J_rng) + len(J_ends_out) + len(Jc) + len(Jm) + len(Jp), 6))
+    k, n_rows = len(J_rng), len(J_ends_out)
+    np.divide(J_rng, range_sigma_m, out=J[:k])
+    np.divide(J_ends_out[:n_edge], edge_sigma_m, out=J[k:k + n_edge])
+    np.divide(J_ends_out[n_edge:], outline_sigma_m, out=J[k + n_edge:k + n_rows])
+    J[k + n_rows:] = np.concatenate([Jc, Jm, Jp], axis=0)
+    return J
 
 
 def _linearised_points(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
