@@ -234,7 +234,7 @@ def _evidence(obs: Observations, C: np.ndarray, range_sigma_m: float, edge_sigma
     margin = margin_residuals(obs, C, lower.get("margin_sigma_m", MARGIN_SIGMA_M), frames)
     prior = lower.get("prior")
     pri = prior.residuals(C) if prior is not None else np.zeros((len(C), 0))
-    bad = np.sum(~plausible_boards(obs, C), axis=1).astype(float)
+    bad = (~plausible_boards(obs, C)).sum(axis=1).astype(float)
     return rng, edge, out, np.concatenate([chord, margin], axis=1), pri, bad
 
 
@@ -271,7 +271,7 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
     rng, edge, out, low, pri, behind = _evidence(obs, candidates, range_sigma_m, edge_sigma_m, outline_sigma_m,
                                                  with_outline, **lower)
     terms = {"range": rng, "edge": edge, "outline": out, "lower_bound": low, "prior": pri}
-    terms = {k: 0.5 * np.sum(v**2, axis=1) for k, v in terms.items()}
+    terms = {k: 0.5 * (v**2).sum(axis=1) for k, v in terms.items()}
     with np.errstate(invalid="ignore"):
         pen = np.where(behind > 0, behind * behind_penalty, 0.0)
     cost = sum(terms.values()) + pen
