@@ -101,7 +101,9 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool | str = False)
     mk, num = _planes_lidar(T, data)
     r, b = data.ranges, data.beams
     mb = np.einsum("...kj,kj->...k", mk, b)
-    mb = np.where(np.abs(mb) < MIN_BEAM_INCIDENCE, np.copysign(MIN_BEAM_INCIDENCE, mb), mb)
+    small = np.abs(mb) < MIN_BEAM_INCIDENCE
+    if small.any():                                                           # rare: clamp only then
+        mb = np.where(small, np.copysign(MIN_BEAM_INCIDENCE, mb), mb)
     r_star = num / mb
     e = r - r_star
     if not jacobian:

@@ -71,7 +71,7 @@ def lidarcam_linearised_many(obs: Observations, C: np.ndarray, *, range_sigma_m:
     if len(exact) < obs.n_boards:                           # rows of the exact outlines only
         edge, out = edge[:, exact], out[:, on_exact]
     parts = [rng / range_sigma_m, edge.reshape(M, -1) / edge_sigma_m, out / outline_sigma_m]
-    if obs.derived("scorers.has_lower_bound", lambda o: bool(len(lower_bound_boards(o)))):
+    if len(lower_bound_boards(obs)):
         parts += [chord_residuals(obs, C, chord_sigma_m, chord_cap, frames),
                   margin_residuals(obs, C, margin_sigma_m, frames)]
     if prior is not None:
