@@ -22,8 +22,9 @@ from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.mounting import MountingPrior, T_from_params, params_from_T
 from calib_core.geometry.transforms import make_T
 from calib_core.refine.lower_bound import MARGIN_CAP, lower_bound_rows
+from calib_core.robust.linearised import lidarcam_linearised
 from calib_core.robust.plausible import plausibility, plausible_boards
-from calib_core.robust.scorers import lidarcam_linearised, lidarcam_residuals
+from calib_core.robust.scorers import lidarcam_residuals
 from simulate import SimOptions, generate
 
 REPO = Path(__file__).resolve().parents[1]

@@ -1,7 +1,9 @@
 """The hot paths' lazy Jacobians against the eager ones: the residual functions that give their Jacobian (or
 gradient) as a function to call later (``jacobian="later"``) give the same numbers, bit for bit, as when asked at
 once, and ``least_squares_many`` given such functions answers as with the Jacobians given at once, computing fewer
-of them."""
+of them. The polish's batched linearisation (every start of a round in one call) gives each row as the call on its
+extrinsic alone, bit for bit, and so a polish of many starts answers as each start polished alone;
+``rotvec_to_matrix``'s path for a few rotations gives scipy's numbers."""
 
 from __future__ import annotations
 
@@ -16,9 +18,11 @@ from calib_core.data.residuals import (
     range_residuals,
 )
 from calib_core.geometry.mounting import MountingPrior
-from calib_core.geometry.transforms import skew, so3_left_jacobian
+from calib_core.geometry.transforms import rotvec_to_matrix, skew, so3_left_jacobian
 from calib_core.refine.trust_region import jacobian, least_squares_many
-from calib_core.robust.scorers import ScoreOptions, lidarcam_linearised
+from calib_core.robust.choose import polish_many
+from calib_core.robust.linearised import lidarcam_linearised, lidarcam_linearised_many
+from calib_core.robust.scorers import ScoreOptions
 from simulate import SimOptions, generate
 
 SCENES = {
@@ -121,3 +125,52 @@ def test_so3_left_jacobian_equals_its_formula_in_numpy(rng):
         ref = np.eye(3) + 0.5 * W if th < 1e-8 else \
             np.eye(3) + (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * (W @ W)
         assert np.array_equal(so3_left_jacobian(w), ref)
+
+
+def _bits(a) -> np.ndarray:
+    """The bit patterns of a float array (signed zeros and NaN payloads told apart)."""
+    return np.ascontiguousarray(a, float).view(np.int64)
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_batched_linearisation_equals_each_extrinsic_alone(scene, rng):
+    """``lidarcam_linearised_many`` of (M,4,4) extrinsics: each row's residuals and Jacobian (asked for any subset of
+    rows, in any order) are those of ``lidarcam_linearised`` at that extrinsic alone, bitwise, with and without a
+    mounting prior."""
+    obs = generate(SCENES[scene], seed=10, trial=int(rng.integers(100)))
+    prior = MountingPrior(perturb(obs.T_lidar_cam_true, rng.normal(0, [0.05] * 3 + [0.05] * 3)), 0.1, 0.05)
+    for p in (None, prior):
+        kw = {"range_sigma_m": 0.02, **ScoreOptions(prior=p).kwargs()}
+        for M in (1, 2, 5):
+            C = _poses(obs, rng, M)
+            F, jac = lidarcam_linearised_many(obs, C, **kw)
+            rows = rng.permutation(M)[:int(rng.integers(1, M + 1))]
+            J = jac(rows)
+            for r in range(M):
+                assert np.array_equal(_bits(F[r]), _bits(lidarcam_linearised(obs, C[r], **kw)[0]))
+            for i, r in enumerate(rows):
+                assert np.array_equal(_bits(J[i]), _bits(lidarcam_linearised(obs, C[r], **kw)[1]))
+
+
+@pytest.mark.parametrize("scene", ["exact", "lower_bound"])
+def test_polish_of_many_starts_answers_as_each_start_alone(scene, rng):
+    """``polish_many`` from several starts (their residuals evaluated in one call per round) gives each start the
+    answer of its polish alone, bitwise."""
+    obs = generate(SCENES[scene], seed=11, trial=int(rng.integers(100)))
+    T0 = np.array([perturb(obs.T_lidar_cam_true, rng.normal(0, [0.05] * 3 + [0.08] * 3)) for _ in range(4)])
+    together = polish_many(obs, T0, 40, ScoreOptions(), 0.02)
+    for T, alone in zip(T0, together, strict=True):
+        assert np.array_equal(_bits(polish_many(obs, T[None], 40, ScoreOptions(), 0.02)[0]), _bits(alone))
+
+
+def test_rotvec_to_matrix_equals_scipy_bitwise(rng):
+    """A few rotation vectors converted in Python floats give scipy's matrices bit for bit: tiny angles, the
+    series' threshold (1e-3 rad) and beyond, one vector or a batch; more than ``FEW_ROTATIONS`` go to scipy."""
+    from scipy.spatial.transform import Rotation
+
+    W = np.concatenate([rng.normal(0, 1, (300, 3)) * 10.0 ** rng.uniform(-9, 1, (300, 1)),
+                        rng.normal(0, 1, (50, 3)) * (1e-3 / np.sqrt(3)), np.zeros((2, 3)), [[1e-3, 0, 0]]])
+    for w in W:
+        assert np.array_equal(_bits(rotvec_to_matrix(w)), _bits(Rotation.from_rotvec(w).as_matrix()))
+    for k in (1, 3, 4):
+        assert np.array_equal(_bits(rotvec_to_matrix(W[:k])), _bits(Rotation.from_rotvec(W[:k]).as_matrix()))

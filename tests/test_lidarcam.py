@@ -157,7 +157,8 @@ def test_lidarcam_linearised_jacobian_matches_central_differences(seed):
     a Jacobian equal to central differences, endpoint and outline rows included (poses off enough that scan points
     fall outside the outlines)."""
     from calib_core.data.residuals import perturb
-    from calib_core.robust.scorers import lidarcam_linearised, lidarcam_residuals
+    from calib_core.robust.linearised import lidarcam_linearised
+    from calib_core.robust.scorers import lidarcam_residuals
 
     rng = np.random.default_rng(seed)
     obs = make_observations(rng, 3 + seed % 6, 0.02)

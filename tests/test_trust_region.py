@@ -12,7 +12,8 @@ from calib_core.data.residuals import perturb
 from calib_core.geometry.transforms import so3_left_jacobian
 from calib_core.refine.trust_region import least_squares_many
 from calib_core.robust.choose import GIVE_UP_ITERATIONS, polish_many
-from calib_core.robust.scorers import ScoreOptions, lidarcam_linearised
+from calib_core.robust.linearised import lidarcam_linearised
+from calib_core.robust.scorers import ScoreOptions
 
 
 def _curve(rng):

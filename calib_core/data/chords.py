@@ -34,9 +34,15 @@ def lower_bound_groups(obs: Observations) -> list[tuple[np.ndarray, np.ndarray]]
 
 
 def lower_bound_boards(obs: Observations) -> np.ndarray:
-    """Indices of the boards with a lower-bound outline (sorted)."""
+    """Indices of the boards with a lower-bound outline (sorted, read-only); computed once per observation set."""
+    return obs.derived("chords.lower_bound_boards", _lower_bound_boards)
+
+
+def _lower_bound_boards(obs: Observations) -> np.ndarray:
     groups = lower_bound_groups(obs)
-    return np.sort(np.concatenate([idx for idx, _ in groups])) if groups else np.zeros(0, int)
+    out = np.sort(np.concatenate([idx for idx, _ in groups])) if groups else np.zeros(0, int)
+    out.setflags(write=False)
+    return out
 
 
 def endpoints_2d(obs: Observations, candidates: np.ndarray, frames: tuple | None = None) -> np.ndarray:

@@ -19,7 +19,7 @@ def outside_outline(xy: np.ndarray, outline: np.ndarray, gradient: bool | str = 
                                                    xy.ndim - 1)
     x, y = xy[..., 0], xy[..., 1]
     wx, wy = x - ax, y - ay                                                     # (V,...) from each edge's start
-    s = np.clip((wx * abx + wy * aby) * inv_len2, 0.0, 1.0)
+    s = ((wx * abx + wy * aby) * inv_len2).clip(0.0, 1.0)
     ox, oy = wx - s * abx, wy - s * aby                                         # from the nearest point of each edge
     d2 = ox**2 + oy**2
     dist = np.sqrt(d2.min(axis=0))
@@ -36,8 +36,10 @@ def _outline_gradient(ox: np.ndarray, oy: np.ndarray, d2: np.ndarray, dist: np.n
                       inside: np.ndarray) -> np.ndarray:
     """``outside_outline``'s gradient (...,2) from the offsets (V,...) of the points from each edge's nearest point,
     their squares' sum, the distances to the outline and the inside mask (...)."""
-    k = np.argmin(d2, axis=0).ravel() * dist.size + np.arange(dist.size)       # flat index of the nearest edge
-    nearest = np.stack([ox.ravel()[k], oy.ravel()[k]], axis=-1).reshape(dist.shape + (2,))
+    k = d2.argmin(axis=0).ravel() * dist.size + np.arange(dist.size)       # flat index of the nearest edge
+    nearest = np.empty(dist.shape + (2,))
+    flat = nearest.reshape(-1, 2)                                               # a view: each point's (x, y)
+    flat[:, 0], flat[:, 1] = ox.ravel()[k], oy.ravel()[k]
     return np.where((inside | (dist == 0))[..., None], 0.0, nearest / np.where(dist > 0, dist, 1.0)[..., None])
 
 

@@ -64,9 +64,9 @@ def _planes_lidar(T: np.ndarray, data: ScanData):
     """Per point, the board normal ``m = R n`` (...,K,3) and plane offset ``d + m . t`` (...,K) in the lidar frame;
     ``T`` is one (4,4) or a batch (M,4,4) of ``T_lidar_cam``."""
     R, t = T[..., :3, :3], T[..., :3, 3]
-    m = data.normals @ np.swapaxes(R, -1, -2)                                 # (...,N,3) rows R n
+    m = data.normals @ R.swapaxes(-1, -2)                                 # (...,N,3) rows R n
     c = data.offsets + (m @ t[..., None])[..., 0]                             # (...,N)
-    return np.take(m, data.board, axis=-2), np.take(c, data.board, axis=-1)
+    return m.take(data.board, axis=-2), c.take(data.board, axis=-1)
 
 
 def plane_residuals(T: np.ndarray, data: ScanData, jacobian: bool | str = False):
@@ -101,7 +101,9 @@ def range_residuals(T: np.ndarray, data: ScanData, jacobian: bool | str = False)
     mk, num = _planes_lidar(T, data)
     r, b = data.ranges, data.beams
     mb = np.einsum("...kj,kj->...k", mk, b)
-    mb = np.where(np.abs(mb) < MIN_BEAM_INCIDENCE, np.copysign(MIN_BEAM_INCIDENCE, mb), mb)
+    small = np.abs(mb) < MIN_BEAM_INCIDENCE
+    if small.any():                                                           # rare: clamp only then
+        mb = np.where(small, np.copysign(MIN_BEAM_INCIDENCE, mb), mb)
     r_star = num / mb
     e = r - r_star
     if not jacobian:
@@ -115,7 +117,7 @@ def _range_jacobian(T: np.ndarray, mk: np.ndarray, mb: np.ndarray, r_star: np.nd
     # with dm = w x m: d(num)/dw = m x t and d(mb)/dw = m x b, so de/dw = (m x b num / mb - m x t) / mb
     # = m x (p* - t) / mb, with p* = (num / mb) b the point where the beam meets the plane; de/d(dt) = -m / mb
     p_t = r_star[..., None] * b - T[..., None, :3, 3]                                  # p* - t
-    J = np.empty(np.broadcast_shapes(mk.shape, p_t.shape)[:-1] + (6,))
+    J = np.empty(mk.shape[:-1] + (6,))  # p_t has mk's shape
     _cross_into(J[..., :3], mk, p_t)
     np.negative(mk, out=J[..., 3:])
     J /= mb[..., None]
@@ -166,7 +168,7 @@ def endpoints_in_board(obs: Observations, candidates: np.ndarray, frames: tuple 
     theirs, when the caller has them).
     """
     A, c = given_frames(obs, candidates, 3, frames)
-    return scan_endpoints(obs)[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]
+    return scan_endpoints(obs)[None] @ A.swapaxes(-1, -2) + c[:, :, None, :]
 
 
 def scan_endpoints(obs: Observations) -> np.ndarray:
@@ -188,7 +190,7 @@ def board_frames(obs: Observations, candidates: np.ndarray, rows: int = 3) -> tu
     first ``rows`` coordinates), so ``A = Phi_i^T R^T`` and ``c = -A t - Phi_i^T Delta_i``."""
     Pt, PtD = obs.derived("residuals.board_poses", _board_poses)
     R, t = candidates[:, :3, :3], candidates[:, :3, 3]
-    A = Pt[None, :, :rows] @ np.swapaxes(R, -1, -2)[:, None]                  # (M,N,rows,3)
+    A = Pt[None, :, :rows] @ R.swapaxes(-1, -2)[:, None]                  # (M,N,rows,3)
     return A, -(A @ t[:, None, :, None])[..., 0] - PtD[None, :, :rows]
 
 
@@ -206,9 +208,10 @@ def _board_slices(obs: Observations) -> list[slice]:
 
 
 def _edge_groups(obs: Observations) -> list[tuple]:
-    """Per vertex count V of the boards' outlines: the boards (n,), their vertices ``q_k`` (n,V,2), edge lengths
-    (1,n,1,V), unit in-plane edge normals (n,V,2), ``q_k . normal_k`` and ``|q_k|^2`` (each (1,n,1,V)), the
-    vertices in the board frame (n,V,3) (z = 0), the next vertex's index (V,) and the vertex indices (V,)."""
+    """Per vertex count V of the boards' outlines: the boards (n,), their vertices ``q_k`` and unit in-plane edge
+    normals one after the other (n,2V,2), edge lengths (1,n,1,V), ``q_k . normal_k`` and ``|q_k|^2`` (each
+    (1,n,1,V)), the vertices in the board frame (n,V,3) (z = 0), the next vertex's index (V,) and the vertex
+    indices (V,)."""
     counts = np.array([0 if b.outline is None else len(b.outline) for b in obs.boards])
     groups = []
     for V in np.unique(counts[counts > 0]):
@@ -217,7 +220,7 @@ def _edge_groups(obs: Observations) -> list[tuple]:
         edge = np.roll(a, -1, axis=1) - a                                    # q_{k+1} - q_k
         L = np.linalg.norm(edge, axis=-1)
         nrm = np.stack([-edge[..., 1], edge[..., 0]], axis=-1) / L[..., None]
-        groups.append((idx, a, L[None, :, None], nrm, np.sum(a * nrm, axis=-1)[None, :, None],
+        groups.append((idx, np.concatenate([a, nrm], axis=1), L[None, :, None], np.sum(a * nrm, axis=-1)[None, :, None],
                        np.sum(a**2, axis=-1)[None, :, None], np.concatenate([a, np.zeros(a.shape[:2] + (1,))], -1),
                        np.arange(1, V + 1) % V, np.arange(V)))
     return groups
@@ -241,20 +244,21 @@ def point_line_errors(obs: Observations, candidates: np.ndarray, gradient: bool 
     P = endpoints_in_board(obs, candidates, frames) if ends is None else ends  # (M,N,2,3)
     M, N = P.shape[:2]
     out, kept = np.zeros((M, N, 2)), []
-    for idx, a, L, nrm, a_nrm, a2, a3, nxt, vertex in obs.derived("residuals.edge_vertex_groups", _edge_groups):
-        V, n = a.shape[1], len(idx)
+    for idx, a_nrm2, L, a_nrm, a2, a3, nxt, vertex in obs.derived("residuals.edge_vertex_groups", _edge_groups):
+        V, n = len(nxt), len(idx)
         Pi = P if n == N else P[:, idx]                                      # one group: every board, in order
         xy, z2 = Pi[..., :2], Pi[..., 2:3] ** 2                               # (M,n,2,2), (M,n,2,1)
+        xy_q = np.einsum("mnkc,nvc->mnkv", xy, a_nrm2)                       # xy . q_k, then xy . normal_k
         # |p - q_k| from the expansion |xy|^2 - 2 xy.q_k + |q_k|^2 + z^2; |p - q_{k+1}| is its roll
-        d2 = (xy[..., 0] ** 2 + xy[..., 1] ** 2)[..., None] - 2 * np.einsum("mnkc,nvc->mnkv", xy, a) + a2 + z2
+        d2 = (xy[..., 0] ** 2 + xy[..., 1] ** 2)[..., None] - 2 * xy_q[..., :V] + a2 + z2
         da = np.sqrt(np.maximum(d2, 0.0))                                    # (M,n,2,V)
         db = da[..., nxt]                                                    # |p - q_{k+1}|
         err = da + db - L
-        dist = np.sqrt((np.einsum("mnkc,nvc->mnkv", xy, nrm) - a_nrm) ** 2 + z2)  # point-to-line distances
+        dist = np.sqrt((xy_q[..., V:] - a_nrm) ** 2 + z2)                    # point-to-line distances
         pair = dist[:, :, 0, :, None] + dist[:, :, 1, None, :]              # (M,n,V,V)
         pair[..., vertex, vertex] = np.inf                                   # the two edges differ
         k = np.empty((M, n, 2), int)                                         # each endpoint's edge
-        k[..., 0], k[..., 1] = np.divmod(np.argmin(pair.reshape(M, n, V * V), axis=-1), V)
+        k[..., 0], k[..., 1] = np.divmod(pair.reshape(M, n, V * V).argmin(axis=-1), V)
         at = k.ravel() + np.arange(0, err.size, V)                           # flat index of each one's edge
         out[:, idx] = err.ravel()[at].reshape(M, n, 2)
         if gradient:
@@ -316,7 +320,7 @@ def scan_points_in_boards(obs: Observations, candidates: np.ndarray, rows: int =
     points = obs.scan_data.points
     out = np.empty((len(candidates), len(points), rows))
     for i, sl in enumerate(obs.derived("residuals.board_slices", _board_slices)):
-        out[:, sl] = points[sl] @ np.swapaxes(A[:, i], -1, -2) + c[:, i, None]
+        out[:, sl] = points[sl] @ A[:, i].swapaxes(-1, -2) + c[:, i, None]
     return out
 
 

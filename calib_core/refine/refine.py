@@ -88,10 +88,10 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
     last: dict = {}  # the latest step: its pose, residuals and Jacobian (computed when first asked for)
 
     def at(x):
-        if not np.array_equal(last.get("x"), x):
+        if not _same(last.get("x"), x):
             T = perturb(T0, x)
             e, J = fn(T, data, jacobian="later")  # a rejected step needs no Jacobian
-            last.update(x=x.copy(), T=T, e=e, J=J)
+            last.update(x=x.copy(), T=T, e=e, J=J, jac=None)
         return last
 
     def linearised(x):
@@ -105,10 +105,14 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
 
     def jac(x):
         # d/dx of f(exp(w) R0): the left-perturbation Jacobian at the current pose times the left
-        # Jacobian of SO(3) at w (exp(w + dw) = exp(J_l(w) dw) exp(w) to first order).
-        J = linearised(x)[1].copy()
-        J[:, :3] = J[:, :3] @ so3_left_jacobian(x[:3])
-        return J
+        # Jacobian of SO(3) at w (exp(w + dw) = exp(J_l(w) dw) exp(w) to first order); kept for the step, whose
+        # Jacobian leastsq asks twice at the start (a copy each time: the solver may write into it)
+        step = at(x)
+        if step["jac"] is None:
+            J = linearised(x)[1].copy()
+            J[:, :3] = J[:, :3] @ so3_left_jacobian(x[:3])
+            step["jac"] = J
+        return step["jac"].copy()
 
     e0 = fun(np.zeros(6))
     if loss == Loss.LINEAR and len(e0) >= 6:
@@ -123,6 +127,11 @@ def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str
     K = len(data.points)
     return RefineResult(T, robust_cost(e) if cost is None else cost, robust_cost(e0, loss, f_scale), e[:K], J[:K],
                         success, message, nfev)
+
+
+def _same(a: np.ndarray | None, b: np.ndarray) -> bool:
+    """``np.array_equal(a, b)`` for a kept (6,) step ``a`` (or None) and the solver's ``b`` (6,), with less overhead."""
+    return a is not None and bool((a == b).all())
 
 
 def _with_prior(fn, prior: MountingPrior, scale_m: float):

@@ -52,6 +52,7 @@ def trust_region_step(uf: np.ndarray, s: np.ndarray, V: np.ndarray, Delta: float
     ``alpha`` it ends at (``alpha`` in: the previous one, a first guess)."""
     n, m = len(s), len(uf)
     suf = s * uf
+    s2, suf2 = s**2, suf**2  # the squares every evaluation of phi reads, computed once
     full_rank = bool(m >= n and s[-1] > EPS * m * s[0])
     if full_rank:
         p = -V.dot(uf / s)
@@ -60,31 +61,32 @@ def trust_region_step(uf: np.ndarray, s: np.ndarray, V: np.ndarray, Delta: float
     alpha_upper = norm(suf) / Delta
     alpha_lower = 0.0
     if full_rank:
-        phi, phi_prime = _phi(0.0, suf, s, Delta)
+        phi, phi_prime = _phi(0.0, suf, suf2, s2, Delta)
         alpha_lower = -phi / phi_prime
     if not full_rank and alpha == 0:
         alpha = max(0.001 * alpha_upper, (alpha_lower * alpha_upper) ** 0.5)
     for _ in range(max_iter):
         if alpha < alpha_lower or alpha > alpha_upper:
             alpha = max(0.001 * alpha_upper, (alpha_lower * alpha_upper) ** 0.5)
-        phi, phi_prime = _phi(alpha, suf, s, Delta)
+        phi, phi_prime = _phi(alpha, suf, suf2, s2, Delta)
         if phi < 0:
             alpha_upper = alpha
         ratio = phi / phi_prime
         alpha_lower = max(alpha_lower, alpha - ratio)
         alpha -= (phi + Delta) * ratio / Delta
-        if np.abs(phi) < rtol * Delta:
+        if abs(phi) < rtol * Delta:
             break
-    p = -V.dot(suf / (s**2 + alpha))
+    p = -V.dot(suf / (s2 + alpha))
     p *= Delta / norm(p)
     return p, alpha
 
 
-def _phi(alpha: float, suf: np.ndarray, s: np.ndarray, Delta: float) -> tuple[float, float]:
-    """The norm of the step regularised by ``alpha`` less ``Delta``, and its derivative in ``alpha``."""
-    denom = s**2 + alpha
+def _phi(alpha: float, suf: np.ndarray, suf2: np.ndarray, s2: np.ndarray, Delta: float) -> tuple[float, float]:
+    """The norm of the step regularised by ``alpha`` less ``Delta``, and its derivative in ``alpha`` (``suf2``, ``s2``:
+    the squares of ``suf`` and of the singular values)."""
+    denom = s2 + alpha
     p_norm = norm(suf / denom)
-    return p_norm - Delta, -np.sum(suf**2 / denom**3) / p_norm
+    return p_norm - Delta, -(suf2 / denom**3).sum() / p_norm
 
 
 def _radius(Delta: float, actual: float, predicted: float, step_norm: float, bound_hit: bool):
@@ -117,7 +119,7 @@ def _one_start(x0: np.ndarray, f: np.ndarray, J: np.ndarray, max_nfev: int):
                 return x
             J = yield ("jac",)
         g = J.T.dot(f)
-        done = done or np.max(np.abs(g)) < TOL
+        done = done or np.abs(g).max() < TOL
         if done or nfev == max_nfev:
             return x
         U, s, V = thin_svd(J)
@@ -131,7 +133,7 @@ def _one_start(x0: np.ndarray, f: np.ndarray, J: np.ndarray, max_nfev: int):
             f_new = yield ("eval", x_new)
             nfev += 1
             step_norm = norm(step)
-            if not np.all(np.isfinite(f_new)):
+            if not np.isfinite(f_new).all():
                 Delta = 0.25 * step_norm
                 continue
             cost_new = 0.5 * np.dot(f_new, f_new)

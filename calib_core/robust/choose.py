@@ -15,7 +15,8 @@ from ..data.residuals import perturb
 from ..errors import SolveFailure
 from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine, so3_left_jacobian
 from ..refine.trust_region import least_squares_many
-from .scorers import ScoreOptions, lidarcam_linearised, outline_term
+from .linearised import lidarcam_linearised_many
+from .scorers import ScoreOptions, outline_term
 from .scorers import lidarcam as lidarcam_score
 from .starts import DISTINCT_ROT_DEG, DISTINCT_TRANS_M, distinct_order, gauss_newton_steps, near_any
 
@@ -82,30 +83,28 @@ def polish_many(obs: Observations, T0: np.ndarray, max_nfev: int, score: ScoreOp
     """Minimise the whole ``lidarcam`` selection cost from each of the (B,4,4) ``T0`` at once (B,4,4):
     ``least_squares(method=POLISH_METHOD)`` of each in ``x = (w, dt)`` around its start (``data.residuals``' left
     perturbation), as ``refine.trust_region.least_squares_many`` runs it, with the analytic Jacobian
-    (``scorers.lidarcam_linearised``, times the left Jacobian of SO(3) at the rotation step). ``halt`` and
-    ``done``: ``least_squares_many``'s (``done`` is told the start's index and its polished pose)."""
+    (``linearised.lidarcam_linearised_many``, times the left Jacobian of SO(3) at the rotation step), the starts of
+    a round linearised in one call. ``halt`` and ``done``: ``least_squares_many``'s (``done`` is told the start's
+    index and its polished pose)."""
     T0 = np.asarray(T0, float).reshape(-1, 4, 4)
     kw = {"range_sigma_m": range_sigma_m, **score.kwargs()}
 
     def fun(idx, X):
-        lin = [lidarcam_linearised(obs, T, **kw, jacobian="later") for T in perturb(T0[idx], X)]
-        return np.array([f for f, _ in lin]), functools.partial(_polish_jacobians, [J for _, J in lin], X)
+        F, jac = lidarcam_linearised_many(obs, perturb(T0[idx], X), **kw)
+        return F, functools.partial(_polish_jacobians, jac, X)
 
     told = None if done is None else (lambda i, x: done(i, perturb(T0[i], x)))
     X = least_squares_many(fun, np.zeros((len(T0), 6)), max_nfev, halt, told)
     return perturb(T0, X)
 
 
-def _polish_jacobians(jacobians: list, X: np.ndarray, rows: np.ndarray) -> np.ndarray:
+def _polish_jacobians(jac, X: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """(k',n,6) the polish's Jacobians in ``x = (w, dt)`` at rows ``rows`` of the points ``X`` (k,6) of one residual
-    call: ``lidarcam_linearised``'s (its functions ``jacobians``, one per row) times the left Jacobian of SO(3) at
-    the rotation step."""
-    out = []
-    for r in rows:
-        j = jacobians[r]()
-        j[:, :3] = j[:, :3] @ so3_left_jacobian(X[r, :3])
-        out.append(j)
-    return np.array(out)
+    call: ``lidarcam_linearised_many``'s (``jac(rows)``) times the left Jacobian of SO(3) at the rotation step."""
+    J = jac(rows)
+    for i, r in enumerate(rows):
+        J[i, :, :3] = J[i, :, :3] @ so3_left_jacobian(X[r, :3])
+    return J
 
 
 PRUNE_FIRST = 4

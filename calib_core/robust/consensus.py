@@ -75,7 +75,7 @@ def board_statistics(obs: Observations, T: np.ndarray, sigma_m: float, outline_s
 def _statistics(obs: Observations, L: ScanLines, var: tuple, T: np.ndarray, outline_sigma_m: float) -> np.ndarray:
     n, d = obs.planes_cam()
     R, t = T[:, :3, :3], T[:, :3, 3]
-    m = n @ np.swapaxes(R, -1, -2)                                            # (M,N,3) board normals in {L}
+    m = n @ R.swapaxes(-1, -2)                                                # (M,N,3) board normals in {L}
     c = d[None] + (m @ t[..., None])[..., 0]
     s = np.sqrt(m[..., 0] ** 2 + m[..., 1] ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -86,9 +86,9 @@ def _statistics(obs: Observations, L: ScanLines, var: tuple, T: np.ndarray, outl
     # scan centre's depth in {C} (z of R^T (p_L - t)) and the scan ends in each board's frame (``board_frames``)
     depth = ((L.ends.mean(axis=1)[None] - t[:, None]) @ R[:, :, 2:3])[..., 0]
     A, c = board_frames(obs, T, rows=2)
-    p_W = L.ends[None] @ np.swapaxes(A, -1, -2) + c[:, :, None, :]             # (M,N,2,2)
+    p_W = L.ends[None] @ A.swapaxes(-1, -2) + c[:, :, None, :]                 # (M,N,2,2)
     for idx, outline in outline_groups(obs):          # boards sharing one outline at once
-        q[:, idx] += np.sum((outside_outline(p_W[:, idx], outline) / outline_sigma_m) ** 2, axis=-1)
+        q[:, idx] += ((outside_outline(p_W[:, idx], outline) / outline_sigma_m) ** 2).sum(axis=-1)
     lb = lower_bound_boards(obs)
     if len(lb):                                       # lower-bound outlines: chord coverage and the margin prior
         low = chord_residuals(obs, T) ** 2 + margin_residuals(obs, T) ** 2

@@ -48,11 +48,11 @@ def plausibility(obs: Observations, candidates: np.ndarray) -> dict[str, np.ndar
     C = np.asarray(candidates, float).reshape(-1, 4, 4)
     n, d, beams, centres = obs.derived("plausible.constants", _constants)
     R, t = C[:, :3, :3], C[:, :3, 3]
-    m = n @ np.swapaxes(R, -1, -2)                                           # (M,N,3) rows R n
+    m = n @ R.swapaxes(-1, -2)                                               # (M,N,3) rows R n
     c = d[None] + np.einsum("mna,ma->mn", m, t)                              # the plane's offset in {L}
     mb = np.einsum("mna,nka->mnk", m, beams)                                 # (M,N,2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        front = np.all(c[..., None] / mb > 0, axis=-1)
+        front = (c[..., None] / mb > 0).all(axis=-1)
     depth = np.einsum("mna,ma->mn", centres[None] - t[:, None], R[:, :, 2])  # z of R^T (c - t)
     return {"same_side": c * d[None] > 0, "lidar_front": front, "camera_front": depth > 0}
 

@@ -9,7 +9,6 @@ inside the board outline, boards in front of the camera).
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +16,6 @@ from scipy.special import logsumexp
 
 from ..data.observations import Observations
 from ..data.residuals import (
-    board_frame_rows,
     board_frames,
     candidate_chunk,
     in_chunks,
@@ -25,7 +23,6 @@ from ..data.residuals import (
     plane_residuals,
     point_line_errors,
     range_residuals,
-    scan_points_in_boards,
 )
 from ..errors import CalibrationError, SolveFailure
 from ..geometry.mounting import MountingPrior
@@ -34,7 +31,6 @@ from ..refine.lower_bound import (
     CHORD_SIGMA_M,
     MARGIN_SIGMA_M,
     chord_residuals,
-    lower_bound_rows,
     margin_residuals,
 )
 from .plausible import plausible_boards
@@ -238,7 +234,7 @@ def _evidence(obs: Observations, C: np.ndarray, range_sigma_m: float, edge_sigma
     margin = margin_residuals(obs, C, lower.get("margin_sigma_m", MARGIN_SIGMA_M), frames)
     prior = lower.get("prior")
     pri = prior.residuals(C) if prior is not None else np.zeros((len(C), 0))
-    bad = np.sum(~plausible_boards(obs, C), axis=1).astype(float)
+    bad = (~plausible_boards(obs, C)).sum(axis=1).astype(float)
     return rng, edge, out, np.concatenate([chord, margin], axis=1), pri, bad
 
 
@@ -275,7 +271,7 @@ def lidarcam(obs: Observations, candidates: np.ndarray, *, range_sigma_m: float 
     rng, edge, out, low, pri, behind = _evidence(obs, candidates, range_sigma_m, edge_sigma_m, outline_sigma_m,
                                                  with_outline, **lower)
     terms = {"range": rng, "edge": edge, "outline": out, "lower_bound": low, "prior": pri}
-    terms = {k: 0.5 * np.sum(v**2, axis=1) for k, v in terms.items()}
+    terms = {k: 0.5 * (v**2).sum(axis=1) for k, v in terms.items()}
     with np.errstate(invalid="ignore"):
         pen = np.where(behind > 0, behind * behind_penalty, 0.0)
     cost = sum(terms.values()) + pen
@@ -305,80 +301,6 @@ def lidarcam_residuals(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigm
     rng, edge, out, low, pri, _ = _evidence(obs, C, range_sigma_m, edge_sigma_m, outline_sigma_m, **lower)
     res = np.concatenate([rng, edge, out, low, pri], axis=1)
     return res[0] if T.ndim == 2 else res
-
-
-def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float = DEFAULT_RANGE_SIGMA_M,
-                        edge_sigma_m: float = EDGE_SIGMA_M, outline_sigma_m: float = OUTLINE_SIGMA_M,
-                        behind_penalty: float = np.inf, chord_sigma_m: float = CHORD_SIGMA_M,
-                        chord_cap: float = CHORD_CAP, margin_sigma_m: float = MARGIN_SIGMA_M,
-                        prior: MountingPrior | None = None, jacobian: bool | str = True) -> tuple:
-    """``lidarcam_residuals`` (n,) at one (4,4) ``T_lidar_cam`` and their analytic Jacobian (n,6) with respect to
-    ``x = (w, dt)``, the left perturbation of ``calib_core.data.residuals`` (radians, metres): range rows from
-    ``range_residuals``; endpoint, outline, chord and margin rows by the chain rule through the board-frame
-    coordinates of the scan points (``board_frame_rows``), each endpoint's edge pairing and each point's nearest
-    outline edge held fixed (both are piecewise constant); the prior's rows from ``MountingPrior.jacobian``.
-    ``behind_penalty`` is not a residual; it is accepted for the scorer's keywords. ``jacobian="later"``: the
-    Jacobian as a function of no arguments, the same numbers computed only when asked (a rejected step of the
-    polish needs none)."""
-    T = np.asarray(T_lidar_cam, float)
-    data = obs.scan_data
-    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
-    ends = obs.derived("scorers.linearised_rows", _linearised_rows)[0]
-    rng, J_rng = range_residuals(T, data, jacobian="later")
-    frames = board_frames(obs, T[None])                     # every board-frame map below, computed once
-    P = scan_points_in_boards(obs, T[None], frames=frames)  # every scan point in its board's frame, once
-    edge, g_edge = point_line_errors(obs, T[None], gradient="later", frames=frames, ends=P[:, ends])
-    out, g_out = outside_outlines(obs, T[None], gradient="later", frames=frames, points=P[..., :2])
-    every = len(exact) == obs.n_boards                      # every outline exact: no rows to leave out
-    edge, out = (edge[0], out[0]) if every else (edge[0][exact], out[0][on_exact])
-    rc = chord_residuals(obs, T[None], chord_sigma_m, chord_cap, frames)[0]
-    rm = margin_residuals(obs, T[None], margin_sigma_m, frames)[0]
-    rp = prior.residuals(T) if prior is not None else np.zeros(0)
-    res = np.concatenate([rng / range_sigma_m, edge.ravel() / edge_sigma_m, out / outline_sigma_m, rc, rm, rp])
-    lower = (chord_sigma_m, chord_cap, margin_sigma_m)
-    J = functools.partial(_linearised_jacobian, obs, T, frames, J_rng, g_edge, g_out, lower, prior,
-                          (range_sigma_m, edge_sigma_m, outline_sigma_m))
-    return res, (J if jacobian == "later" else J())
-
-
-def _linearised_jacobian(obs: Observations, T: np.ndarray, frames: tuple, J_rng, g_edge, g_out, lower: tuple,
-                         prior: MountingPrior | None, sigmas: tuple) -> np.ndarray:
-    """``lidarcam_linearised``'s Jacobian (n,6) at ``T`` from its board frames, the range rows' and the board-frame
-    gradients' functions (``range_residuals``, ``point_line_errors``, ``outside_outlines``), the lower-bound scales
-    (chord sigma, cap, margin sigma, metres), the prior and the range, endpoint and outline sigmas (metres)."""
-    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
-    rows = obs.derived("scorers.linearised_rows", _linearised_rows)[1]
-    n_edge = 2 * len(exact)
-    g_edge, g_out = g_edge(), g_out()
-    if len(exact) == obs.n_boards:
-        g_edge, g_out = g_edge[0], g_out[0]
-    else:
-        g_edge, g_out = g_edge[0][exact], g_out[0][on_exact]
-    # the endpoint and outline rows at once: the outline's gradient has no board-frame z part
-    g = np.zeros((len(rows), 3))
-    g[:n_edge] = g_edge.reshape(-1, 3)
-    g[n_edge:, :2] = g_out
-    J_ends_out = board_frame_rows(obs, T, *obs.derived("scorers.linearised_points", _linearised_points), g, frames)
-    _, Jc, _, Jm = lower_bound_rows(obs, T, frames, *lower)
-    Jp = prior.jacobian(T) if prior is not None else np.zeros((0, 6))
-    range_sigma_m, edge_sigma_m, outline_sigma_m = sigmas
-    return np.concatenate([J_rng() / range_sigma_m, J_ends_out[:n_edge] / edge_sigma_m,
-                           J_ends_out[n_edge:] / outline_sigma_m, Jc, Jm, Jp], axis=0)
-
-
-def _linearised_points(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
-    """The lidar-frame points (K',3) and boards (K',) of the endpoint and outline rows (``_linearised_rows``)."""
-    rows = obs.derived("scorers.linearised_rows", _linearised_rows)[1]
-    return obs.scan_data.points[rows], obs.scan_data.board[rows]
-
-
-def _linearised_rows(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
-    """(N,2) the rows of ``obs.scan_data`` of every board's first and last scan point (its endpoints), and the rows
-    of the endpoints of the exact-outline boards followed by those of their scan points (``lidarcam_linearised``)."""
-    stops = np.cumsum([len(b.scan) for b in obs.boards])
-    ends = np.stack([stops - [len(b.scan) for b in obs.boards], stops - 1], axis=1)
-    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
-    return ends, np.concatenate([ends[exact].ravel(), np.flatnonzero(on_exact)])
 
 
 PENG2022_OPTIONS = ("delta_m", "normalise_candidates", "beta_norm", "beta_eps", "error", "weighting")
