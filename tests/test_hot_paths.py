@@ -2,8 +2,7 @@
 gradient) as a function to call later (``jacobian="later"``) give the same numbers, bit for bit, as when asked at
 once, and ``least_squares_many`` given such functions answers as with the Jacobians given at once, computing fewer
 of them. The polish's batched linearisation (every start of a round in one call) gives each row as the call on its
-extrinsic alone, bit for bit, and so a polish of many starts answers as each start polished alone;
-``rotvec_to_matrix``'s path for a few rotations gives scipy's numbers."""
+extrinsic alone, bit for bit, and so a polish of many starts answers as each start polished alone."""
 
 from __future__ import annotations
 
@@ -18,7 +17,7 @@ from calib_core.data.residuals import (
     range_residuals,
 )
 from calib_core.geometry.mounting import MountingPrior
-from calib_core.geometry.transforms import rotvec_to_matrix, skew, so3_left_jacobian
+from calib_core.geometry.transforms import skew, so3_left_jacobian
 from calib_core.refine.trust_region import jacobian, least_squares_many
 from calib_core.robust.choose import polish_many
 from calib_core.robust.linearised import lidarcam_linearised, lidarcam_linearised_many
@@ -161,16 +160,3 @@ def test_polish_of_many_starts_answers_as_each_start_alone(scene, rng):
     together = polish_many(obs, T0, 40, ScoreOptions(), 0.02)
     for T, alone in zip(T0, together, strict=True):
         assert np.array_equal(_bits(polish_many(obs, T[None], 40, ScoreOptions(), 0.02)[0]), _bits(alone))
-
-
-def test_rotvec_to_matrix_equals_scipy_bitwise(rng):
-    """A few rotation vectors converted in Python floats give scipy's matrices bit for bit: tiny angles, the
-    series' threshold (1e-3 rad) and beyond, one vector or a batch; more than ``FEW_ROTATIONS`` go to scipy."""
-    from scipy.spatial.transform import Rotation
-
-    W = np.concatenate([rng.normal(0, 1, (300, 3)) * 10.0 ** rng.uniform(-9, 1, (300, 1)),
-                        rng.normal(0, 1, (50, 3)) * (1e-3 / np.sqrt(3)), np.zeros((2, 3)), [[1e-3, 0, 0]]])
-    for w in W:
-        assert np.array_equal(_bits(rotvec_to_matrix(w)), _bits(Rotation.from_rotvec(w).as_matrix()))
-    for k in (1, 3, 4):
-        assert np.array_equal(_bits(rotvec_to_matrix(W[:k])), _bits(Rotation.from_rotvec(W[:k]).as_matrix()))

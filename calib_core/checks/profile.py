@@ -30,65 +30,92 @@ PROFILE_GN_STEPS = 8
 a few steps converge; the profile is then an upper bound only by their residual error)."""
 PROFILE_DOUBLINGS = 12
 """``profile_sigma`` steps out from ``span`` / 2^12 (scaled units) by doublings ..."""
-PROFILE_BISECTIONS = 10
-"""... then bisects the step where the profile first reaches its 1-sigma this many times (to 2^-10 of it)."""
+PROFILE_GRID, PROFILE_GRID_ROUNDS = 4, 5
+"""... then finds the first crossing inside the bracket on a grid of ``PROFILE_GRID`` intervals, ``PROFILE_GRID_ROUNDS``
+times (to 1/1024 of the bracket, as ten bisections would), every point of a grid re-fitted at once."""
 
 
 def move(T: np.ndarray, x: np.ndarray, scale_m: float) -> np.ndarray:
-    """``T_lidar_cam`` moved by ``x`` (6,) in the scaled lidar-origin axes: ``[exp(w) | dt L] T``."""
-    M = np.eye(4)
-    M[:3, :3] = rotvec_to_matrix(x[:3])
-    M[:3, 3] = x[3:] * scale_m
+    """``T_lidar_cam`` (4,4), or a batch (M,4,4), moved by ``x`` (6,) or (M,6) in the scaled lidar-origin axes:
+    ``[exp(w) | dt L] T``."""
+    x = np.asarray(x, float)
+    M = np.broadcast_to(np.eye(4), x.shape[:-1] + (4, 4)).copy()
+    M[..., :3, :3] = rotvec_to_matrix(x[..., :3])
+    M[..., :3, 3] = x[..., 3:] * scale_m
     return M @ np.asarray(T, float)
 
 
 def _origin_jacobian(J: np.ndarray, T: np.ndarray, scale_m: float) -> np.ndarray:
-    """The residual Jacobian of ``data.residuals`` in the scaled lidar-origin axes (``degeneracy.origin_jacobian``
-    with translations scaled)."""
-    t = np.asarray(T, float)[:3, 3]
-    return np.concatenate([J[:, :3] - J[:, 3:] @ skew(t), J[:, 3:] * scale_m], axis=1)
+    """The residual Jacobian (K,6) of ``data.residuals``, or a batch (M,K,6) at extrinsics (M,4,4), in the scaled
+    lidar-origin axes (``degeneracy.origin_jacobian`` with translations scaled)."""
+    t = np.asarray(T, float)[..., :3, 3]
+    return np.concatenate([J[..., :3] - J[..., 3:] @ skew(t), J[..., 3:] * scale_m], axis=-1)
+
+
+def _along(data: ScanData, T: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What every point of one profile shares: the unit direction ``v``, a basis (6,5) of its orthogonal
+    complement, and the residuals at ``T``."""
+    v = np.asarray(v, float) / np.linalg.norm(v)
+    B = np.linalg.svd(np.eye(6) - np.outer(v, v))[0][:, :5]               # the orthogonal complement of v
+    return v, B, range_residuals(np.asarray(T, float), data)
+
+
+def profile_rises(data: ScanData, T: np.ndarray, v: np.ndarray, deltas: np.ndarray, scale_m: float,
+                  sigma_m: float, along: tuple | None = None) -> np.ndarray:
+    """(M,) the range model's negative log-likelihood at ``T`` moved by each of ``deltas`` (M,) along the unit
+    direction ``v`` (scaled axes), minimised over the five directions orthogonal to ``v`` (``PROFILE_GN_STEPS``
+    Gauss-Newton steps from there, all points at once, each stopping where its step no longer lowers its cost),
+    less its value at ``T``: ``(|e|^2 - |e_0|^2) / (2 sigma^2)``. At an optimum it is >= 0 up to the re-fit's
+    error. ``along``: ``_along(data, T, v)`` when the caller has it (one profile's points share it)."""
+    v, B, e0 = _along(data, T, v) if along is None else along
+    Tk = move(T, np.asarray(deltas, float)[:, None] * v, scale_m)
+    e, J = range_residuals(Tk, data, jacobian=True)
+    live = np.ones(len(Tk), bool)
+    for _ in range(PROFILE_GN_STEPS):
+        A = _origin_jacobian(J[live], Tk[live], scale_m) @ B                    # (m,K,5)
+        step = np.einsum("mjk,mk->mj", np.linalg.pinv(A), -e[live])           # least squares, as lstsq
+        T_next = move(Tk[live], step @ B.T, scale_m)
+        e_next, J_next = range_residuals(T_next, data, jacobian=True)
+        better = np.einsum("mk,mk->m", e_next, e_next) < np.einsum("mk,mk->m", e[live], e[live])
+        idx = np.flatnonzero(live)[better]
+        Tk[idx], e[idx], J[idx] = T_next[better], e_next[better], J_next[better]
+        live[np.flatnonzero(live)[~better]] = False
+        if not live.any():
+            break
+    return (np.einsum("mk,mk->m", e, e) - e0 @ e0) / (2.0 * sigma_m**2)
 
 
 def profile_rise(data: ScanData, T: np.ndarray, v: np.ndarray, delta: float, scale_m: float,
                  sigma_m: float) -> float:
-    """The range model's negative log-likelihood at ``T`` moved ``delta`` along the unit direction ``v`` (scaled
-    axes), minimised over the five directions orthogonal to ``v`` (``PROFILE_GN_STEPS`` Gauss-Newton steps from
-    there), less its value at ``T``: ``(|e|^2 - |e_0|^2) / (2 sigma^2)``. At an optimum it is >= 0 up to the
-    re-fit's error."""
-    v = np.asarray(v, float) / np.linalg.norm(v)
-    B = np.linalg.svd(np.eye(6) - np.outer(v, v))[0][:, :5]               # the orthogonal complement of v
-    e0 = range_residuals(np.asarray(T, float), data)
-    Tk = move(T, delta * v, scale_m)
-    e = range_residuals(Tk, data)
-    for _ in range(PROFILE_GN_STEPS):
-        e, J = range_residuals(Tk, data, jacobian=True)
-        step = np.linalg.lstsq(_origin_jacobian(J, Tk, scale_m) @ B, -e, rcond=None)[0]
-        T_next = move(Tk, B @ step, scale_m)
-        e_next = range_residuals(T_next, data)
-        if e_next @ e_next >= e @ e:
-            break
-        Tk, e = T_next, e_next
-    return float((e @ e - e0 @ e0) / (2.0 * sigma_m**2))
+    """``profile_rises`` at one ``delta``."""
+    return float(profile_rises(data, T, v, np.array([delta]), scale_m, sigma_m)[0])
+
+
+def _first_rise(data, T, v, deltas, scale_m, sigma_m, along) -> int | None:
+    """Index of the first of ``deltas`` whose profile reaches ``PROFILE_ONE_SIGMA``; None when none does."""
+    hit = np.flatnonzero(profile_rises(data, T, v, deltas, scale_m, sigma_m, along) >= PROFILE_ONE_SIGMA)
+    return int(hit[0]) if len(hit) else None
 
 
 def profile_sigma(data: ScanData, T: np.ndarray, v: np.ndarray, span: float, scale_m: float,
                   sigma_m: float) -> float:
     """The profile 1-sigma along ``v`` (scaled units): on each side the nearest ``delta`` at which the profile
-    (``profile_rise``) reaches ``PROFILE_ONE_SIGMA``, stepping out from ``span`` / 2^``PROFILE_DOUBLINGS`` by
-    doublings and then bisecting (the nearest crossing: far out, the five re-fitted directions can find other
-    poses); the larger of the two sides, or ``inf`` when a side does not reach it within ``span``."""
+    (``profile_rises``) reaches ``PROFILE_ONE_SIGMA``, stepping out from ``span`` / 2^``PROFILE_DOUBLINGS`` by
+    doublings and then on two grids inside the bracket (``PROFILE_GRID``; the nearest crossing: far out, the five
+    re-fitted directions can find other poses); the larger of the two sides, or ``inf`` when a side does not reach
+    it within ``span``. Each stage's points are re-fitted at once."""
     out = 0.0
+    along = _along(data, T, v)
     for sign in (1.0, -1.0):
-        def rises(delta, sign=sign):
-            return profile_rise(data, T, v, sign * delta, scale_m, sigma_m) >= PROFILE_ONE_SIGMA
-
         steps = span * 0.5 ** np.arange(PROFILE_DOUBLINGS, -1, -1)
-        first = next((k for k, d in enumerate(steps) if rises(d)), None)
+        first = _first_rise(data, T, v, sign * steps, scale_m, sigma_m, along)
         if first is None:
             return float("inf")
         lo, hi = (0.0 if first == 0 else steps[first - 1]), steps[first]
-        for _ in range(PROFILE_BISECTIONS):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (lo, mid) if rises(mid) else (mid, hi)
+        for _ in range(PROFILE_GRID_ROUNDS):
+            grid = lo + (hi - lo) * np.arange(1, PROFILE_GRID + 1) / PROFILE_GRID      # hi itself rises
+            k = _first_rise(data, T, v, sign * grid, scale_m, sigma_m, along)
+            k = PROFILE_GRID - 1 if k is None else k                                      # hi, as before
+            lo, hi = (lo if k == 0 else grid[k - 1]), grid[k]
         out = max(out, hi)
     return float(out)

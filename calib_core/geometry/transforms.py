@@ -64,36 +64,10 @@ def project_to_so3(M: np.ndarray) -> np.ndarray:
     return (U * D[..., None, :]) @ Vt
 
 
-FEW_ROTATIONS = 4
-"""``rotvec_to_matrix`` converts up to this many rotation vectors one by one in Python floats (the hot paths' one or
-few steps), more through scipy; both give the same numbers."""
-
-
 def rotvec_to_matrix(w: np.ndarray) -> np.ndarray:
-    """Rotation matrices (...,3,3) from rotation vectors (...,3) in radians (scipy's ``Rotation.from_rotvec(w)
-    .as_matrix()``, bit for bit)."""
+    """Rotation matrices (...,3,3) from rotation vectors (...,3) in radians (scipy)."""
     w = np.asarray(w, dtype=float)
-    if w.size <= 3 * FEW_ROTATIONS:
-        return np.array([_rotvec_matrix(*v) for v in w.reshape(-1, 3).tolist()]).reshape(w.shape[:-1] + (3, 3))
     return Rotation.from_rotvec(w.reshape(-1, 3)).as_matrix().reshape(w.shape[:-1] + (3, 3))
-
-
-def _rotvec_matrix(x: float, y: float, z: float) -> tuple:
-    """The rotation matrix (rows) of one rotation vector (radians) by scipy's arithmetic, operation for operation:
-    the unit quaternion ``(sin(a/2) w / a, cos(a/2))`` (a Taylor series of ``sin(a/2) / a`` for ``a <= 1e-3``), then
-    its matrix; without scipy's per-call overhead on the hot paths' single steps."""
-    angle = math.sqrt(x * x + y * y + z * z)
-    if angle <= 1e-3:
-        a2 = angle * angle
-        scale = 0.5 - a2 / 48 + a2 * a2 / 3840
-    else:
-        scale = math.sin(angle / 2) / angle
-    qx, qy, qz, qw = scale * x, scale * y, scale * z, math.cos(angle / 2)
-    x2, y2, z2, w2 = qx * qx, qy * qy, qz * qz, qw * qw
-    xy, zw, xz, yw, yz, xw = qx * qy, qz * qw, qx * qz, qy * qw, qy * qz, qx * qw
-    return ((x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw)),
-            (2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw)),
-            (2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2))
 
 
 def matrix_to_rotvec(R: np.ndarray) -> np.ndarray:
