@@ -99,10 +99,14 @@ def effective_sigma(obs: Observations, range_sigma_m: float | None = None) -> fl
     return float(np.hypot(0.0 if not np.isfinite(s) else s, POSE_FLOOR_M))
 
 
+def measured_mask(obs: Observations) -> np.ndarray:
+    """(K,) bool over ``obs.scan_data``: the points away from the lidar origin (``MIN_RANGE_M``)."""
+    return np.linalg.norm(obs.scan_data.points, axis=1) > MIN_RANGE_M
+
+
 def measured_points(obs: Observations) -> ScanData:
-    """The scan data without points at the lidar origin (``MIN_RANGE_M``)."""
-    data = obs.scan_data
-    keep = np.linalg.norm(data.points, axis=1) > MIN_RANGE_M
+    """The scan data without points at the lidar origin (``measured_mask``)."""
+    data, keep = obs.scan_data, measured_mask(obs)
     return data if keep.all() else ScanData(data.points[keep], data.board[keep], data.normals, data.offsets)
 
 
@@ -118,9 +122,8 @@ def board_depths(obs: Observations) -> np.ndarray:
 def board_tests(obs: Observations, T: np.ndarray, sigma: float) -> list[dict]:
     """Per board, the statistics of the tests of ``T`` (see the module docstring); ``bad`` lists failed tests."""
     T = np.asarray(T, float)
-    keep = np.linalg.norm(obs.scan_data.points, axis=1) > MIN_RANGE_M
     data = measured_points(obs)
-    r, moved = pose_explained(obs, T, range_residuals(T, data), keep, sigma)
+    r, moved = pose_explained(obs, T, range_residuals(T, data), measured_mask(obs), sigma)
     z = r / sigma
     q = np.minimum(z**2, CLIP_Z**2)
     N = obs.n_boards

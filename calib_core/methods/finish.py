@@ -34,9 +34,14 @@ def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray
     deg = undetermined_directions(obs, T, range_sigma_m, max_scaled_sigma=options.max_scaled_sigma,
                                   null_conditioning=options.null_conditioning)
     if refuse and not deg.determined:
-        raise SolveFailure(f"{who}: {deg.message()}", candidates,
-                           {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
+        raise undetermined_failure(obs, deg, candidates, who)
     return deg
+
+
+def undetermined_failure(obs: Observations, deg: Degeneracy, candidates: np.ndarray, who: str) -> SolveFailure:
+    """The refusal naming the directions ``deg`` finds free, with the analysis and the board-set warnings."""
+    return SolveFailure(f"{who}: {deg.message()}", candidates,
+                        {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
 
 
 def fold_covariance(obs: Observations, T: np.ndarray, deg: Degeneracy) -> np.ndarray:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..checks.degeneracy import Degeneracy, board_set_warnings, degeneracy_warnings, explain_failure
+from ..checks.degeneracy import Degeneracy, degeneracy_warnings, explain_failure
 from ..data.observations import Observations
 from ..errors import CalibrationError, SolveFailure
 from ..geometry.mounting import params_from_T, with_units
@@ -36,6 +36,7 @@ from .finish import (
     range_covariance,
     refuse_undetermined,
     try_joint,
+    undetermined_failure,
     widened_range_covariance,
     with_prior,
 )
@@ -202,8 +203,7 @@ def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy):
     false) cannot be held one by one: refused as without a prior. (T_lidar_cam, candidates, info)."""
     best, tests, C, prior = found.best, found.tests, found.search.all_candidates, opts.score.prior
     if not deg.aligned:
-        raise SolveFailure(f"lidarcam: {deg.message()}", np.concatenate([best.T[None], C]),
-                           {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(tests.obs_used)})
+        raise undetermined_failure(tests.obs_used, deg, np.concatenate([best.T[None], C]), "lidarcam")
     fixed, sigma = prior_fixed(prior, deg)
     r = opts.refine
     T, _, info = fixed_calibration(tests.obs_used, fixed, lambda: best.T, loss=r.loss, f_scale_m=r.f_scale_m,
