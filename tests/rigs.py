@@ -12,6 +12,11 @@ from simulate.camera import BoardSpec
 from simulate.lidar import beam_bearings, cast_scan
 from simulate.scene import sample_extrinsic
 
+RIG_LIKE = dict(pose_mode="pixel", pixel_noise_px=0.5, noise_mm=20.0, dist_min_m=1.0, dist_max_m=4.0,
+                board_margin_min_m=0.01, board_margin_max_m=0.05, focal_error_rel=0.003,
+                principal_point_error_px=2.0, distortion_error=0.002, std_intrinsics_known=True)
+"""The rig-like preset's values (conf/preset/rig-like.yaml)."""
+
 VERTICAL_OPTIONS = SimOptions(n_boards=5, board_size_m=0.8, checker_square_m=0.1, dist_min_m=1.0, dist_max_m=3.0,
                               noise_mm=5.0, lidar_res_deg=0.5)
 

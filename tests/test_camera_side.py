@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from rigs import RIG_LIKE as RIG
 from scipy.optimize import least_squares
 
 from calib_core.checks.verdict import check, effective_sigma, measured_points
@@ -18,11 +19,6 @@ from calib_core.refine.camera_side import board_pose_covariances, corner_noise_p
 from calib_core.refine.joint_intrinsics import IntrinsicsPrior
 from calib_core.refine.joint_residuals import board_poses, corner_residuals, joint_range_residuals
 from simulate import SimOptions, generate
-
-RIG = dict(pose_mode="pixel", pixel_noise_px=0.5, noise_mm=20.0, dist_min_m=1.0, dist_max_m=4.0,
-           board_margin_min_m=0.01, board_margin_max_m=0.05, focal_error_rel=0.003, principal_point_error_px=2.0,
-           distortion_error=0.002, std_intrinsics_known=True)
-"""The rig-like preset's values (conf/preset/rig-like.yaml)."""
 
 
 def rig(n_boards, trial, seed=11):

@@ -15,14 +15,18 @@ from ..geometry.transforms import invert_T
 RESULT_SCHEMA = "lidarcam.result/1"
 
 JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior",
-             "intrinsics", "board_dispersion")
+             "intrinsics", "board_dispersion", "covariance_bend")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
 answers a refused tie could not decide between (``alternatives``: each ``{"T_lidar_cam": 4x4, "cost": the negative
 log-likelihood, "mounting": its parameters}``, best first), the mounting prior given (``prior``), how the joint
 model treated the camera's intrinsics (``calib_core.refine.joint_intrinsics``), and the boards' dispersion test
-(``board_dispersion``, ``calib_core.refine.dispersion``: whether the covariance was widened to the boards' spread)."""
+(``board_dispersion``, ``calib_core.refine.dispersion``: whether the covariance was widened to the boards' spread), and
+the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.refine.bend``)."""
+BEND_REPORTED = 0.5
+"""The summary names the covariance's bend (``covariance_bend``) when a re-fit departed from the Gaussian by this
+many sigmas or more."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -179,6 +183,10 @@ class CalibrationResult:
                 out.append(f"boards' dispersion: {d['statistic']:.1f} on {d['dof']} degrees of freedom (p "
                            f"{d['p_value']:.1e}): " + ("the covariance is widened to the boards' spread"
                                                         if d["widened"] else "the boards agree with the noise model"))
+            if (b := self.info.get("covariance_bend")) is not None and b["departure_sigmas"] >= BEND_REPORTED:
+                out.append(f"the likelihood bends along its weakest direction ({b['departure_sigmas']:.1f} sigma off "
+                           f"the Gaussian 1.7 sigmas along it): the 1-sigma holds it (Gaussian alone: rotation "
+                           f"{b['sigma_rot_deg_laplace']:.3f} deg, translation {b['sigma_trans_mm_laplace']:.1f} mm)")
         if "mounting" in self.info:
             out.append("mounting (camera pose in the lidar frame; degrees and metres):")
             held = self.info.get("fixed", {})

@@ -81,7 +81,7 @@ def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, 
     try:
         return joint_step(obs, T, corner_sigma_px=options.corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
                           f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter, widen=options.widen,
-                          names=names, outline=options.outline, mounting=mounting), None
+                          names=names, outline=options.outline, mounting=mounting, bend=options.bend), None
     except (JointError, UncertaintyError) as err:
         return None, f"joint refinement failed ({err})"
 

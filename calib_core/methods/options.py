@@ -83,7 +83,7 @@ FLAT_KEYWORDS: dict[str, tuple[str | None, str]] = {
     "null_conditioning": ("degeneracy", "null_conditioning"), "max_scaled_sigma": ("degeneracy", "max_scaled_sigma"),
     "use_corners": ("joint", "use_corners"), "corner_sigma_px": ("joint", "corner_sigma_px"),
     "joint_f_scale_sigmas": ("joint", "f_scale_sigmas"), "joint_max_iter": ("joint", "max_iter"),
-    "widen": ("joint", "widen"), "joint_outline": ("joint", "outline"),
+    "widen": ("joint", "widen"), "joint_outline": ("joint", "outline"), "bend": ("joint", "bend"),
 }
 """Flat keywords of ``calibrate(obs, "lidarcam", ...)`` and the (part, field) each sets (part None: the top)."""
 RENAMED = {"f_scale": "f_scale_m (metres) or f_scale_sigmas (range-noise stds)",

@@ -30,6 +30,7 @@ from ..errors import JointError, ObservationError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.mounting import MountingPrior
 from ..geometry.transforms import rotvec_to_matrix
+from .bend import HeldDirection
 from .joint_intrinsics import IntrinsicsPrior, augmented_blocks
 from .joint_mounting import mounting_cost, with_mounting
 from .joint_outline import has_outline_rows, outline_cost, with_outline
@@ -69,7 +70,8 @@ class JointOptions:
     """A method's joint step: ``use_corners`` (when every board carries them), ``corner_sigma_px`` (default
     estimated), the robust loss's scale ``f_scale_sigmas`` in noise stds, at most ``max_iter`` iterations; ``widen``:
     the covariance widened where the boards disagree beyond the model (``refine.dispersion``); ``outline``: the
-    lower-bound outlines' terms in the cost (``refine.joint_outline``)."""
+    lower-bound outlines' terms in the cost (``refine.joint_outline``); ``bend``: the covariance takes the
+    likelihood's bend along its weakest direction (``refine.bend``)."""
 
     use_corners: bool = True
     corner_sigma_px: float | None = None
@@ -77,6 +79,7 @@ class JointOptions:
     max_iter: int = MAX_ITER
     widen: bool = True
     outline: bool = False
+    bend: bool = True
 
 
 def _weighted(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sc: float, sr: float, jacobian: bool,
@@ -153,17 +156,17 @@ def _blocks(obs, offsets, weighted, w, prior, k):
 
 
 def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL, prior=None, k=None, outline=False,
-           mounting=None):
+           mounting=None, hold=None):
     """Levenberg-Marquardt on the joint cost, each step by the Schur complement (linear in the boards); robust
-    losses by iteratively reweighted least squares (the intrinsics prior's and the mounting prior's rows are
-    Gaussian, never reweighted). Returns (T_e, T_b, cost, iterations, converged, k) (``k`` the free intrinsics;
-    None without an intrinsics prior)."""
+    losses by iteratively reweighted least squares (the intrinsics prior's, the mounting prior's and a held
+    direction's rows are Gaussian, never reweighted). Returns (T_e, T_b, cost, iterations, converged, k) (``k``
+    the free intrinsics; None without an intrinsics prior)."""
     drho = _DRHO[loss]
     offsets = _row_offsets(obs)
 
     def cost_of(Te, Tb, kk):
         c = robust_cost(_weighted(obs, Te, Tb, sc, sr, False, prior, kk), loss, f_scale_sigmas)
-        c += (outline_cost(obs, Te, Tb) if outline else 0.0) + mounting_cost(mounting, Te)
+        c += (outline_cost(obs, Te, Tb) if outline else 0.0) + mounting_cost(mounting, Te) + mounting_cost(hold, Te)
         return c if prior is None else c + 0.5 * float(np.sum(prior.residuals(kk) ** 2))
 
     cost, lam, it = cost_of(T_e, T_b, k), INITIAL_LAMBDA, 0
@@ -173,6 +176,7 @@ def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL,
         blocks = _blocks(obs, offsets, lin, w, prior, k)
         blocks = with_outline(blocks, obs, T_e, T_b) if outline else blocks
         blocks = with_mounting(blocks, mounting, T_e) if mounting is not None else blocks
+        blocks = with_mounting(blocks, hold, T_e) if hold is not None else blocks
         while True:
             de, db = _schur_step(*blocks, lam)
             Te, Tb = _apply(T_e, T_b, de, db)
@@ -203,7 +207,8 @@ class JointResult:
         stds used (given or estimated); corner_rms_px, range_rms_m: RMS of the final residuals; cost: final
         ``0.5 sum rho`` of the normalised residuals; iterations: of the last solve; converged: whether it met the
         tolerance within ``max_iter``; camera: the camera at the estimated intrinsics when they were unknowns
-        (``camera.std_intrinsics``), else None (taken as exact).
+        (``camera.std_intrinsics``), else None (taken as exact); intrinsics: those free intrinsics (the values
+        of ``refine.joint_intrinsics.IntrinsicsPrior``), else None.
     """
 
     T_lidar_cam: np.ndarray
@@ -217,6 +222,7 @@ class JointResult:
     iterations: int
     converged: bool
     camera: Camera | None = None
+    intrinsics: np.ndarray | None = None
 
 
 def estimate_sigmas(obs, T_e, T_b, n_params_boards: int, camera=None):
@@ -229,7 +235,9 @@ def estimate_sigmas(obs, T_e, T_b, n_params_boards: int, camera=None):
 def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                  range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                  max_iter: int = MAX_ITER, sigma_iters: int = 3, sigma_rtol: float = 0.05,
-                 intrinsics: bool = True, outline: bool = False, mounting: MountingPrior | None = None) -> JointResult:
+                 intrinsics: bool = True, outline: bool = False, mounting: MountingPrior | None = None,
+                 hold: HeldDirection | None = None, covariance: bool = True,
+                 start: JointResult | None = None, tol: float = COST_RTOL) -> JointResult:
     """Maximise the joint likelihood from the extrinsic ``T0`` and the observed board poses.
 
     Args:
@@ -243,19 +251,25 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         outline: the lower-bound outlines' chord and margin terms in the cost (``refine.joint_outline``).
         mounting: a mounting prior (``geometry.mounting.MountingPrior``) in the cost: the answer is the posterior's
             mode. The covariance is the data's alone (``methods.finish.with_prior`` adds the prior's information).
+        hold: one direction of the extrinsic held at a value (``refine.bend.HeldDirection``, a Gaussian row in the
+            cost like the mounting prior's): the re-fits of ``refine.bend``.
+        covariance: False skips the covariance (``JointResult.covariance`` is None).
+        start: an earlier answer whose board poses and intrinsics start the solve (with the extrinsic ``T0``).
+        tol: a solve has converged when a step lowers the cost by less than this fraction of it.
     Raises:
         JointError: no corners or camera; UncertaintyError: the joint information is singular.
     """
-    T_e, T_b = np.asarray(T0, float), board_poses(obs)
+    T_e, T_b = np.asarray(T0, float), board_poses(obs) if start is None else start.T_cam_board
     est_c, _ = estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards)
     # start weights from each sensor alone, floored so that neither sensor swamps the other before the solve
     sc = corner_sigma_px if corner_sigma_px is not None else max(est_c, START_CORNER_SIGMA_PX)
     sr = range_sigma_m if range_sigma_m is not None else max(range_sigma(obs), START_RANGE_SIGMA_M)
     prior = IntrinsicsPrior.of(obs.camera) if intrinsics else None
-    k = None if prior is None else prior.k0.copy()
+    k = None if prior is None else prior.k0.copy() if start is None or start.intrinsics is None else \
+        start.intrinsics.copy()
     for _ in range(max(1, sigma_iters)):
-        T_e, T_b, _, nit, converged, k = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter,
-                                                prior=prior, k=k, outline=outline, mounting=mounting)
+        T_e, T_b, _, nit, converged, k = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol,
+                                                prior=prior, k=k, outline=outline, mounting=mounting, hold=hold)
         cam = None if prior is None else prior.camera_at(k)
         new_c, new_r = estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards, cam)
         new_c = corner_sigma_px if corner_sigma_px is not None else new_c
@@ -264,16 +278,17 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         sc, sr = new_c, new_r
         if done:
             break
-    cov = intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k, outline)[:6, :6] \
+    cov = None if not covariance else \
+        intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k, outline)[:6, :6] \
         if prior is not None or (outline and has_outline_rows(obs)) else marginal_covariance(obs, T_e, T_b, sc, sr)
     ec = corner_residuals(obs, T_b, camera=cam)
     er = joint_range_residuals(obs, T_e, T_b)
     cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale_sigmas) + \
-        (outline_cost(obs, T_e, T_b) if outline else 0.0) + mounting_cost(mounting, T_e)
+        (outline_cost(obs, T_e, T_b) if outline else 0.0) + mounting_cost(mounting, T_e) + mounting_cost(hold, T_e)
     if prior is not None:
         cost += 0.5 * float(np.sum(prior.residuals(k) ** 2))
     return JointResult(T_e, T_b, cov, sc, sr, float(np.sqrt(np.mean(np.sum(ec**2, axis=1)))),
-                       float(np.sqrt(np.mean(er**2))), cost, nit, converged, cam)
+                       float(np.sqrt(np.mean(er**2))), cost, nit, converged, cam, k)
 
 
 def intrinsics_marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray,

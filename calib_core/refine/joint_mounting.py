@@ -1,6 +1,7 @@
 """The mounting prior (``geometry.mounting.MountingPrior``) in the joint model: its six Gaussian rows on the
 extrinsic ``(w, dt)`` (``data.residuals``' left perturbation, radians and metres), added to the Gauss-Newton blocks of
-``refine.joint`` and to its cost, so that the joint answer is the posterior's mode."""
+``refine.joint`` and to its cost, so that the joint answer is the posterior's mode. The same functions add any rows
+of that protocol (``residuals(T)``, ``jacobian(T)``): ``refine.bend``'s held direction."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """A method's final step when the boards carry image corners: the joint model (``refine.joint``) from the method's
-answer, its covariance through the boards' dispersion test (``refine.dispersion``), and what the result reports of
-both. Frames and units as in ``refine.joint``."""
+answer, its covariance corrected for the likelihood's bend (``refine.bend``) and through the boards' dispersion test
+(``refine.dispersion``), and what the result reports of them. Frames and units as in ``refine.joint``."""
 
 from __future__ import annotations
 
@@ -8,7 +8,10 @@ import numpy as np
 
 from ..data.lines import range_sigma
 from ..data.observations import Observations
+from ..data.residuals import perturb
+from ..errors import JointError, UncertaintyError
 from ..geometry.mounting import MountingPrior
+from .bend import HOLD_STD_FRACTION, REFIT_COST_RTOL, HeldDirection, bend_summary, bent_covariance, weakest_direction
 from .dispersion import widened_covariance
 from .joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL, MAX_ITER, board_scores, estimate_sigmas, joint_refine
 from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS
@@ -19,20 +22,27 @@ from .refine import F_SCALE_SIGMAS
 def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | None = None,
                range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                max_iter: int = MAX_ITER, widen: bool = True, names=None,
-               outline: bool = False, mounting: MountingPrior | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+               outline: bool = False, mounting: MountingPrior | None = None,
+               bend: bool = True) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
     (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
     ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
     ``info["intrinsics"]`` (``EXACT_INTRINSICS`` or ``ESTIMATED_INTRINSICS``) and the noise figures. With
     ``widen``, ``info["board_dispersion"]`` holds the boards' dispersion test (``refine.dispersion``; boards named by
     ``names``, default their index) and where it fails the covariance is widened to the boards' spread, with a
-    warning that says so.
+    warning that says so. With ``bend`` (and no mounting prior, whose rows cut the ridge to the prior's width) the
+    covariance first takes the likelihood's bend along its weakest direction (``refine.bend``: two re-fits),
+    reported in ``info["covariance_bend"]``.
 
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
                      f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline, mounting=mounting)
     exact, cov, warnings = j.camera is None, j.covariance, []
+    bent = {}
+    if bend and mounting is None:
+        cov, bent, why = bent_joint_covariance(obs, j, loss, f_scale_sigmas, max_iter, outline)
+        warnings += [why] if why else []
     widen = widen and obs.n_boards > 3  # three boards fit exactly; units: the noise each sensor shows alone
     if widen:
         sc = corner_sigma_px if corner_sigma_px is not None else \
@@ -44,9 +54,35 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
             "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
             "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m, "corner_rms_px": j.corner_rms_px,
             "range_rms_m": j.range_rms_m, "joint_cost": j.cost, "joint_iterations": j.iterations,
-            "joint_converged": j.converged, **({"board_dispersion": disp.to_dict(names)} if widen else {})}
+            "joint_converged": j.converged, **({"board_dispersion": disp.to_dict(names)} if widen else {}),
+            **({"covariance_bend": bent} if bent else {})}
     if not j.converged:
         warnings.insert(0, f"joint refinement stopped after {max_iter} iterations without converging")
     if warnings:
         info["warnings"] = warnings
     return j.T_lidar_cam, cov, info
+
+
+def bent_joint_covariance(obs: Observations, j, loss: str, f_scale_sigmas: float, max_iter: int,
+                          outline: bool) -> tuple[np.ndarray, dict, str | None]:
+    """The joint answer ``j``'s (``refine.joint.JointResult``) covariance with the bend of the likelihood along its
+    weakest direction (``refine.bend``; rotation scaled by the scan points' median range): each re-fit is the joint
+    model at ``j``'s noise stds with that direction held. Returns (covariance, ``bend_summary``, None), or ``j``'s
+    covariance, {} and a warning when a re-fit fails."""
+    length = float(np.median(np.linalg.norm(obs.scan_data.points, axis=1)))
+    v, s = weakest_direction(j.covariance, length)
+
+    def refit(u: float, x0: np.ndarray) -> np.ndarray:
+        hold = HeldDirection(j.T_lidar_cam, v, u, HOLD_STD_FRACTION * s)
+        r = joint_refine(obs, perturb(j.T_lidar_cam, x0), corner_sigma_px=j.corner_sigma_px,
+                         range_sigma_m=j.range_sigma_m, loss=loss, f_scale_sigmas=f_scale_sigmas, max_iter=max_iter,
+                         sigma_iters=1, intrinsics=j.camera is not None, outline=outline, hold=hold, covariance=False,
+                         start=j, tol=REFIT_COST_RTOL)
+        return hold.offset(r.T_lidar_cam)
+
+    try:
+        cov, dep = bent_covariance(j.covariance, v, refit)
+    except (JointError, UncertaintyError) as err:
+        return j.covariance, {}, f"the covariance's bend along its weakest direction was not computed ({err}): " \
+            "it is the Gaussian approximation at the answer"
+    return cov, bend_summary(j.covariance, cov, v, dep), None
