@@ -110,3 +110,18 @@ def test_bend_reaches_the_result_json_and_the_summary(tmp_path):
     res.save(tmp_path / "r.json")
     back = CalibrationResult.load(tmp_path / "r.json")
     assert back.info["covariance_bend"] == json.loads(json.dumps(b))
+
+
+def test_a_failed_refit_leaves_the_gaussian_with_a_warning(monkeypatch):
+    import calib_core.refine.joint_step as js
+
+    obs = generate(SimOptions(n_boards=3, **RIG_LIKE), seed=0, trial=2)
+    j = joint_refine(obs, obs.T_lidar_cam_true)
+
+    def broken(*args, **kwargs):
+        raise np.linalg.LinAlgError("singular")
+
+    monkeypatch.setattr(js, "joint_refine", broken)
+    cov, summary, why = bent_joint_covariance(obs, j, "linear", 3.0, 50, False)
+    assert summary == {} and cov is j.covariance
+    assert "not computed (singular)" in why

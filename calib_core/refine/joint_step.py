@@ -82,7 +82,10 @@ def bent_joint_covariance(obs: Observations, j, loss: str, f_scale_sigmas: float
 
     try:
         cov, dep = bent_covariance(j.covariance, v, refit)
-    except (JointError, UncertaintyError) as err:
-        return j.covariance, {}, f"the covariance's bend along its weakest direction was not computed ({err}): " \
+        why = None if np.all(np.isfinite(cov)) else "a re-fit gave no finite answer"
+    except (JointError, UncertaintyError, np.linalg.LinAlgError) as err:
+        why = str(err)
+    if why is not None:
+        return j.covariance, {}, f"the covariance's bend along its weakest direction was not computed ({why}): " \
             "it is the Gaussian approximation at the answer"
     return cov, bend_summary(j.covariance, cov, v, dep), None
