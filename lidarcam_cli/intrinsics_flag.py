@@ -55,4 +55,4 @@ def with_std_intrinsics(obs, text: str):
         camera = Camera(c.K, dist, c.width, c.height, std)
     except ObservationError as err:
         raise CalibrationError(f"--std-intrinsics: {err}") from None
-    return Observations(obs.boards, obs.T_lidar_cam_true, obs.meta, camera)
+    return Observations(obs.boards, obs.T_lidar_cam_true, obs.meta, camera, obs.board_range_sigma_m)

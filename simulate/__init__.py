@@ -28,6 +28,7 @@ from .options import SimOptions, contamination_hash, contamination_on, settings_
 from .outliers import contaminate, contamination_rng
 from .rig import draw_margin, erroneous_camera, file_outline, margins_on, physical_outline, rig_rngs
 from .scene import Scene, SceneError, sample_scene
+from .surface import apply_systematic, board_range_sigma_m, surface_rng, systematic_on
 
 GENERATOR = "lidarcam.simulate/1"
 
@@ -103,6 +104,11 @@ def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0, stream: i
     else:
         scans = [cast_scan(bearings, T[None], scene.outline, o.lidar_max_range_m, sigma, rng_lidar)[0]
                  for T in scene.T_lidar_board]
+    if systematic_on(o):
+        seen = ([scene.outline] * len(scans) if scene.margins_m is None
+                else [physical_outline(o, m) for m in scene.margins_m])
+        scans, drawn = apply_systematic(o, scans, scene.T_lidar_board, seen, surface_rng(o, seed, trial, stream))
+        scene = replace(scene, systematic=drawn)
     return scene, scans, cam_poses, corners
 
 
@@ -144,6 +150,8 @@ def generate(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | N
             "settings_hash": settings_hash(options)}
     if scene.margins_m is not None:
         meta["board_margin_m"] = scene.margins_m.tolist()
+    if scene.systematic is not None:
+        meta.update(scene.systematic)
     if o.intrinsics_error_on:
         meta["K_true"] = camera_matrix(o.focal_px, o.cam_width, o.cam_height).tolist()
     if stream is not None:
@@ -152,7 +160,7 @@ def generate(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | N
         meta["wrong_boards"] = wrong
     if options.pose_mode != "exact":
         meta["T_cam_board_true"] = scene.T_cam_board.tolist()
-    return Observations(boards, scene.T_lidar_cam, meta, camera)
+    return Observations(boards, scene.T_lidar_cam, meta, camera, board_range_sigma_m(o))
 
 
 def observe_poses(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board: np.ndarray, seed: int = 0,
@@ -172,12 +180,14 @@ def observe_poses(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board: n
     bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
     T_cam = invert_T(np.asarray(T_lidar_cam, float))
     P = checkerboard_corners(o)
-    boards, margins = [], []
-    for T in np.asarray(T_lidar_board, float).reshape(-1, 4, 4):
+    boards, margins, seen_outlines = [], [], []
+    T_lidar_board = np.asarray(T_lidar_board, float).reshape(-1, 4, 4)
+    for T in T_lidar_board:
         m = draw_margin(o, rng_margin) if margins_on(o) else None
         outline, kind = (spec.outline(), "exact") if m is None else file_outline(o, m)
         seen = spec.outline() if m is None else physical_outline(o, m)
         scan = cast_scan(bearings, T[None], seen, o.lidar_max_range_m, o.noise_mm / 1000.0, rng_lidar)[0]
+        seen_outlines.append(seen)
         T_cb, uv = observe_board(K, T_cam @ T, spec, o.pose_mode, o.cam_width, o.cam_height, rng_cam,
                                  o.pixel_noise_px, o.image_noise_std, o.render_supersample)
         if o.intrinsics_error_on:
@@ -185,11 +195,16 @@ def observe_poses(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board: n
         boards.append(BoardObservation(T_cb, outline, scan, uv, None if uv is None else P, outline_kind=kind))
         margins.append(m)
     meta = {"generator": GENERATOR, "options": o.to_dict(), "seed": int(seed), "trial": int(trial)}
+    if systematic_on(o):
+        scans, drawn = apply_systematic(o, [b.scan for b in boards], T_lidar_board, seen_outlines,
+                                        surface_rng(o, seed, trial))
+        boards = [replace(b, scan=s) for b, s in zip(boards, scans, strict=True)]
+        meta.update(drawn)
     if margins_on(o):
         meta["board_margin_m"] = margins
     if o.pose_mode != "exact":
         meta["T_cam_board_true"] = (T_cam[None] @ np.asarray(T_lidar_board, float)).tolist()
-    return Observations(tuple(boards), np.asarray(T_lidar_cam, float), meta, camera)
+    return Observations(tuple(boards), np.asarray(T_lidar_cam, float), meta, camera, board_range_sigma_m(o))
 
 
 __all__ = [

@@ -65,6 +65,12 @@ class SimOptions:
     ``distortion_error > 0``, k1, k2, p1, p2 drawn from ``N(0, distortion_error)`` (the true camera has none); the
     file's camera is that erroneous one, every ``T_cam_board`` is the PnP pose with it, and with
     ``std_intrinsics_known`` the file states the drawing's 1-sigma as ``camera.std_intrinsics``.
+
+    Per-board systematic range error (all off by default; see ``simulate.surface``): a range offset shared by one
+    board's beams, drawn per board from N(0, ``lidar_board_offset_mm``); dark squares reading
+    ``lidar_dark_offset_mm`` farther than light ones (+-half each about the true surface); a bow of the board along
+    its normal, its centre's amplitude drawn per board from N(0, ``board_bow_mm``). The file states
+    ``board_range_sigma_m`` (the per-board offset's 1-sigma, metres; 0 when off).
     """
 
     n_boards: int = 6
@@ -108,6 +114,9 @@ class SimOptions:
     principal_point_error_px: float = 0.0
     distortion_error: float = 0.0
     std_intrinsics_known: bool = True
+    lidar_board_offset_mm: float = 0.0
+    lidar_dark_offset_mm: float = 0.0
+    board_bow_mm: float = 0.0
 
     def __post_init__(self) -> None:
         def need(cond: bool, msg: str) -> None:
@@ -174,6 +183,10 @@ class SimOptions:
         for name in ("focal_error_rel", "principal_point_error_px", "distortion_error"):
             need(getattr(self, name) >= 0, f"{name} must be >= 0, got {getattr(self, name)}")
         need(self.focal_error_rel < 0.1, f"focal_error_rel must be < 0.1, got {self.focal_error_rel}")
+        for name in ("lidar_board_offset_mm", "board_bow_mm"):
+            need(0 <= getattr(self, name) <= 1000, f"{name} must be in [0, 1000] mm, got {getattr(self, name)}")
+        need(abs(self.lidar_dark_offset_mm) <= 1000,
+             f"lidar_dark_offset_mm must be within +-1000 mm, got {self.lidar_dark_offset_mm}")
         need(self.pose_mode != "exact" or not self.intrinsics_error_on,
              "an intrinsics error needs pose_mode pixel or image (exact poses come from no camera)")
 
@@ -204,10 +217,11 @@ include them only when on (``hashed_settings``)."""
 
 
 RIG_DEFAULTS = {"board_margin_min_m": 0.0, "board_margin_max_m": 0.0, "outline_known": False, "focal_error_rel": 0.0,
-                "principal_point_error_px": 0.0, "distortion_error": 0.0, "std_intrinsics_known": True}
-"""The rig-condition options and their (off) defaults. At these defaults they are left out of ``settings_hash`` and
-``hashed_settings``, so settings that leave them off keep the random streams and result-folder keys they had
-before these options existed; when on they are part of both."""
+                "principal_point_error_px": 0.0, "distortion_error": 0.0, "std_intrinsics_known": True,
+                "lidar_board_offset_mm": 0.0, "lidar_dark_offset_mm": 0.0, "board_bow_mm": 0.0}
+"""The rig-condition options (per-board systematic range error included) and their (off) defaults. At these
+defaults they are left out of ``settings_hash`` and ``hashed_settings``, so settings that leave them off keep the
+random streams and result-folder keys they had before these options existed; when on they are part of both."""
 
 
 def _at_default(k: str, v) -> bool:

@@ -36,9 +36,13 @@ def rig_rngs(options: SimOptions, seed: int, trial: int, stream: int | None = No
 def refuse_rig_conditions(options: SimOptions, who: str) -> None:
     """ValueError when ``options`` ask for rig conditions that ``who`` (a writer of images and raw scans, whose
     board and camera are the nominal ones) does not simulate."""
-    if margins_on(options) or options.intrinsics_error_on:
-        raise ValueError(f"{who}: board margins and intrinsics error are simulated by simulate.generate only; "
-                         "set board_margin_max_m, focal_error_rel, principal_point_error_px, distortion_error to 0")
+    from .surface import systematic_on
+
+    if margins_on(options) or options.intrinsics_error_on or systematic_on(options):
+        raise ValueError(f"{who}: board margins and intrinsics error (and per-board systematic range error) are "
+                         "simulated by simulate.generate only; set board_margin_max_m, focal_error_rel, "
+                         "principal_point_error_px, distortion_error, lidar_board_offset_mm, lidar_dark_offset_mm, "
+                         "board_bow_mm to 0")
 
 
 def margins_on(options: SimOptions) -> bool:

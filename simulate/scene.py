@@ -44,12 +44,15 @@ class Scene:
         outline: (4,2) board outline in its own frame, metres.
         margins_m: (N,) per board, the margin of the physical board beyond its printed pattern (metres) when the
             options draw one (``simulate.rig``; the board's outline is then ``rig.physical_outline``), else None.
+        systematic: per board, the systematic range error drawn (``simulate.surface``: ``board_range_offset_m``,
+            ``board_bow_m`` lists, metres) when the options simulate one, else None.
     """
 
     T_lidar_cam: np.ndarray
     T_lidar_board: np.ndarray
     outline: np.ndarray
     margins_m: np.ndarray | None = None
+    systematic: dict | None = None
 
     @property
     def T_cam_board(self) -> np.ndarray:

@@ -15,7 +15,10 @@ from simulate.scene import sample_extrinsic
 RIG_LIKE = dict(pose_mode="pixel", pixel_noise_px=0.5, noise_mm=20.0, dist_min_m=1.0, dist_max_m=4.0,
                 board_margin_min_m=0.01, board_margin_max_m=0.05, focal_error_rel=0.003,
                 principal_point_error_px=2.0, distortion_error=0.002, std_intrinsics_known=True)
-"""The rig-like preset's values (conf/preset/rig-like.yaml)."""
+"""The rig-like preset's values (conf/preset/rig-like.yaml) without its per-board systematic error."""
+RIG_SYSTEMATIC = dict(lidar_board_offset_mm=5.0, lidar_dark_offset_mm=20.0, board_bow_mm=3.0)
+"""The preset's per-board systematic range error (conf/systematic/rig.yaml); ``RIG_LIKE | RIG_SYSTEMATIC`` is the
+preset as ``make rig-like`` runs it."""
 
 VERTICAL_OPTIONS = SimOptions(n_boards=5, board_size_m=0.8, checker_square_m=0.1, dist_min_m=1.0, dist_max_m=3.0,
                               noise_mm=5.0, lidar_res_deg=0.5)

@@ -61,7 +61,8 @@ def _rebuilt(obs: Observations, scans, trans_scale: float = 1.0) -> Observations
         T = np.array(b.T_cam_board)
         T[:3, 3] *= trans_scale
         boards.append(BoardObservation(T, b.outline, s, outline_kind=b.outline_kind))
-    return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta))
+    return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta),
+                        board_range_sigma_m=obs.board_range_sigma_m)
 
 
 def _pair_costs(obs: Observations, C: np.ndarray, sigma: float) -> np.ndarray:

@@ -28,6 +28,8 @@ def observations_to_dict(obs: Observations) -> dict:
         d["camera"] = obs.camera.to_dict()
     if obs.T_lidar_cam_true is not None:
         d["ground_truth"] = {"T_lidar_cam": obs.T_lidar_cam_true.tolist()}
+    if obs.board_range_sigma_m is not None:
+        d["board_range_sigma_m"] = obs.board_range_sigma_m
     if obs.meta:
         d["meta"] = obs.meta
     return d
@@ -134,7 +136,7 @@ def observations_from_dict(data, source: str | None = None) -> Observations:
         meta["load_notes"] = notes
     try:
         camera = camera_from_dict(data["camera"]) if data.get("camera") is not None else None
-        return Observations(tuple(boards), T_true, meta, camera)
+        return Observations(tuple(boards), T_true, meta, camera, data.get("board_range_sigma_m"))
     except ObservationError as err:
         raise err.within(file=source) from None
 

@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import ObservationError
 from ..geometry.transforms import ROTATION_TOL, project_to_so3, rotation_defect
 from .camera import Camera
+from .systematic import check_board_range_sigma
 
 MIN_SCAN_POINTS = 2
 MIN_RANGE_M = 1e-3
@@ -38,11 +39,9 @@ MAX_BOARDS = 100
 """Most boards one problem may hold (the exhaustive methods grow as N^4); more are refused when loaded."""
 MAX_SCAN_POINTS = 20_000
 """Most scan points on one board (a 2D lidar sweep has a few thousand beams)."""
-MAX_OUTLINE_VERTICES = 64
-"""Most vertices of one board outline."""
+MAX_OUTLINE_VERTICES = 64  # most vertices of one board outline
 LOAD_ROTATION_TOL = 1e-5
-"""Largest ``|R^T R - I|`` of a rotation read from a file: 6 written decimals give about 1e-6; such a rotation is
-re-orthonormalised (``orthonormalised``) with a note."""
+"""Largest ``|R^T R - I|`` of a rotation read from a file (6 decimals give 1e-6): re-orthonormalised with a note."""
 
 
 def _bad_leaf(value, depth: int) -> str | None:
@@ -86,9 +85,6 @@ def numeric_array(value, name: str, shape: tuple, max_len: int | None = None) ->
         raise ObservationError("contains NaN or inf", field=name)
     a.setflags(write=False)
     return a
-
-
-_frozen_array = numeric_array
 
 
 def orthonormalised(T, name: str) -> tuple[np.ndarray, str | None]:
@@ -170,7 +166,7 @@ class BoardObservation:
     outline_kind: str = "exact"
 
     def __post_init__(self) -> None:
-        T = _frozen_array(self.T_cam_board, "T_cam_board", (4, 4))
+        T = numeric_array(self.T_cam_board, "T_cam_board", (4, 4))
         if not np.allclose(T[3], [0, 0, 0, 1], atol=ROTATION_TOL):
             raise ObservationError("last row must be [0, 0, 0, 1]", field="T_cam_board")
         defect = rotation_defect(T[:3, :3])
@@ -219,9 +215,9 @@ class BoardObservation:
             if getattr(self, name) is None:
                 other = "corners_board" if name == "corners_px" else "corners_px"
                 raise ObservationError(f"missing while {other} is given (both or neither)", field=name)
-        px = _frozen_array(self.corners_px, "corners_px", (None, 2))
+        px = numeric_array(self.corners_px, "corners_px", (None, 2))
         planar = np.ndim(self.corners_board) == 2 and np.shape(self.corners_board)[1] == 2
-        pb = _frozen_array(self.corners_board, "corners_board", (None, 2 if planar else 3))
+        pb = numeric_array(self.corners_board, "corners_board", (None, 2 if planar else 3))
         if planar:
             pb = np.column_stack([pb, np.zeros(len(pb))])
             pb.setflags(write=False)
@@ -316,12 +312,15 @@ class Observations:
             the paper's ``p_L = R p_C + t``).
         meta: free-form provenance (simulator settings, seed, source file); not used by the solvers.
         camera: optional intrinsics (``calib_core.data.camera.Camera``); required when a board carries corners.
+        board_range_sigma_m: optional stated 1-sigma (metres) of a range offset shared by one board's beams; None:
+            unstated (real files), 0: a clean simulation (``calib_core.data.systematic``).
     """
 
     boards: tuple[BoardObservation, ...]
     T_lidar_cam_true: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
     camera: Camera | None = None
+    board_range_sigma_m: float | None = None
 
     def __post_init__(self) -> None:
         boards = tuple(self.boards)
@@ -336,8 +335,9 @@ class Observations:
         if self.camera is not None and not isinstance(self.camera, Camera):
             raise ObservationError(f"not a Camera ({type(self.camera).__name__})", field="camera")
         object.__setattr__(self, "boards", boards)
+        object.__setattr__(self, "board_range_sigma_m", check_board_range_sigma(self.board_range_sigma_m))
         if self.T_lidar_cam_true is not None:
-            T = _frozen_array(self.T_lidar_cam_true, "ground_truth.T_lidar_cam", (4, 4))
+            T = numeric_array(self.T_lidar_cam_true, "ground_truth.T_lidar_cam", (4, 4))
             if rotation_defect(T[:3, :3]) > ROTATION_TOL or not np.allclose(T[3], [0, 0, 0, 1]):
                 raise ObservationError("not a rigid transform", field="ground_truth.T_lidar_cam")
             object.__setattr__(self, "T_lidar_cam_true", T)
@@ -357,7 +357,7 @@ class Observations:
         # every part was validated when ``self`` was built: the subset is assembled, not validated again
         out = object.__new__(Observations)
         out.__dict__.update(boards=tuple(self.boards[i] for i in indices), T_lidar_cam_true=self.T_lidar_cam_true,
-                            meta=dict(self.meta), camera=self.camera)
+                            meta=dict(self.meta), camera=self.camera, board_range_sigma_m=self.board_range_sigma_m)
         per_board = {k: v.subset_boards(indices) for k, v in self.__dict__.get("_derived", {}).items()
                      if hasattr(v, "subset_boards")}
         if per_board:
