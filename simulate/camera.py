@@ -90,20 +90,36 @@ def board_homography(K: np.ndarray, T_cam_board: np.ndarray) -> np.ndarray:
     return np.asarray(K, float) @ np.column_stack([T_cam_board[:3, 0], T_cam_board[:3, 1], T_cam_board[:3, 3]])
 
 
+def _parity_cover(edges: np.ndarray, origin: float, square: float, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per interval ``[edges[i], edges[i+1])`` along one board axis (metres): the fraction of it on the pattern's
+    odd-index squares and on its even-index squares (``count`` squares of side ``square`` from ``origin``)."""
+    def covered(x: np.ndarray, parity: int) -> np.ndarray:   # length of [origin, x] on squares of that parity
+        t = np.clip((x - origin) / square, 0.0, count)
+        k = np.floor(t)
+        full = np.ceil(k / 2) if parity == 0 else np.floor(k / 2)
+        return (full + np.where((k % 2 == parity) & (k < count), t - k, 0.0)) * square
+
+    w = np.diff(edges)
+    return ((covered(edges[1:], 1) - covered(edges[:-1], 1)) / w,
+            (covered(edges[1:], 0) - covered(edges[:-1], 0)) / w)
+
+
 def board_texture(spec, px_per_m: float) -> tuple[np.ndarray, float]:
     """The board's appearance as a float32 image: texel (row v, column u) covers board xy
-    ``[u, u+1) x [v, v+1)`` divided by ``px_per_m``; returns (texture, px_per_m actually used)."""
+    ``[u, u+1) x [v, v+1)`` divided by ``px_per_m``; returns (texture, px_per_m actually used).
+
+    Each texel is the exact area average of the pattern over it (box-filtered): a square's edge that falls inside a
+    texel gives it the grey of its dark share, so the edges (and the corners) sit where they are on the board, not
+    moved to the nearest texel boundary (up to half a texel, the same shift for every corner of one grid line)."""
     b = BoardSpec.of(spec)
     n = int(np.ceil(b.size_m * px_per_m))
     ppm = n / b.size_m
-    centres = (np.arange(n) + 0.5) / ppm
+    edges = np.arange(n + 1) / ppm
     ox, oy = b.pattern_origin
-    ix = np.floor((centres - ox) / b.square_m).astype(int)
-    iy = np.floor((centres - oy) / b.square_m).astype(int)
-    in_x = (ix >= 0) & (ix < b.squares_x)
-    in_y = (iy >= 0) & (iy < b.squares_y)
-    black = ((iy[:, None] + ix[None, :]) % 2 == 1) & in_y[:, None] & in_x[None, :]
-    return np.where(black, BLACK, WHITE).astype(np.float32), ppm
+    odd_x, even_x = _parity_cover(edges, ox, b.square_m, b.squares_x)
+    odd_y, even_y = _parity_cover(edges, oy, b.square_m, b.squares_y)
+    dark = odd_y[:, None] * even_x[None, :] + even_y[:, None] * odd_x[None, :]   # (ix + iy) odd
+    return (WHITE + (BLACK - WHITE) * dark).astype(np.float32), ppm
 
 
 def render_board_image(K: np.ndarray, T_cam_board: np.ndarray, spec, width: int, height: int,

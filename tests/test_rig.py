@@ -266,7 +266,11 @@ def test_report_files_and_overlay_points_on_the_board(rig, tmp_path):
     assert all(p.exists() for p in summary.overlays + summary.residual_plots)
     assert (tmp_path / "rep" / "extrinsic.yaml").exists()
     assert max(summary.board_rms_mm) < 40.0
-    for name, b, png in zip(obs.meta["poses"], obs.boards, summary.overlays, strict=True):
+    from rig.overlay import board_plane_distances, overlay_clim_mm
+
+    d_mm = [1000 * board_plane_distances(res.T_cam_lidar, b.T_cam_board, b.scan) for b in obs.boards]
+    clim = overlay_clim_mm(np.concatenate(d_mm))  # points beyond +-clim are drawn grey (OVERLAY_BEYOND)
+    for name, b, png, d in zip(obs.meta["poses"], obs.boards, summary.overlays, d_mm, strict=True):
         uv, ok = project_scan(ds.camera, res.T_cam_lidar, b.scan)
         assert ok.mean() > 0.9
         ring = transform_points(b.T_cam_board, np.column_stack([b.outline, np.zeros(len(b.outline))]))
@@ -275,9 +279,10 @@ def test_report_files_and_overlay_points_on_the_board(rig, tmp_path):
         assert np.mean(inside) > 0.95, name
         img = cv2.imread(str(png))  # the overlay maps image pixel (u, v) to PNG pixel (u, v)
         hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)
-        px = np.rint(uv[ok]).astype(int)
-        coloured = [hsv[v, u, 1] > 100 for u, v in px]  # the image is grey: saturated pixels are scan points
-        assert np.mean(coloured) > 0.9, name
+        px = np.rint(uv[ok & (np.abs(d) < clim)]).astype(int)
+        # the image is grey: saturated pixels are scan points (3x3: a later marker's black edge may cover a centre)
+        coloured = [hsv[v - 1:v + 2, u - 1:u + 2, 1].max() > 100 for u, v in px]
+        assert len(px) > 0.8 * ok.sum() and np.mean(coloured) > 0.9, name
 
 
 def test_bad_poses_in_a_rig_are_skipped_with_reasons(rig, tmp_path):
