@@ -1,4 +1,4 @@
-"""The tool's detector (rig.detect) on the project's own renders (simulate.camera, as simulate.dataset draws the demo):
+"""The tool's detector (lidarcam.rig.detect) on the project's own renders (simulate.camera, as simulate.dataset draws the demo):
 its corners against the rendered truth, and the board poses they give against the noise their own residuals imply
 (the corner noise the calibration assumes). A structured corner error (shared along the board) moves the pose more
 than the residuals show: the demo's false "boards disagree" warning came from it."""
@@ -7,8 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from rig.dataset import BoardSpec as DatasetBoard
-from rig.detect import find_chessboard
+from lidarcam.rig.dataset import BoardSpec as DatasetBoard
+from lidarcam.rig.detect import find_chessboard
 from simulate import SimOptions
 from simulate.camera import BoardSpec, camera_matrix, checkerboard_corners, project, render_board_image
 from simulate.scene import sample_scene

@@ -266,7 +266,7 @@ def test_report_files_and_overlay_points_on_the_board(rig, tmp_path):
     assert all(p.exists() for p in summary.overlays + summary.residual_plots)
     assert (tmp_path / "rep" / "extrinsic.yaml").exists()
     assert max(summary.board_rms_mm) < 40.0
-    from rig.overlay import board_plane_distances, overlay_clim_mm
+    from lidarcam.rig.overlay import board_plane_distances, overlay_clim_mm
 
     d_mm = [1000 * board_plane_distances(res.T_cam_lidar, b.T_cam_board, b.scan) for b in obs.boards]
     clim = overlay_clim_mm(np.concatenate(d_mm))  # points beyond +-clim are drawn grey (OVERLAY_BEYOND)

@@ -101,7 +101,7 @@ def test_bad_values_are_refused(bad):
 
 def test_cli_flags_write_the_stated_scale(tmp_path):
     out = tmp_path / "o.json"
-    cmd = [sys.executable, "-m", "lidarcam_cli", "simulate", "--out", str(out), "--boards", "4",
+    cmd = [sys.executable, "-m", "lidarcam.cli", "simulate", "--out", str(out), "--boards", "4",
            "--lidar-board-offset-mm", "4", "--lidar-dark-offset-mm", "15", "--board-bow-mm", "2"]
     subprocess.run(cmd, check=True, capture_output=True)
     assert json.loads(out.read_text())["board_range_sigma_m"] == 0.004

@@ -38,6 +38,6 @@ def test_bad_scale_names_file_and_field(tmp_path, obs_dict, bad):
     with pytest.raises(ObservationError, match="board_range_sigma_m") as err:
         load_observations(p)
     assert "bad.json" in str(err.value)
-    r = subprocess.run([sys.executable, "-m", "lidarcam_cli", "calibrate", str(p)], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "lidarcam.cli", "calibrate", str(p)], capture_output=True, text=True)
     assert r.returncode == 2 and "board_range_sigma_m" in r.stderr and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
