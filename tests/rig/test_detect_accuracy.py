@@ -1,4 +1,5 @@
-"""The tool's detector (lidarcam.rig.detect) on the project's own renders (simulate.camera, as simulate.dataset draws the demo):
+"""The tool's detector (lidarcam.rig.detect) on the project's own renders (simulate.camera, as simulate.dataset
+draws the demo):
 its corners against the rendered truth, and the board poses they give against the noise their own residuals imply
 (the corner noise the calibration assumes). A structured corner error (shared along the board) moves the pose more
 than the residuals show: the demo's false "boards disagree" warning came from it."""
