@@ -265,7 +265,7 @@ def run_set(name: str, folder: Path, out: Path, n_subsets: int, n_jobs: int) -> 
     md += ["### Leaderboard", ""] + leaderboard_md(rows, sigma, rs.published is not None) + [""]
     md += _covariance_md(rows) + uncertainty_md(rows) + [""]
     md += ["### Degeneracy", "", verdict[0], ""]
-    md += ["### Capture plan", "", capture_verdict(obs, T), ""]
+    md += ["### Capture plan", "", capture_verdict(obs), ""]
     axes = _undetermined(obs, T, sigma) if verdict[1] is False else ()
     if axes:
         planar, T_planar = planar_calibration(obs, axes)

@@ -53,8 +53,8 @@ def _current(args, k: int, target, criterion):
         print(f"note: {args.method} failed ({res.reason}); planning at the rig description's mounting")
     T = res.T_lidar_cam if res.ok else base.T_lidar_cam
     try:
-        p = plan_from_observations(obs, np.asarray(T, float), k, info=res.info, base=base, target=target,
-                                   criterion=criterion)
+        p = plan_from_observations(obs, np.asarray(T, float), k, covariance=res.covariance if res.ok else None,
+                                   info=res.info, base=base, target=target, criterion=criterion)
     except ValueError as err:
         raise CalibrationError(f"{args.from_obs}: {err}") from None
     return p.rig, obs, p.plan

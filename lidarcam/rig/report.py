@@ -77,25 +77,30 @@ def report_warnings(observations: Observations, rms_mm: list[float], T_lidar_cam
     return out
 
 
-def capture_verdict(observations: Observations, T_lidar_cam: np.ndarray | None = None) -> str:
-    """The capture planner's verdict on the boards captured (``calib_core.planning.observed``) at ``T_lidar_cam``
-    (None: the ``lidarcam`` calibration of the boards), with the noise it assumed."""
+def capture_verdict(observations: Observations, result=None) -> str:
+    """The capture planner's verdict on the boards captured (``calib_core.planning.observed.plan_from_observations``)
+    from their calibration ``result`` (a CalibrationResult or a result dict: its extrinsic, covariance and noise
+    estimates; None: the ``lidarcam`` calibration of the boards, as ``lidarcam plan --from`` makes it), with the
+    noise it assumed."""
     from calib_core import calibrate
     from calib_core.planning.capture import verdict
     from calib_core.planning.observed import plan_from_observations
 
-    info = None
     try:
-        if T_lidar_cam is None:
-            res = calibrate(observations)
-            if not res.ok:
-                return f"no plan: the calibration failed ({res.reason})"
-            T_lidar_cam, info = res.T_lidar_cam, res.info
-        p = plan_from_observations(observations, T_lidar_cam, 2, info=info)
+        res = calibrate(observations) if result is None else result
+        ok = res.ok if isinstance(res, CalibrationResult) else bool(res.get("ok"))
+        if not ok:
+            reason = res.reason if isinstance(res, CalibrationResult) else res.get("reason")
+            return f"no plan: the calibration failed ({reason})"
+        if isinstance(res, CalibrationResult):
+            T, cov, info = res.T_lidar_cam, res.covariance, res.info
+        else:
+            T, cov, info = res["T_lidar_cam"], res.get("covariance"), res.get("info") or res
+        p = plan_from_observations(observations, np.asarray(T, float), 2, covariance=cov, info=info)
     except (LidarcamError, ValueError) as err:
         return f"no plan: {err}"
     return (f"{verdict(p.plan)}. (Assumed noise: range {1000 * p.range_sigma_m:.1f} mm, corners "
-            f"{p.corner_sigma_px:.2g} px; `lidarcam plan --from OBS.json` gives the whole plan.)")
+            f"{p.corner_sigma_px:.2g} px ({p.noise_source}); `lidarcam plan --from OBS.json` gives the whole plan.)")
 
 
 def _mounting_md(res: dict) -> list[str]:
@@ -263,7 +268,8 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     every = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
     summary.warnings = list(dict.fromkeys(every))  # the method's own board-set warnings are the library's too
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
-    md += ["## Capture plan", "", capture_verdict(observations, T), ""]
+    md += ["## Capture plan", "", capture_verdict(observations, result if isinstance(result, CalibrationResult)
+                                                  else res), ""]
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
     summary.markdown.write_text("\n".join(md) + "\n")
     return summary

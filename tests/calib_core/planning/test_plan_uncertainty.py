@@ -1,0 +1,72 @@
+"""The plan speaks with the calibration's own uncertainty: ``lidarcam plan --from``, the capture verdict of
+``extract``/``bag`` and the report's all start from the covariance the calibration reports (the boards' dispersion
+widening included) and add proposed boards at the same widened noise."""
+
+import re
+
+import numpy as np
+import pytest
+
+from calib_core import calibrate
+from calib_core.data.io import save_observations
+from calib_core.geometry.metrics import sigma_rot_deg, sigma_trans_m
+from calib_core.planning.capture import predict
+from calib_core.planning.observed import calibration_widening, plan_from_observations
+from simulate import SimOptions, generate
+
+# boards whose planes each carry an error of their own (a range offset per board): the dispersion test widens
+SPREAD = SimOptions(n_boards=12, pose_mode="pixel", pixel_noise_px=0.1, noise_mm=5.0, dist_min_m=1.5, dist_max_m=4.0,
+                    lidar_board_offset_mm=20.0)
+
+
+@pytest.fixture(scope="module")
+def widened():
+    for seed in range(6):
+        obs = generate(SPREAD, seed)
+        res = calibrate(obs)
+        if res.ok and res.info.get("board_dispersion", {}).get("widened"):
+            return obs, res
+    pytest.fail("no widened calibration in 6 seeds")
+
+
+def test_the_plan_starts_from_the_calibrations_covariance(widened):
+    obs, res = widened
+    p = plan_from_observations(obs, res.T_lidar_cam, 3, covariance=res.covariance, info=res.info)
+    assert p.plan.current.rot_sigma_deg == pytest.approx(sigma_rot_deg(res.covariance), rel=1e-6)
+    assert p.plan.current.trans_sigma_mm == pytest.approx(1000 * sigma_trans_m(res.covariance), rel=1e-6)
+    model = plan_from_observations(obs, res.T_lidar_cam, 3, info=res.info)
+    assert p.widening > 1.3 and model.widening == 1.0
+    assert p.plan.current.rot_sigma_deg > 1.3 * model.plan.current.rot_sigma_deg
+    # a proposed board counts for what a captured one did: at the noise stds times the widening
+    assert p.range_sigma_m == pytest.approx(model.range_sigma_m * p.widening)
+    assert p.plan.after[-1].rot_sigma_deg < p.plan.current.rot_sigma_deg
+
+
+def test_widening_is_one_for_the_models_own_covariance_and_scales_as_the_noise(rng):
+    A = rng.normal(size=(6, 6))
+    S = A @ A.T + np.eye(6)
+    assert calibration_widening(S, np.linalg.inv(S)) == pytest.approx(1.0)
+    assert calibration_widening(S, 4.0 * np.linalg.inv(S)) == pytest.approx(2.0)
+    assert calibration_widening(S, None) == 1.0 and calibration_widening(S, np.full((6, 6), np.nan)) == 1.0
+    p = predict(S / 4.0)                                         # the information at twice the noise
+    assert p.rot_sigma_deg == pytest.approx(2 * predict(S).rot_sigma_deg)
+
+
+def test_every_verb_quotes_one_number(widened, tmp_path, capsys):
+    from lidarcam.cli import main
+    from lidarcam.rig.report import capture_verdict
+
+    obs, res = widened
+    save_observations(obs, tmp_path / "obs.json")
+    assert main(["plan", "--from", str(tmp_path / "obs.json"), "--next", "2"]) == 0
+    text = capsys.readouterr().out
+    cli = re.search(r"1-sigma: rotation ([\d.]+) deg, translation ([\d.]+) mm", text)
+    extract_line = capture_verdict(obs)                          # what extract and bag print
+    report_line = capture_verdict(obs, res.to_dict())            # what the report writes from a result file
+    quoted = [re.search(r"give 1-sigma ([\d.]+) deg, (\d+) mm", t) for t in (extract_line, report_line)]
+    assert cli and all(quoted)
+    assert float(cli.group(1)) == pytest.approx(sigma_rot_deg(res.covariance), abs=1e-3)
+    for q in quoted:
+        assert float(q.group(1)) == pytest.approx(sigma_rot_deg(res.covariance), abs=0.006)
+        assert float(q.group(2)) == pytest.approx(1000 * sigma_trans_m(res.covariance), abs=0.6)
+    assert extract_line.split(". (Assumed")[0] in text
