@@ -12,7 +12,7 @@ variance of one axis, or of the rotation or translation as a whole).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -143,18 +143,26 @@ def _scores(S: np.ndarray, C: np.ndarray, criterion: str) -> np.ndarray:
     return -cov[:, j, j]
 
 
-def greedy(S0: np.ndarray, candidates: np.ndarray, n: int, criterion: str = "D") -> list[int]:
+def greedy(S0: np.ndarray, candidates: np.ndarray, n: int, criterion: str = "D", centres: np.ndarray | None = None,
+           min_separation_m: float = 0.0) -> list[int]:
     """Indices of ``n`` candidates (each at most once) chosen one at a time to maximise ``criterion`` of
-    ``S0 + sum of the chosen candidates' information`` (``candidates`` (M,6,6))."""
+    ``S0 + sum of the chosen candidates' information`` (``candidates`` (M,6,6)). With ``centres`` (M,3, metres), a
+    candidate closer than ``min_separation_m`` to a board chosen in the current round is passed over, so that the
+    proposed boards stand at distinct places; a round ends when every place is taken (boards may then share one)."""
     if criterion not in CRITERIA:
         raise PlanError(f"unknown criterion {criterion!r}; one of {', '.join(CRITERIA)}")
     S, free, out = np.array(S0, float), np.ones(len(candidates), bool), []
+    taken = np.zeros(len(candidates), bool)
     for _ in range(min(n, len(candidates))):
-        sc = np.where(free, _scores(S, candidates, criterion), -np.inf)
+        if not (free & ~taken).any():
+            taken[:] = False
+        sc = np.where(free & ~taken, _scores(S, candidates, criterion), -np.inf)
         k = int(np.argmax(sc))
         out.append(k)
         free[k] = False
         S = S + candidates[k]
+        if centres is not None:
+            taken |= np.linalg.norm(centres - centres[k], axis=1) < min_separation_m
     return out
 
 
@@ -203,6 +211,12 @@ def name_undetermined(obs: Observations | None, T_lidar_cam: np.ndarray, range_s
     return (deg.axes if len(deg.directions) else ()), deg.message()
 
 
+def separation_m(rig: PlanRig) -> float:
+    """How far apart (metres, board centres) proposed boards stand: half the board's largest extent."""
+    outline = np.asarray(rig.outline, float)
+    return 0.5 * float(np.max(np.linalg.norm(outline[:, None] - outline[None], axis=-1)))
+
+
 def plan_capture(rig: PlanRig, k: int, *, current: Observations | None = None, current_info: np.ndarray | None = None,
                  target: tuple[float, float] = DEFAULT_TARGET, criterion: str = "D") -> Plan:
     """The next ``k`` board poses for ``rig`` after the boards ``current`` (their per-board information
@@ -212,7 +226,9 @@ def plan_capture(rig: PlanRig, k: int, *, current: Observations | None = None, c
     S0 = np.zeros((6, 6)) if current_info is None or not len(current_info) else np.sum(current_info, axis=0)
     n0 = 0 if current is None else current.n_boards
     more = max(k, MAX_PLAN_BOARDS - n0)
-    order = greedy(S0, C, more, criterion)
+    T_pool = board_poses_lidar(rig, poses)
+    centre = np.r_[np.asarray(rig.outline, float).mean(axis=0), 0.0]
+    order = greedy(S0, C, more, criterion, T_pool[:, :3, :3] @ centre + T_pool[:, :3, 3], separation_m(rig))
     cum = S0[None] + np.cumsum(C[order], axis=0)
     preds = [predict(F) for F in cum]
     now = predict(S0)
@@ -315,12 +331,35 @@ def _summary_lines(plan: Plan, rig: PlanRig) -> list[str]:
     out.append(f"to reach the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm): "
                + (f"{plan.to_target} boards in all" if plan.to_target is not None else
                   "not within the planner's limit of boards; lower the noise or widen the workspace"))
+    if plan.current_n == 0 and (plan.to_target is None or plan.to_target > MANY_BOARDS):
+        out.append(what_limits(rig, plan))
     _, ranges, _ = feasibility(rig, plan.T_lidar_board)
     out += ["", "checklist at the rig:"]
     out += [f"  [ ] {i + 1}. board {describe_pose(q)}; check: the whole board in the image with "
             f"{rig.image_margin_px:g} px to spare, the scan line across it (about {int(np.isfinite(r).sum())} points)"
             for i, (q, r) in enumerate(zip(plan.poses, ranges, strict=True))]
     return out + ["", f"verdict: {verdict(plan)}"]
+
+
+MANY_BOARDS = 30
+"""A plan from a rig description that needs more boards than this says what limits it (``what_limits``)."""
+
+
+def what_limits(rig: PlanRig, plan: Plan) -> str:
+    """One line on what limits a plan from a rig description: the boards in all that reach its target with half the
+    range noise and with half the corner noise (the rest of the rig as it is)."""
+    def boards(r: PlanRig) -> str:
+        n = plan_capture(r, 1, target=plan.target, criterion=plan.criterion).to_target
+        return "none within the limit" if n is None else f"{n}"
+
+    parts = [f"half the range noise ({500 * rig.range_sigma_m:.0f} mm): "
+             + boards(replace(rig, range_sigma_m=rig.range_sigma_m / 2))]
+    if rig.corner_sigma_px > 0:
+        parts.append(f"half the corner noise ({rig.corner_sigma_px / 2:.2g} px): "
+                     + boards(replace(rig, corner_sigma_px=rig.corner_sigma_px / 2)))
+    axis, value = weakest_axis(plan.after[-1] if plan.after else plan.current, plan.target)
+    return (f"what limits it: the noise, the weakest axis {AXIS_WORDS[axis]} ({value} after the proposed boards); "
+            "boards in all to the target with " + "; with ".join(parts))
 
 
 def boards_to_add(plan: Plan) -> int | None:

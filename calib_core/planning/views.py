@@ -150,7 +150,9 @@ def rig_from_observations(obs: Observations, T_lidar_cam: np.ndarray, range_sigm
     the extrinsic ``T_lidar_cam`` (e.g. its calibration) and the noise stds given. With ``base`` (a rig
     description) the lidar, limits and workspace are ``base``'s; otherwise the lidar's resolution is the median
     bearing step of the scans, and the workspace spans the captured boards' distances (-10 %, +10 %) and bearings
-    (+-10 deg) with the default tilts. ValueError without camera intrinsics."""
+    (+-10 deg) with the default tilts, the boards rolled in their plane as most captured ones are (to the nearest
+    quarter turn: ``captured_roll_deg``; so a grid written 5x8 instead of 8x5 gives the same plan). ValueError
+    without camera intrinsics."""
     if obs.camera is None and base is None:
         raise ValueError("the observations carry no camera intrinsics: give a rig description too")
     b0 = obs.boards[0]
@@ -174,8 +176,30 @@ def rig_from_observations(obs: Observations, T_lidar_cam: np.ndarray, range_sigm
     T_lb = T[None] @ np.array([bd.T_cam_board for bd in obs.boards])
     c = T_lb[:, :3, :3] @ np.r_[outline.mean(axis=0), 0.0] + T_lb[:, :3, 3]
     dist, bearing = np.linalg.norm(c[:, :2], axis=1), np.degrees(np.arctan2(c[:, 1], c[:, 0]))
+    roll = captured_roll_deg(rig_roll_probe(camera, T, outline, corners), T_lb)
     ws = Workspace(distance_m=(0.9 * dist.min(), 1.1 * dist.max()),
-                   bearing_deg=(bearing.min() - 10.0, bearing.max() + 10.0))
+                   bearing_deg=(bearing.min() - 10.0, bearing.max() + 10.0), roll_deg=(roll, roll))
     fov = min(360.0, 2.0 * max(abs(ws.bearing_deg[0]), abs(ws.bearing_deg[1])) + 40.0)
     return PlanRig(camera, T, outline, corners, fov, res_deg, 1.5 * float(dist.max()) + 5.0, range_sigma_m,
                    corner_sigma_px, workspace=ws)
+
+
+def rig_roll_probe(camera: Camera, T_lidar_cam: np.ndarray, outline: np.ndarray, corners: np.ndarray) -> PlanRig:
+    """A rig with the board and mounting given, to place boards with ``board_poses_lidar``."""
+    return PlanRig(camera, T_lidar_cam, outline, corners)
+
+
+def captured_roll_deg(rig: PlanRig, T_lidar_board: np.ndarray) -> float:
+    """The in-plane roll (degrees, a multiple of 90) most captured boards ``T_lidar_board`` (N,4,4) have against the
+    planner's upright board at their place (``board_poses_lidar`` with no turn, lean or roll): each board's roll
+    ``atan2(x . down, x . right)`` of its x axis, rounded to a quarter turn; the most common (ties: the smallest)."""
+    T = np.asarray(T_lidar_board, float).reshape(-1, 4, 4)
+    c = T[:, :3, :3] @ np.r_[np.asarray(rig.outline, float).mean(axis=0), 0.0] + T[:, :3, 3]
+    dist, bearing = np.linalg.norm(c, axis=1), np.degrees(np.arctan2(c[:, 1], c[:, 0]))
+    upright = board_poses_lidar(rig, np.column_stack([dist, bearing, c[:, 2], np.zeros((len(T), 3))]))
+    x = T[:, :3, 0]
+    angle = np.degrees(np.arctan2(np.sum(x * upright[:, :3, 1], axis=1), np.sum(x * upright[:, :3, 0], axis=1)))
+    quarter = np.mod(np.rint(angle / 90.0).astype(int), 4)
+    k = int(np.argmax(np.bincount(quarter, minlength=4)))
+    return float(90 * k if k < 3 else -90)
+

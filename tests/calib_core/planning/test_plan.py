@@ -296,7 +296,7 @@ def test_plan_figure_labels_do_not_overlap():
     from lidarcam.rig.plan_figure import LABEL_MERGE_M, _board_xy, label_groups
 
     rig = load_plan_rig(Path(__file__).resolve().parents[3] / "conf" / "plan" / "rig.yaml")
-    plan = plan_capture(rig, 6)
+    plan = plan_capture(rig, 25)  # more boards than distinct places in the workspace: some share one
     centres = _board_xy(plan.T_lidar_board, rig.outline)[:, :-1].mean(axis=1)
     d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)[np.triu_indices(len(centres), 1)]
     assert d.min() < LABEL_MERGE_M  # this plan has boards at one place: one label each would overlap

@@ -1,0 +1,62 @@
+"""Where the plan puts boards: the grid's orientation (8x5 or 5x8) does not change it, proposed boards stand at
+distinct places, and a plan that needs many boards says what limits it."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib_core import calibrate
+from calib_core.data.observations import BoardObservation, Observations
+from calib_core.planning.capture import plan_capture, separation_m
+from calib_core.planning.observed import plan_from_observations
+from lidarcam.rig.plan_figure import LABEL_MERGE_M
+from lidarcam.rig.plan_rig import load_plan_rig
+from simulate import SimOptions, generate
+
+RIG_FILE = Path(__file__).resolve().parents[3] / "conf" / "plan" / "rig.yaml"
+QUARTER = np.array([[0.0, -1, 0, 0], [1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])   # board' -> board
+
+
+def _turned(obs: Observations) -> Observations:
+    """The same boards with the grid written the other way round (board x and y swapped by a quarter turn)."""
+    boards = [BoardObservation(b.T_cam_board @ QUARTER, b.outline @ QUARTER[:2, :2], b.scan, b.corners_px,
+                               np.column_stack([b.corners_board[:, :2], np.zeros(len(b.corners_board))])
+                               @ QUARTER[:3, :3], outline_kind=b.outline_kind) for b in obs.boards]
+    return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta), obs.camera)
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_the_grids_orientation_does_not_change_the_plan(seed):
+    obs = generate(SimOptions(n_boards=8, pose_mode="pixel", board_squares_x=8, board_squares_y=5, max_roll_deg=10.0,
+                              noise_mm=10.0), seed)
+    plans = []
+    for o in (obs, _turned(obs)):
+        r = calibrate(o)
+        assert r.ok
+        plans.append(plan_from_observations(o, r.T_lidar_cam, 4, covariance=r.covariance, info=r.info).plan)
+    a, b = plans
+    assert b.current.rot_sigma_deg == pytest.approx(a.current.rot_sigma_deg, rel=1e-3)
+    for pa, pb in zip(a.after, b.after, strict=True):
+        assert pb.rot_sigma_deg == pytest.approx(pa.rot_sigma_deg, rel=0.1)
+        assert pb.trans_sigma_mm == pytest.approx(pa.trans_sigma_mm, rel=0.1)
+    assert (a.to_target is None) == (b.to_target is None)
+    if a.to_target is not None:
+        assert b.to_target == pytest.approx(a.to_target, rel=0.1)
+
+
+def test_proposed_boards_stand_at_distinct_places():
+    rig = load_plan_rig(RIG_FILE)
+    plan = plan_capture(rig, 6)
+    c = plan.T_lidar_board[:, :3, :3] @ np.r_[rig.outline.mean(axis=0), 0.0] + plan.T_lidar_board[:, :3, 3]
+    apart = np.linalg.norm(c[:, None] - c[None], axis=-1)[np.triu_indices(len(c), 1)]
+    assert apart.min() >= separation_m(rig) - 1e-9 and apart.min() >= LABEL_MERGE_M
+
+
+def test_a_plan_of_many_boards_says_what_limits_it():
+    rig = load_plan_rig(RIG_FILE)
+    plan = plan_capture(rig, 3)
+    assert plan.to_target is None or plan.to_target > 30
+    line = next(ln for ln in plan.summary_lines(rig) if ln.startswith("what limits it"))
+    counts = [int(n) for n in __import__("re").findall(r"\): (\d+)", line)]
+    assert len(counts) == 2 and all(n < (plan.to_target or 10**9) for n in counts)
