@@ -33,6 +33,9 @@ def cmd_bag(args) -> int:
     if need:
         raise DatasetError(f"{', '.join(need)} required (or --list-topics to see the bag's topics)", file=args.bag)
     writable_folder(args.out, "--out")
+    from .rig import check_noise_flags
+
+    check_noise_flags(args)
     eo = ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma)
     conv = bag_to_dataset(args.bag, args.out, args.image_topic, args.scan_topic, args.board,
                           camera_info_topic=args.camera_info_topic, camera_path=args.camera, opts=opts,

@@ -14,9 +14,23 @@ from calib_core.data.observations import OUTLINE_KINDS
 from rig.extract_options import CURVATURE_CHI2, SCAN_DIRECTIONS
 
 
+def check_noise_flags(args) -> None:
+    """``--range-sigma`` and ``--max-curvature-chi2``, when given, must be positive finite numbers."""
+    import math
+
+    from rig.extract_options import ExtractionError
+
+    for flag, v in (("--range-sigma", args.range_sigma), ("--max-curvature-chi2",
+                                                          getattr(args, "max_curvature_chi2", None))):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise ExtractionError(f"{flag} must be a positive number, got {v!r} (leave it out to estimate it from "
+                                  "the boards' scan segments)")
+
+
 def _options(args):
     from rig.extract import ExtractOptions
 
+    check_noise_flags(args)
     return ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma,
                           max_reproj_px=args.max_reproj, outline_kind=args.outline_kind,
                           max_curvature_chi2=args.max_curvature_chi2, max_board_m=args.max_board)

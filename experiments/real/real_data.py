@@ -31,7 +31,7 @@ from calib_core.geometry.transforms import invert_T
 from calib_core.refine.joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL
 from rig import public_sets as ps
 from rig.dataset import DatasetError
-from rig.extract import extract, format_diagnostics
+from rig.extract import direction_line, extract, format_diagnostics, noise_line
 from rig.intrinsics import format_intrinsics, refit_camera
 from rig.markdown import md_table
 from rig.report import capture_verdict, save_overlay
@@ -131,7 +131,8 @@ def _observations(rs) -> tuple:
     merged = ", ".join(f"{k} + {'/'.join(v)}" for k, v in obs.meta.get("merged", {}).items()) or "none"
     md = ["### Extraction", "", "```", format_diagnostics(diags), "```", "",
           f"{sum(d.used for d in diags)} of {len(diags)} poses used, {obs.n_boards} boards after merging "
-          f"near-duplicates (merged: {merged}).", ""]
+          f"near-duplicates (merged: {merged}). {noise_line(obs.meta)[0].upper()}{noise_line(obs.meta)[1:]}; "
+          f"{direction_line(obs.meta)}.", ""]
     return obs, md, intr
 
 

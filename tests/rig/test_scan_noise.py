@@ -135,3 +135,13 @@ def test_extraction_estimates_the_noise_of_a_rendered_dataset_and_says_so(sim_ri
     assert main(["extract", str(sim_rig), "--range-sigma", "0.015", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "range noise 15.0 mm (given)" in printed and "arc test: curvature statistic above" in printed
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--range-sigma", "nan"), ("--range-sigma", "-0.01"),
+                                             ("--max-curvature-chi2", "0")])
+def test_a_bad_noise_flag_is_one_line_naming_it(sim_rig, capsys, flag, value):
+    from lidarcam_cli import main
+
+    assert main(["extract", str(sim_rig), flag, value, "--out", str(sim_rig.parent / "bad.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{flag} must be a positive number" in err[0]
