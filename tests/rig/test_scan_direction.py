@@ -1,5 +1,5 @@
-"""A declared scan direction (rig.dataset.direction): lidar.yaml's ``scan_direction`` and ``--scan-direction`` mirror
-the scan angles (scans, background, windows), a clockwise lidar's mirrored scans calibrate upright once declared,
+"""A declared scan direction (lidarcam.rig.dataset.direction): lidar.yaml's ``scan_direction`` and ``--scan-direction``
+mirror the scan angles (scans, background, windows), a clockwise lidar's mirrored scans calibrate upright once declared,
 the upside-down warning names the declaration or advises it, ``import radlocc`` reads a settings file's
 ``Laser_Direction``, and ``import`` / ``bag`` write the declaration."""
 
@@ -15,9 +15,9 @@ import pytest
 from calib_core import calibrate
 from calib_core.checks.verdict import orientation_warnings
 from calib_core.geometry.metrics import pose_errors
-from lidarcam_cli import main as cli
-from rig.dataset import DatasetError, load_dataset, read_scan_csv
-from rig.extract import direction_line, extract
+from lidarcam.cli import main as cli
+from lidarcam.rig.dataset import DatasetError, load_dataset, read_scan_csv
+from lidarcam.rig.extract import direction_line, extract
 from simulate import SimOptions
 
 
@@ -174,7 +174,7 @@ def test_import_radlocc_reads_laser_direction_beside_the_camera_file(tmp_path, v
 
 
 def test_import_of_observations_mirrors_their_points_when_declared_clockwise():
-    from rig.importing import mirror_observations
+    from lidarcam.rig.importing import mirror_observations
     from simulate import generate
 
     obs = generate(SimOptions(n_boards=4), seed=0, trial=0)

@@ -1,7 +1,7 @@
-"""The range noise and the arc test estimated from the boards' own segments (rig.scan_noise): the simulator's noise
-recovered across seeds and noise levels, a colour-biased board (black squares read centimetres further than white
-ones, as a Hokuyo does) not refused as an arc while a pillar still is, options given kept, and extraction recording
-what it used."""
+"""The range noise and the arc test estimated from the boards' own segments (lidarcam.rig.scan_noise): the simulator's
+noise recovered across seeds and noise levels, a colour-biased board (black squares read centimetres further than white
+ones, as a Hokuyo does) not refused as an arc while a pillar still is, options given kept, and extraction recording what
+it used."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from calib_core.geometry.transforms import invert_T, transform_points
-from rig.extract_options import CURVATURE_CHI2, DEFAULT_RANGE_SIGMA, ExtractionError, ExtractOptions
-from rig.scan_noise import MIN_SEGMENTS, estimate_noise, segment_range_sigma
-from rig.segment import curvature_statistic
+from lidarcam.rig.extract_options import CURVATURE_CHI2, DEFAULT_RANGE_SIGMA, ExtractionError, ExtractOptions
+from lidarcam.rig.scan_noise import MIN_SEGMENTS, estimate_noise, segment_range_sigma
+from lidarcam.rig.segment import curvature_statistic
 from simulate import SimOptions, generate
 
 
@@ -118,9 +118,9 @@ def sim_rig(tmp_path_factory):
 
 
 def test_extraction_estimates_the_noise_of_a_rendered_dataset_and_says_so(sim_rig, capsys):
-    from lidarcam_cli import main
-    from rig.dataset import load_dataset
-    from rig.extract import extract, noise_line
+    from lidarcam.cli import main
+    from lidarcam.rig.dataset import load_dataset
+    from lidarcam.rig.extract import extract, noise_line
 
     obs, diags = extract(load_dataset(sim_rig))
     noise = obs.meta["extraction_noise"]
@@ -140,7 +140,7 @@ def test_extraction_estimates_the_noise_of_a_rendered_dataset_and_says_so(sim_ri
 @pytest.mark.parametrize(("flag", "value"), [("--range-sigma", "nan"), ("--range-sigma", "-0.01"),
                                              ("--max-curvature-chi2", "0")])
 def test_a_bad_noise_flag_is_one_line_naming_it(sim_rig, capsys, flag, value):
-    from lidarcam_cli import main
+    from lidarcam.cli import main
 
     assert main(["extract", str(sim_rig), flag, value, "--out", str(sim_rig.parent / "bad.json")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -1,0 +1,155 @@
+"""The dataset's data model: camera, board, scan, pose, dataset (frozen dataclasses), and its error type."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from calib_core.errors import LidarcamError
+
+
+class DatasetError(LidarcamError, ValueError):
+    """Bad dataset input; ``str(err)`` reads ``"ds/003.csv: line 7: expected 2 numbers, got 'a,b,c'"``.
+
+    Attributes: ``file`` (path as given), ``line`` (1-based, or None), ``pose`` (pose name, or None), ``message``.
+    """
+
+    def __init__(self, message: str, *, file=None, line: int | None = None, pose: str | None = None) -> None:
+        self.message = message
+        self.file = None if file is None else str(file)
+        self.line = line
+        self.pose = pose
+        parts = [p for p in (self.file, None if line is None else f"line {line}") if p]
+        super().__init__(": ".join(parts + [message]))
+
+
+@dataclass(frozen=True, eq=False)
+class CameraModel:
+    """Pinhole camera with OpenCV distortion.
+
+    Attributes: ``width``, ``height`` (pixels); ``K`` 3x3 camera matrix; ``dist`` (D,) OpenCV distortion
+    coefficients (k1, k2, p1, p2[, k3, ...]); may be empty; ``std_intrinsics`` the optional 1-sigma of fx, fy, cx,
+    cy (pixels) and then of ``dist`` (OpenCV's ``stdDeviationsIntrinsics`` order, ``calib_core.data.camera.Camera``),
+    None when the source states none.
+    """
+
+    width: int
+    height: int
+    K: np.ndarray
+    dist: np.ndarray
+    std_intrinsics: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class BoardSpec:
+    """Checkerboard geometry, board frame: origin at the first inner corner, x along a row of ``cols`` corners,
+    y along a column of ``rows`` corners, z = x cross y (the board plane is z = 0); metres.
+
+    Attributes:
+        cols, rows: inner corners per row / per column (OpenCV's ``patternSize = (cols, rows)``).
+        square: side of one square (m).
+        outline: (V,2) physical outline of the board in the board frame (m).
+        origin_square_dark: colour of the square spanning x in [0, square], y in [0, square] (True dark, False
+            light); used to undo a 180-degree reversal of the corner order (possible only when cols + rows is
+            odd). None: keep the detector's order (``findChessboardCornersSB`` starts next to a light outer square
+            on an odd x even board, i.e. a light origin square).
+    """
+
+    cols: int
+    rows: int
+    square: float
+    outline: np.ndarray
+    origin_square_dark: bool | None = None
+
+    @property
+    def corners(self) -> np.ndarray:
+        """(cols*rows, 3) inner corners in the board frame, row-major (x fastest), as OpenCV orders them."""
+        j, i = np.mgrid[0:self.rows, 0:self.cols]
+        return np.column_stack([i.ravel() * self.square, j.ravel() * self.square, np.zeros(i.size)])
+
+    @property
+    def diagonal(self) -> float:
+        """Longest distance between two outline vertices (m): no chord of the board is longer."""
+        d = self.outline[:, None, :] - self.outline[None, :, :]
+        return float(np.sqrt((d ** 2).sum(-1)).max())
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Mean of the outline vertices in the board frame (m), (2,)."""
+        return self.outline.mean(axis=0)
+
+    @property
+    def reversible(self) -> bool:
+        """True when a 180-degree turn maps the corner grid onto itself with the same colours (cols+rows even)."""
+        return (self.cols + self.rows) % 2 == 0
+
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """One lidar scan, ordered along the sweep (by bearing, starting after the largest angular gap).
+
+    Attributes: ``bearing`` (K,) radians in (-pi, pi]; ``range`` (K,) metres; ``points`` (K,2) lidar-frame x, y;
+    ``n_dropped``: beams without a return (range NaN, inf or <= 0) left out.
+    """
+
+    bearing: np.ndarray
+    range: np.ndarray
+    points: np.ndarray
+    n_dropped: int = 0
+
+    def __len__(self) -> int:
+        return len(self.range)
+
+
+@dataclass(frozen=True, eq=False)
+class Pose:
+    """One board pose of the dataset: an image path and a scan, or the error that makes it unusable.
+
+    Attributes: ``name`` (file stem, e.g. ``"003"``); ``image_path`` (or None); ``scan`` (or None);
+    ``window`` (bearing_min, bearing_max) radians from windows.yaml, or None; ``error``: a DatasetError when
+    the image or scan is missing or bad (the pose is then skipped by extraction), else None; ``corners``: the
+    checkerboard detector's corners (N,2 pixels) when found already (extraction then skips the detection;
+    an empty array: the detector found no board).
+    """
+
+    name: str
+    image_path: Path | None
+    scan: Scan | None
+    window: tuple[float, float] | None = None
+    error: DatasetError | None = None
+    corners: np.ndarray | None = None
+
+    def read_image(self) -> np.ndarray:
+        """The image as 8-bit grayscale (H, W)."""
+        import cv2
+
+        img = cv2.imread(str(self.image_path), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise DatasetError("cannot read image", file=self.image_path, pose=self.name)
+        return img
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    """A loaded dataset folder. ``poses`` are sorted by name (numerically when all names are digits).
+
+    ``scan_direction``: which way the scan files count their bearings (``ccw`` or ``cw``; the scans here are
+    already read counter-clockwise, ``lidarcam.rig.dataset.direction``); ``scan_direction_source``: ``default`` (nothing
+    declared), ``lidar.yaml`` or ``given`` (by the caller, e.g. ``--scan-direction``)."""
+
+    root: Path
+    camera: CameraModel
+    board: BoardSpec
+    poses: tuple[Pose, ...]
+    background: Scan | None = None
+    ground_truth: dict = field(default_factory=dict)
+    scan_direction: str = "ccw"
+    scan_direction_source: str = "default"
+
+    def pose(self, name: str) -> Pose:
+        for p in self.poses:
+            if p.name == name:
+                return p
+        raise KeyError(name)
