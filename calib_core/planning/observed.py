@@ -96,7 +96,7 @@ def plan_from_observations(obs: Observations, T_lidar_cam: np.ndarray, k: int, *
             current = np.linalg.inv(np.asarray(covariance, float))[None]
         except np.linalg.LinAlgError:
             widening = 1.0
-    if widening != 1.0:
+    if round(widening, 2) != 1.0:
         source += f", times {widening:.2f} to the calibration's covariance"
     rig = rig_from_observations(obs, T, sr * widening, sc * widening, base)
     plan = plan_capture(rig, k, current=obs, current_info=current, target=target, criterion=criterion)
