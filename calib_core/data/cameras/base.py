@@ -65,10 +65,15 @@ class FieldCamera(CameraModel):
         return type(self)(K, v[self.n_core:], self.width, self.height, **p)
 
     def to_dict(self) -> dict:
-        """Plain-JSON form: Kalibr's ``camera_model`` and ``distortion_model``, ``K``, ``dist``, width, height,
-        the model's parameters and ``std_intrinsics`` when given."""
+        """Plain-JSON form: Kalibr's ``camera_model`` and ``distortion_model``, ``K``, ``dist`` (the shortest accepted
+        length that keeps its non-zero values and ``std_intrinsics``' length), width, height, the model's parameters
+        and ``std_intrinsics`` when given."""
+        used = max(np.flatnonzero(self.dist), default=-1) + 1
+        if self.std_intrinsics is not None:
+            used = max(used, len(self.std_intrinsics) - self.n_core)
+        n = min(k for k in self.dist_lengths if k >= used)
         d = {"camera_model": self.camera_model, "distortion_model": self.distortion_model, "K": self.K.tolist(),
-             "dist": self.dist.tolist(), "width": self.width, "height": self.height}
+             "dist": self.dist[:n].tolist(), "width": self.width, "height": self.height}
         d.update({n: float(getattr(self, n)) for n in self.param_names})
         if self.std_intrinsics is not None:
             d["std_intrinsics"] = self.std_intrinsics.tolist()
