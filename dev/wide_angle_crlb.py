@@ -24,9 +24,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def preset_sim(name: str) -> dict:
-    """The SimOptions fields a preset file sets (its scene, camera and noise groups, flattened)."""
+    """Every SimOptions field: the preset file's (its scene, camera and noise groups, flattened), else the
+    default."""
+    from simulate import SimOptions
+
     d = yaml.safe_load((ROOT / "conf" / "preset" / f"{name}.yaml").read_text())
-    return {k: v for g in ("scene", "lidar", "camera", "noise") for k, v in (d.get(g) or {}).items()}
+    return {**SimOptions().to_dict(), **{k: v for g in ("scene", "lidar", "camera", "noise")
+                                        for k, v in (d.get(g) or {}).items()}}
 
 
 def main(out: str, n: int, presets: list[str]) -> None:
