@@ -4,10 +4,13 @@ lens estimated under their stated prior."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from calib_core import calibrate
+from calib_core.data.camera import Camera
 from calib_core.data.cameras.pose import pose_from_corners
 from calib_core.geometry.metrics import nees
 from calib_core.geometry.transforms import matrix_to_rotvec
@@ -47,3 +50,28 @@ def test_lidarcam_estimates_a_lens_intrinsics_under_their_prior(lens):
     assert r.ok, r.reason
     assert r.info["intrinsics"] == ESTIMATED_INTRINSICS
     assert nees(r.T_lidar_cam, obs.T_lidar_cam_true, r.covariance) < 25      # chi2(6) 99.9% is 22.5
+
+
+def test_the_planner_places_boards_beside_a_wide_angle_lens():
+    from calib_core.planning.views import feasibility, rig_from_observations
+    obs = generate(SimOptions(**WIDE, **LENSES["ds180"]), seed=1)
+    rig = rig_from_observations(obs, obs.T_lidar_cam_true, 0.02, 0.5)
+    T_cl = rig.T_lidar_cam
+    # boards about 2 m from the camera, about 0, 45 and 70 deg off its axis, centred on the scan plane, facing it
+    poses = []
+    for deg in (0.0, 45.0, 70.0):
+        a = np.radians(deg)
+        c = T_cl[:3, :3] @ (2.0 * np.array([np.sin(a), 0.0, np.cos(a)])) + T_cl[:3, 3]
+        c[2] = 0.0                                                  # on the scan plane
+        z = c - T_cl[:3, 3]
+        z /= np.linalg.norm(z)
+        y = np.array([0.0, 0.0, -1.0])
+        x = np.cross(y, z)
+        T = np.eye(4)
+        T[:3, :3] = np.column_stack([x, y, z])
+        T[:3, 3] = c - T[:3, :3] @ np.r_[rig.corners_board[:, :2].mean(0), 0]
+        poses.append(T)
+    reason, _, _ = feasibility(rig, np.array(poses))
+    assert reason.tolist() == [-1, -1, -1]
+    pinhole = replace(rig, camera=Camera(obs.camera.K, [], obs.camera.width, obs.camera.height))
+    assert feasibility(pinhole, np.array(poses))[0][2] >= 0       # the same K as a pinhole misses the 70 deg board
