@@ -65,7 +65,7 @@ def test_the_intrinsics_error_of_a_lens_keeps_its_parameters_and_states_zero_for
 
 
 def test_the_simulate_verb_takes_a_lens(tmp_path):
-    from lidarcam_cli import main
+    from lidarcam.cli import main
     out = tmp_path / "w.json"
     assert main(["simulate", "--lens", "fisheye150", "--pose-mode", "pixel", "--focal-px", "380", "--out",
                  str(out)]) == 0

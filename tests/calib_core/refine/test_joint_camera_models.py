@@ -14,8 +14,8 @@ from calib_core.data.camera import Camera
 from calib_core.data.cameras.pose import pose_from_corners
 from calib_core.geometry.metrics import nees
 from calib_core.geometry.transforms import matrix_to_rotvec
+from calib_core.model.intrinsics import ESTIMATED_INTRINSICS
 from calib_core.refine.camera_side import board_pose_covariances
-from calib_core.refine.joint_intrinsics import ESTIMATED_INTRINSICS
 from simulate import SimOptions, generate
 from simulate.lens import LENSES
 
