@@ -301,6 +301,17 @@ def _newton(dist, x, y, xd, yd, iterations):
     return x, y, ok & np.isfinite(x) & np.isfinite(y)
 
 
+def view_depth(camera: CameraModel | None, P_cam: np.ndarray) -> np.ndarray:
+    """How far in front of ``camera`` points ``P_cam`` (...,3) lie, as the plausibility tests read it (metres):
+    Z for the pinhole ``Camera`` or no camera; for a wide-angle model, which sees beside and behind its axis, the
+    distance ``|P|`` where the model takes the point (``valid``) and ``-|P|`` where it does not."""
+    P = np.asarray(P_cam, float)
+    if camera is None or isinstance(camera, Camera):
+        return P[..., 2]
+    d = np.linalg.norm(P, axis=-1)
+    return np.where(camera.valid(P), d, -d)
+
+
 def intrinsics_jacobian(camera: CameraModel, P_cam: np.ndarray) -> np.ndarray:
     """d(u, v)/d(``camera.intrinsics``) (...,2,n) of ``project`` at camera-frame points ``P_cam`` (...,3) (metres):
     pixels per pixel for fx, fy, cx, cy, pixels per unit for the others. For ``Camera`` the order is (fx, fy, cx,

@@ -75,3 +75,18 @@ def test_the_planner_places_boards_beside_a_wide_angle_lens():
     assert reason.tolist() == [-1, -1, -1]
     pinhole = replace(rig, camera=Camera(obs.camera.K, [], obs.camera.width, obs.camera.height))
     assert feasibility(pinhole, np.array(poses))[0][2] >= 0       # the same K as a pinhole misses the 70 deg board
+
+
+def test_boards_beside_and_behind_a_wide_lens_axis_are_used():
+    # a double-sphere lens seeing about 200 deg across; boards over 230 deg of bearing, some beyond 90 deg off axis
+    o = SimOptions(pose_mode="pixel", n_boards=8, dist_min_m=1.0, dist_max_m=2.0, bearing_spread_deg=230.0,
+                   lidar_fov_deg=270.0, cam_model="ds", cam_params="-0.2,0.6", focal_px=250.0, cam_width=1280,
+                   cam_height=1024, max_attempts=5000)
+    for trial in (2, 4):
+        obs = generate(o, seed=1, trial=trial)
+        T = np.asarray(obs.meta["T_cam_board_true"])
+        centre_z = [(t[:3, :3] @ b.corners_board.mean(0) + t[:3, 3])[2] for t, b in zip(T, obs.boards, strict=True)]
+        assert min(centre_z) < -0.2                                   # a board centre behind the camera's plane
+        r = calibrate(obs, method="lidarcam")
+        assert r.ok and len(r.boards_used) == 8, r.warnings
+        assert nees(r.T_lidar_cam, obs.T_lidar_cam_true, r.covariance) < 25
