@@ -114,6 +114,11 @@ def _observed(o: SimOptions, K: np.ndarray, lens, T_cam_board: np.ndarray, spec:
                              o.image_noise_std, o.render_supersample)
     if o.pose_mode == "exact":
         return np.array(T_cam_board, float), None
+    if o.pose_mode == "image":
+        from .lens_render import image_corners
+
+        uv = image_corners(lens, T_cam_board, spec, rng, o.image_noise_std, o.render_supersample)
+        return pose_of(lens, P, uv), uv
     return lens_corners(lens, T_cam_board, P, o.pixel_noise_px, rng)
 
 

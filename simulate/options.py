@@ -35,10 +35,11 @@ class SimOptions:
 
     Camera: pinhole, ``focal_px``, ``cam_width`` x ``cam_height``, principal point at the image centre
     ((W-1)/2, (H-1)/2) in OpenCV's pixel-centre convention; ``cam_model`` and ``cam_params`` choose the lens
-    (``simulate.lens``: any model of ``calib_core.data.cameras`` on that K; ``pixel`` and ``exact`` modes only, the
-    pose then fitted through the model). ``pose_mode``: ``exact`` (true board poses), ``pixel`` (project the inner
-    corners, add ``pixel_noise_px`` Gaussian noise, solvePnP IPPE), ``image`` (render at ``render_supersample`` x
-    supersampling, add ``image_noise_std`` grey-level noise, detect with findChessboardCornersSB, solvePnP IPPE).
+    (``simulate.lens``: any model of ``calib_core.data.cameras`` on that K; ``image`` mode renders through it,
+    ``simulate.lens_render``; the pose is then fitted through the model). ``pose_mode``: ``exact`` (true board
+    poses), ``pixel`` (project the inner corners, add ``pixel_noise_px`` Gaussian noise, solvePnP IPPE), ``image``
+    (render at ``render_supersample`` x supersampling, add ``image_noise_std`` grey-level noise, detect with
+    findChessboardCornersSB, solvePnP IPPE).
     Boards must project at least ``image_margin_px`` inside the
     image and lie at least ``min_depth_m`` in front of the camera.
 
@@ -184,8 +185,6 @@ class SimOptions:
             from .lens import true_camera  # the lens models; ValueError naming the option when not valid
 
             true_camera(self)
-            need(self.pose_mode != "image", "pose_mode image renders through the pinhole only; with cam_model "
-                 f"{self.cam_model!r} use pixel or exact")
             need(self.distortion_error == 0 or self.cam_model == "pinhole-radtan",
                  "distortion_error draws OpenCV coefficients: it needs cam_model pinhole-radtan")
 

@@ -294,8 +294,10 @@ def _newton(dist, x, y, xd, yd, iterations):
         D = _distort_jacobian(dist, x, y, r2, a, b, rad)
         det = D[..., 0, 0] * D[..., 1, 1] - D[..., 0, 1] * D[..., 1, 0]
         det = np.where(np.abs(det) > 1e-12, det, 1e-12)
-        x = x - (D[..., 1, 1] * ex - D[..., 0, 1] * ey) / det
-        y = y - (-D[..., 1, 0] * ex + D[..., 0, 0] * ey) / det
+        sx, sy = (D[..., 1, 1] * ex - D[..., 0, 1] * ey) / det, (-D[..., 1, 0] * ex + D[..., 0, 0] * ey) / det
+        x, y = x - sx, y - sy
+        if np.nanmax(np.abs(np.r_[np.ravel(sx), np.ravel(sy)]), initial=0.0) < 1e-15:
+            break
     _, _, _, _, ex, ey = _distort(dist, x, y)
     ok = np.hypot(ex - xd, ey - yd) < 1e-10
     return x, y, ok & np.isfinite(x) & np.isfinite(y)

@@ -98,7 +98,11 @@ class Equidistant(FieldCamera):
         theta = np.minimum(rd, 0.5 * self.theta_max)
         for _ in range(40):
             g, dg = _theta_d(self.dist, theta)
-            theta = np.clip(theta - (g - rd) / np.where(dg > 1e-12, dg, 1e-12), 0.0, self.theta_max)
+            new = np.clip(theta - (g - rd) / np.where(dg > 1e-12, dg, 1e-12), 0.0, self.theta_max)
+            done = np.nanmax(np.abs(new - theta), initial=0.0) < 1e-14
+            theta = new
+            if done:
+                break
         ok = (np.abs(_theta_d(self.dist, theta)[0] - rd) < 1e-10) & (theta < self.theta_max)
         k = np.where(rd > 0, np.sin(theta) / np.where(rd > 0, rd, 1.0), 1.0)
         return np.stack([k * mx, k * my, np.cos(theta)], axis=-1), ok & np.isfinite(rd)
