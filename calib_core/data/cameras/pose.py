@@ -28,7 +28,7 @@ def homography_pose(rays: np.ndarray, xy: np.ndarray) -> np.ndarray:
     z = np.zeros_like(p)
     A = np.concatenate([np.hstack([z, -r[:, 2:3] * p, r[:, 1:2] * p]), np.hstack([r[:, 2:3] * p, z, -r[:, 0:1] * p]),
                         np.hstack([-r[:, 1:2] * p, r[:, 0:1] * p, z])])
-    H = np.linalg.svd(A)[2][-1].reshape(3, 3) @ N
+    H = np.linalg.svd(A, full_matrices=False)[2][-1].reshape(3, 3) @ N
     if np.mean(np.einsum("na,na->n", r, np.column_stack([xy, np.ones(len(xy))]) @ H.T)) < 0:
         H = -H
     lam = 2.0 / (np.linalg.norm(H[:, 0]) + np.linalg.norm(H[:, 1]))
