@@ -89,6 +89,7 @@ def cmd_report(args) -> int:
     from calib_core.data.result import load_result
     from rig.extract import extract
     from rig.report import write_report
+    from rig.result_match import result_fit
 
     from .outputs import writable_folder
 
@@ -106,13 +107,14 @@ def cmd_report(args) -> int:
 
             c = obs.camera
             ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist))
-    summary = write_report(ds, obs, res, args.out)
+    fit = result_fit(res, obs, args.result, args.obs or args.dataset)
+    summary = write_report(ds, obs, res, args.out, alerts=fit.warnings)
     from .wording import cli_hint
 
     for w in summary.warnings:
         print(f"warning: {cli_hint(w)}")
     print(f"wrote {summary.markdown} ({len(summary.overlays)} overlays, {len(summary.residual_plots)} residual plots)")
-    return 0 if res.get("ok") else 1
+    return 0 if res.get("ok") and fit.fits else 1
 
 
 def add_parsers(subparsers) -> None:

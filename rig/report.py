@@ -220,7 +220,7 @@ def _boards_md(observations: Observations, res: dict, Ti: np.ndarray, rms_mm: li
     return md
 
 
-def write_report(dataset: Dataset | None, observations: Observations, result, out_dir) -> ReportSummary:
+def write_report(dataset: Dataset | None, observations: Observations, result, out_dir, alerts=()) -> ReportSummary:
     """Write the report of ``result`` on ``observations`` (extracted from ``dataset``) into ``out_dir``.
 
     Files: ``overlay_<pose>.png`` (the image with the whole scan projected through ``T_cam_lidar``, coloured by
@@ -229,6 +229,8 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     bearing), ``extrinsic.yaml`` and ``report.md`` (the extrinsic both ways with quaternion (x, y, z, w) and
     translation, 1-sigma where the result has a covariance, per-board residual RMS, skipped poses, warnings).
     ``dataset`` may be None (no overlays). ``result``: a CalibrationResult, a ``load_result`` dict or a path.
+    ``alerts``: warnings that come first, under the title and in ``ReportSummary.warnings`` (e.g.
+    ``rig.result_match.result_fit``'s: the result does not fit these boards).
     """
     res = _as_result(result)
     out = Path(out_dir)
@@ -236,9 +238,10 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     md = [f"# lidarcam calibration report ({res['method']})", ""]
     if dataset is not None:
         md += [f"Dataset: `{dataset.root}`, {len(dataset.poses)} poses, {observations.n_boards} used.", ""]
+    md += [f"**Warning: {a}**" for a in alerts] + ([""] if alerts else [])
     skipped = (observations.meta or {}).get("skipped") or {}
     skipped_md = ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""] if skipped else []
-    summary = ReportSummary(out / "report.md")
+    summary = ReportSummary(out / "report.md", warnings=list(alerts))
     if not res["ok"] or res["T_lidar_cam"] is None:
         md += ["**The calibration failed**: " + str(res.get("reason")), ""] + skipped_md
         summary.warnings.append(f"calibration failed: {res.get('reason')}")
@@ -260,8 +263,8 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     clim = overlay_clim_mm(np.concatenate(d_mm) if d_mm else [])  # one colour range for every board's overlay
     links = _board_plots(dataset, observations, res, Ti, out, summary, rms_mm, clim)
     md += _boards_md(observations, res, Ti, rms_mm, mean_mm, links) + skipped_md
-    every = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
-    summary.warnings = list(dict.fromkeys(every))  # the method's own board-set warnings are the library's too
+    every = summary.warnings + report_warnings(observations, rms_mm, T) + list(res.get("warnings") or [])
+    summary.warnings = list(dict.fromkeys(every))  # alerts first; the method's board-set warnings are the library's too
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
     md += ["## Capture plan", "", capture_verdict(observations, T), ""]
     md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
