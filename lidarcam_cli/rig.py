@@ -113,7 +113,9 @@ def cmd_report(args) -> int:
 
     for w in summary.warnings:
         print(f"warning: {cli_hint(w)}")
-    print(f"wrote {summary.markdown} ({len(summary.overlays)} overlays, {len(summary.residual_plots)} residual plots)")
+    views = f", {len(summary.board_views)} board views" if summary.board_views else ""
+    print(f"wrote {summary.html} and {summary.markdown.name} ({len(summary.overlays)} overlays, "
+          f"{len(summary.residual_plots)} residual plots{views})")
     return 0 if res.get("ok") and fit.fits else 1
 
 

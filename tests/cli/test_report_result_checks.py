@@ -73,7 +73,9 @@ def test_another_sets_result_without_fingerprint_does_not_fit(sets, capsys):
     first = out.splitlines()[0]
     assert rc == 1 and first.startswith("warning: THE RESULT DOES NOT FIT THESE BOARDS: median board residual")
     md = (sets / "rep_old" / "report.md").read_text()
-    assert md.splitlines()[2].startswith("**Warning: THE RESULT DOES NOT FIT")
+    assert md.index("**Warning: THE RESULT DOES NOT FIT") < md.index("## Extrinsic")  # above the answer
+    page = (sets / "rep_old" / "report.html").read_text()
+    assert page.index('class="warn alert"><ul><li>THE RESULT DOES NOT FIT') < page.index("<h2>Answer</h2>")
 
 
 def test_a_rotation_three_times_too_large_is_a_misfit_exit_1(sets, capsys):
