@@ -52,7 +52,7 @@ def summary_figure(path: Path, observations: Observations, T_lidar_cam: np.ndarr
     with the scans' noise ``noise_mm`` and the level ``misfit_mm`` above which a median says the result does not
     fit."""
     fig = _figure(11.0, 5.0)
-    ax = fig.add_axes((0.06, 0.2, 0.40, 0.72))
+    ax = fig.add_axes((0.08, 0.2, 0.38, 0.72))
     for i, b in enumerate(observations.boards):
         colour = REJECTED if i in rejected else USED
         ax.plot(b.scan[:, 0], b.scan[:, 1], ".", ms=2.5, color=colour)

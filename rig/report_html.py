@@ -117,7 +117,7 @@ def _num(v, spec: str) -> str:
 
 
 def _matrix(M: np.ndarray) -> str:
-    rows = "".join("<tr>" + "".join(f"<td>{v: .6f}</td>" for v in r) + "</tr>" for r in M)
+    rows = "".join("<tr>" + "".join(f"<td>{v + 0.0: .6f}</td>" for v in np.round(r, 6)) + "</tr>" for r in M)
     return f'<table class="m">{rows}</table>'
 
 

@@ -93,3 +93,16 @@ def test_chromium_renders_every_image(reports, tmp_path):
     png = reports["images"][0].overlays[0]
     assert _loaded(browser, reports["alone"][0].html, tmp_path,
                    f'<img src="{png.as_uri()}"><img src="data:image/png;base64,AAAA">') == (11, 13)
+
+
+def test_residual_bearings_stay_one_run_behind_the_lidar():
+    # a board behind the lidar spans +-180 deg: its residual plot's bearings are one run, not two ends of the axis
+    import numpy as np
+
+    from rig.report import _bearing_deg
+
+    a = np.radians(np.linspace(170.0, 190.0, 21))
+    b = _bearing_deg(np.column_stack([np.cos(a), np.sin(a)]) * 3.0)
+    assert np.allclose(np.abs(np.diff(b)), 1.0) and np.ptp(b) == pytest.approx(20.0)
+    ahead = _bearing_deg(np.column_stack([np.cos(a - np.pi), np.sin(a - np.pi)]))
+    np.testing.assert_allclose(ahead, np.linspace(-10.0, 10.0, 21), atol=1e-9)
