@@ -82,7 +82,8 @@ def cmd_extract(args) -> int:
 
 
 def cmd_report(args) -> int:
-    """``lidarcam report``: overlays, residual plots and report.md for a result on a dataset."""
+    """``lidarcam report``: the result checked against the observations (``rig.result_match``), then overlays,
+    residual plots, report.md and report.html for it on a dataset or an observation file."""
     from pathlib import Path
 
     from calib_core.data.io import load_observations
@@ -130,9 +131,12 @@ def add_parsers(subparsers) -> None:
     _add_extract_options(p)
     p.set_defaults(func=cmd_extract)
 
-    p = subparsers.add_parser("report", help="overlays, residual plots and report.md of a calibration result",
-                              description="Project the scans into the images through the result's extrinsic, "
-                                          "plot residuals per board and write report.md.")
+    p = subparsers.add_parser("report", help="report.html (one self-contained page) and report.md of a calibration "
+                              "result: overlays, residuals, verdict",
+                              description="Check that the result belongs to these boards, project the scans into the "
+                                          "images through the result's extrinsic (boards face-on for observations "
+                                          "without images), plot residuals per board and write report.html and "
+                                          "report.md. Exit 1 when the result failed or does not fit the boards.")
     p.add_argument("dataset", help="dataset folder, or an observation JSON (no overlays then)")
     p.add_argument("result", help="lidarcam.result/1 JSON (from lidarcam calibrate --out)")
     p.add_argument("--out", required=True, help="folder to write the report into")
