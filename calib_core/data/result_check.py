@@ -18,6 +18,8 @@ from .observations import MAX_BOARDS, numeric_array, orthonormalised
 
 INVERSE_TOL = 1e-6
 """Largest entry of ``T_cam_lidar @ T_lidar_cam - I`` accepted (the file's two directions must agree)."""
+MAX_TRANSLATION_M = 1000.0
+"""Longest translation a result's transform may hold (metres): beyond it, a unit mistake or garbage."""
 COVARIANCE_TOL = 1e-9
 """Relative asymmetry and negative eigenvalue (of the largest) a covariance may have from rounding."""
 TEXT_FIELDS = ("method", "reason", "covariance_model", "note", "intrinsics")
@@ -47,6 +49,9 @@ def _transform(value, name: str) -> np.ndarray:
         raise ObservationError(f"not a rigid transform: the rotation block is not a rotation ({why})", field=name)
     if not np.allclose(T[3], [0, 0, 0, 1]):
         raise ObservationError("not a rigid transform: the last row is not [0, 0, 0, 1]", field=name)
+    if np.max(np.abs(T[:3, 3])) > MAX_TRANSLATION_M:
+        raise ObservationError(f"a translation of {np.max(np.abs(T[:3, 3])):.3g} m along an axis, more than the "
+                               f"limit of {MAX_TRANSLATION_M:g} m (metres expected)", field=name)
     return T
 
 
@@ -55,7 +60,7 @@ def _covariance(value) -> np.ndarray:
     scale = float(np.max(np.abs(C))) or 1.0
     if np.max(np.abs(C - C.T)) > COVARIANCE_TOL * scale:
         raise ObservationError("not a covariance: not symmetric", field="covariance")
-    if np.linalg.eigvalsh(C)[0] < -COVARIANCE_TOL * scale:
+    if np.linalg.eigvalsh(C / scale)[0] < -COVARIANCE_TOL:
         raise ObservationError("not a covariance: a negative eigenvalue", field="covariance")
     return C
 
@@ -81,6 +86,10 @@ def _check_scalars(d: dict) -> None:
         for name, v in (d.get(k) or {}).items():
             if not _is_number(v):
                 raise ObservationError(f"expected a finite number, got {str(v)[:20]!r}", field=f"{k}.{name}")
+    stamp = d.get("observations")
+    if stamp is not None and (isinstance(stamp.get("boards"), bool) or not isinstance(stamp.get("boards"), int)
+                              or not isinstance(stamp.get("sha256"), str)):
+        raise ObservationError("expected {\"boards\": a count, \"sha256\": text}", field="observations")
     for k, names in NESTED_NUMBERS.items():
         for name in names:
             if d.get(k) is not None and not _is_number(d[k].get(name)):
