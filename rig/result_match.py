@@ -54,9 +54,9 @@ def _named_boards(res: dict):
         yield f"boards_used[{i}]", int(b)
     for i, r in enumerate(res.get("boards_rejected") or []):
         yield f"boards_rejected[{i}].index", int(r["index"])
-    verdict = res.get("verdict")
-    for i, b in enumerate(verdict.get("boards") or [] if isinstance(verdict, dict) else []):
-        if isinstance(b, dict) and isinstance(b.get("board"), int):
+    boards = (res.get("verdict") or {}).get("boards")  # free-form: only the indices it names are read
+    for i, b in enumerate(boards if isinstance(boards, list) else []):
+        if isinstance(b, dict) and isinstance(b.get("board"), int) and not isinstance(b["board"], bool):
             yield f"verdict.boards[{i}].board", b["board"]
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import ObservationError
 from ..geometry.transforms import ROTATION_TOL, invert_T, rotation_defect
-from .observations import MAX_BOARDS, numeric_array, orthonormalised
+from .observations import LOAD_ROTATION_TOL, MAX_BOARDS, numeric_array, orthonormalised
 
 INVERSE_TOL = 1e-6
 """Largest entry of ``T_cam_lidar @ T_lidar_cam - I`` accepted (the file's two directions must agree)."""
@@ -42,7 +42,11 @@ def _board_index(v, name: str) -> int:
 
 def _transform(value, name: str) -> np.ndarray:
     """A 4x4 rigid transform (rotation re-orthonormalised when written with few decimals)."""
-    T, _ = orthonormalised(value, name)
+    A = numeric_array(value, name, (4, 4))
+    if np.max(np.abs(A[:3, :3])) > 1.0 + LOAD_ROTATION_TOL:  # before any product of it can overflow
+        raise ObservationError(f"not a rigid transform: the rotation block holds {np.max(np.abs(A[:3, :3])):.3g}, "
+                               "a rotation's entries lie within [-1, 1]", field=name)
+    T, _ = orthonormalised(A, name)
     defect = rotation_defect(T[:3, :3])
     if defect > ROTATION_TOL:
         why = "its determinant is not positive" if not math.isfinite(defect) else f"|R^T R - I| = {defect:.2g}"
