@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 import calib_core
 from calib_core.data.io import load_observations, save_observations
-from lidarcam_cli import main
+from lidarcam.cli import main
 from simulate import SimOptions, generate
 
 OTHER_RIG = dict(extrinsic_rot_deg=25.0, extrinsic_trans_min_m=0.3, extrinsic_trans_max_m=0.4)
@@ -181,8 +181,8 @@ def test_mutated_result_files_load_or_fail_in_one_line(sets, seed, tmp_path):
     # checks against the set, or raises the library's one error; where one loads, the report is written
     from calib_core.data.result import load_result
     from calib_core.errors import LidarcamError
-    from rig.report import write_report
-    from rig.result_match import result_fit
+    from lidarcam.rig.report import write_report
+    from lidarcam.rig.result_match import result_fit
 
     rng = np.random.default_rng(seed)
     base = json.loads((sets / "a.res.json").read_text())

@@ -14,8 +14,8 @@ import pytest
 import calib_core
 from calib_core.data.io import save_observations
 from calib_core.data.result import CalibrationResult
-from rig.report import write_report
-from rig.report_html import CSP
+from lidarcam.rig.report import write_report
+from lidarcam.rig.report_html import CSP
 from simulate import SimOptions, generate
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")
@@ -27,8 +27,8 @@ PROBE = ('<script>addEventListener("load", () => { const im = [...document.image
 @pytest.fixture(scope="module")
 def reports(tmp_path_factory):
     """Reports of a dataset with images (overlays) and of observations alone (board views), and a failed one."""
-    from rig.dataset import load_dataset
-    from rig.extract import extract
+    from lidarcam.rig.dataset import load_dataset
+    from lidarcam.rig.extract import extract
     from simulate.dataset import write_dataset
 
     tmp = tmp_path_factory.mktemp("html")
@@ -99,7 +99,7 @@ def test_residual_bearings_stay_one_run_behind_the_lidar():
     # a board behind the lidar spans +-180 deg: its residual plot's bearings are one run, not two ends of the axis
     import numpy as np
 
-    from rig.report import _bearing_deg
+    from lidarcam.rig.report import _bearing_deg
 
     a = np.radians(np.linspace(170.0, 190.0, 21))
     b = _bearing_deg(np.column_stack([np.cos(a), np.sin(a)]) * 3.0)
