@@ -320,6 +320,27 @@ def _noise_mm(observations: Observations) -> float | None:
         return None
 
 
+def _headline(res: dict, n_boards: int, n_rejected: int, rms_mm: list[float], noise_mm: float | None,
+              misfit: bool) -> str:
+    """The answer at a glance: whether it fits (``misfit``: the median residual is above the level at which
+    ``lidarcam.rig.result_match`` says it does not), the 1-sigma, the boards used, the median residual against the
+    scans' noise."""
+    verdict = res.get("verdict") if isinstance(res.get("verdict"), dict) else {}
+    state = "does not fit these boards" if misfit else "the method's own test finds the data contradict it" \
+        if verdict.get("consistent") is False else "ok"
+    parts = [f"{res['method']}: {state}"]
+    cov = res.get("covariance")
+    if cov is not None:
+        cov = np.asarray(cov, float)
+        parts.append(f"1-sigma {sigma_rot_deg(cov):.2f} deg, {1000 * sigma_trans_m(cov):.1f} mm")
+    parts.append(f"{n_boards - n_rejected} of {n_boards} boards used")
+    if rms_mm:
+        med = float(np.median(rms_mm))
+        parts.append(f"median board residual {med:.1f} mm" + (f" ({med / noise_mm:.1f} x the scans' noise)"
+                                                               if noise_mm else ""))
+    return "; ".join(parts)
+
+
 def _fill_page(page: HtmlReport, observations: Observations, res: dict, T: np.ndarray, rms_mm: list[float],
                mean_mm: list[float], images: list[list], out: Path, warnings: list[str]) -> None:
     """The HTML page's answer, summary figure, fit line and board cards."""
@@ -338,6 +359,8 @@ def _fill_page(page: HtmlReport, observations: Observations, res: dict, T: np.nd
         page.fit = (f"Median board residual RMS {med:.1f} mm against the scans' own noise {noise:.1f} mm (from "
                     f"their lines alone): {med / max(noise, 1e-9):.1f} x; above {misfit:.0f} mm the result would "
                     "not fit these boards.")
+    misfits = bool(finite) and misfit is not None and float(np.median(finite)) > misfit
+    page.headline = _headline(res, observations.n_boards, len(rejected), finite, noise, misfits)
     reproj = (observations.meta or {}).get("reproj_rms_px") or []
     page.cards = [BoardCard(i, names[i], len(b.scan), rms_mm[i], mean_mm[i],
                             reproj[i] if i < len(reproj) and isinstance(reproj[i], (int, float)) else None,

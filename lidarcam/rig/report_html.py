@@ -40,7 +40,8 @@ th { background: #f3f3f3; } td.n { text-align: right; font-variant-numeric: tabu
 table.m td { font-family: ui-monospace, Menlo, Consolas, monospace; text-align: right; border: none;
        padding: 0.1em 0.7em; } table.m { border-left: 2px solid #444; border-right: 2px solid #444; }
 .answer { display: flex; flex-wrap: wrap; gap: 0 3em; } .answer > div { flex: 1 1 440px; }
-.big { font-size: 1.15em; } code, pre { font-family: ui-monospace, Menlo, Consolas, monospace; }
+.big { font-size: 1.15em; } .big.bad { color: #c62828; }
+code, pre { font-family: ui-monospace, Menlo, Consolas, monospace; }
 pre { background: #f6f8fa; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
 img { max-width: 100%; height: auto; display: block; }
 .cards { display: grid; grid-template-columns: repeat(auto-fill, minmax(520px, 1fr)); gap: 1.2em; }
@@ -74,6 +75,8 @@ class HtmlReport:
     alerts: int = 0
     """How many of the first ``warnings`` say the result is not to be used (drawn in red)."""
     failure: str | None = None
+    headline: str | None = None
+    """The answer at a glance, under the title."""
     result: dict = field(default_factory=dict)
     T_lidar_cam: np.ndarray | None = None
     truth: str | None = None
@@ -219,7 +222,11 @@ def _boards(r: HtmlReport) -> str:
 
 def render(r: HtmlReport) -> str:
     """The page's text."""
-    parts = [f"<h1>{_e(r.title)}</h1>", *(f'<p class="sub">{_e(t)}</p>' for t in r.intro), "<h2>Warnings</h2>",
+    glance = r.headline or (f"The calibration failed: {r.failure}" if r.failure else "")
+    bad = " bad" if r.alerts or r.failure or "does not fit" in glance else ""
+    parts = [f"<h1>{_e(r.title)}</h1>", *(f'<p class="sub">{_e(t)}</p>' for t in r.intro),
+             f'<p class="big{bad}"><b>{_e(glance)}</b></p>' if glance else "",
+             "<h2>Warnings</h2>",
              _warnings(r), _answer(r)]
     if r.summary_png is not None:
         parts += ["<h2>Summary</h2>", _img(r.summary_png, "summary: the boards from above and their residuals")]

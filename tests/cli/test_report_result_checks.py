@@ -90,6 +90,8 @@ def test_a_rotation_three_times_too_large_is_a_misfit_exit_1(sets, capsys):
     m = out.splitlines()[0]
     assert rc == 1 and "DOES NOT FIT" in m, out
     assert float(m.split("median board residual ")[1].split(" mm")[0]) > 300
+    page = (sets / "rep_triple" / "report.html").read_text()
+    assert '<p class="big bad"><b>lidarcam: does not fit these boards;' in page
 
 
 def test_other_observations_that_fit_give_a_warning(sets, capsys):

@@ -61,6 +61,7 @@ def test_the_page_reads_in_order_and_escapes_its_text(reports):
                                      "<h2>Verdict and plan</h2>", "<h2>Boards</h2>", "<h2>Extrinsic as YAML</h2>")]
     assert order == sorted(order)
     assert 'class="warn alert"><ul><li>THE RESULT DOES NOT FIT &lt;these&gt; BOARDS</li>' in text
+    assert re.search(r"<b>lidarcam: ok; 1-sigma [\d.]+ deg, [\d.]+ mm; 5 of 5 boards used; median board residual", text)
     for needle in ("<code>T_lidar_cam</code>", "maps camera points into the lidar frame", "<code>T_cam_lidar</code>",
                    "1-sigma: rotation", "Capture plan:", "the scans&#x27; own noise", "face-on"):
         assert needle in text, needle
