@@ -24,10 +24,15 @@ COVARIANCE_TOL = 1e-9
 """Relative asymmetry and negative eigenvalue (of the largest) a covariance may have from rounding."""
 TEXT_FIELDS = ("method", "reason", "covariance_model", "note", "intrinsics")
 NUMBER_FIELDS = ("seconds", "conditioning", "sigma_rot_deg", "sigma_trans_mm")
-DICT_FIELDS = ("verdict", "degeneracy", "prior", "board_dispersion", "covariance_bend", "observations")
+DICT_FIELDS = ("verdict", "degeneracy", "prior", "board_dispersion", "covariance_bend", "observations", "noise",
+               "residual_rms")
 NUMBER_DICTS = ("mounting", "mounting_sigma", "fixed")
 NESTED_NUMBERS = {"board_dispersion": ("statistic", "dof", "p_value"),
-                  "covariance_bend": ("departure_sigmas", "sigma_rot_deg_laplace", "sigma_trans_mm_laplace")}
+                  "covariance_bend": ("departure_sigmas", "sigma_rot_deg_laplace", "sigma_trans_mm_laplace"),
+                  "residual_rms": ("answer_m",)}
+"""Numbers inside an object field that the readers format (required where the object is given)."""
+OPTIONAL_NUMBERS = {"residual_rms": ("start_m",), "noise": ("scan_lines_m", "trimmed_m", "joint_m", "verdict_spread_m")}
+"""Numbers inside an object field that may be null."""
 
 
 def _is_number(v) -> bool:
@@ -99,6 +104,25 @@ def _check_scalars(d: dict) -> None:
             if d.get(k) is not None and not _is_number(d[k].get(name)):
                 raise ObservationError(f"expected a finite number, got {str(d[k].get(name))[:20]!r}",
                                        field=f"{k}.{name}")
+    for k, names in OPTIONAL_NUMBERS.items():
+        for name in names:
+            v = (d.get(k) or {}).get(name)
+            if v is not None and not _is_number(v):
+                raise ObservationError(f"expected a finite number or null, got {str(v)[:20]!r}", field=f"{k}.{name}")
+    _check_verdict(d.get("verdict"))
+
+
+def _check_verdict(v) -> None:
+    """The parts of ``verdict`` the readers take (``data.outcome.VerdictPart``); the rest is free-form."""
+    if v is None:
+        return
+    if v.get("consistent") is not None and not isinstance(v["consistent"], bool):
+        raise ObservationError("expected true, false or null", field="verdict.consistent")
+    if v.get("reason") is not None and not isinstance(v["reason"], str):
+        raise ObservationError("expected text or null", field="verdict.reason")
+    for k in ("warnings", "causes"):
+        if not isinstance(v.get(k, []), list) or not all(isinstance(w, str) for w in v.get(k, [])):
+            raise ObservationError("expected a list of text lines", field=f"verdict.{k}")
 
 
 def _check_boards(d: dict) -> None:
