@@ -310,16 +310,6 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     return summary
 
 
-def _noise_mm(observations: Observations) -> float | None:
-    """The scans' range noise (mm) from their lines alone (``calib_core.data.lines.range_sigma``), or None."""
-    from calib_core.data.lines import range_sigma
-
-    try:
-        return 1000 * range_sigma(observations)
-    except (LidarcamError, ValueError, np.linalg.LinAlgError):
-        return None
-
-
 def _headline(res: dict, n_boards: int, n_rejected: int, rms_mm: list[float], noise_mm: float | None,
               misfit: bool) -> str:
     """The answer at a glance: whether it fits (``misfit``: the median residual is above the level at which
@@ -344,12 +334,12 @@ def _headline(res: dict, n_boards: int, n_rejected: int, rms_mm: list[float], no
 def _fill_page(page: HtmlReport, observations: Observations, res: dict, T: np.ndarray, rms_mm: list[float],
                mean_mm: list[float], images: list[list], out: Path, warnings: list[str]) -> None:
     """The HTML page's answer, summary figure, fit line and board cards."""
-    from .result_match import MISFIT_FLOOR_MM, MISFIT_NOISE_FACTOR
+    from .result_match import MISFIT_FLOOR_MM, MISFIT_NOISE_FACTOR, scan_noise_mm
 
     page.warnings, page.T_lidar_cam = warnings, T
     rejected = {int(r["index"]): str(r["reason"]) for r in res.get("boards_rejected") or []}
     names = [_pose_name(observations, i) for i in range(observations.n_boards)]
-    noise = _noise_mm(observations)
+    noise = scan_noise_mm(observations)
     misfit = None if noise is None else max(MISFIT_NOISE_FACTOR * noise, MISFIT_FLOOR_MM)
     page.summary_png = summary_figure(out / "summary.png", observations, T, rms_mm, names, set(rejected),
                                       noise if noise is not None else math.nan, misfit)

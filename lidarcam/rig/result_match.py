@@ -48,6 +48,16 @@ class ResultFit:
     warnings: list[str] = field(default_factory=list)
 
 
+def scan_noise_mm(obs: Observations) -> float | None:
+    """The scans' range noise (mm) from their lines alone (``calib_core.data.lines.range_sigma``), or None where
+    the lines give none."""
+    try:
+        noise = 1000 * range_sigma(obs)
+    except (LidarcamError, ValueError, np.linalg.LinAlgError):
+        return None
+    return noise if np.isfinite(noise) else None
+
+
 def _named_boards(res: dict):
     """(field, board index) of every board the result names."""
     for i, b in enumerate(res.get("boards_used") or []):
@@ -74,7 +84,8 @@ def result_fit(res: dict, obs: Observations, result_name: str, obs_name: str) ->
         raise ResultMismatch(f"{result_name}: computed from {stamp['boards']} boards (field 'observations'), but "
                              f"{obs_name} has {n}: the result of another board set")
     other = isinstance(stamp, dict) and stamp.get("sha256") not in (None, mine["sha256"])
-    noise_mm = 1000 * range_sigma(obs)
+    noise_mm = scan_noise_mm(obs)
+    noise_mm = 0.0 if noise_mm is None else noise_mm  # unknown: the floor alone judges
     if res.get("T_lidar_cam") is None:
         return ResultFit(None, noise_mm, True, other)
     Ti = invert_T(np.asarray(res["T_lidar_cam"], float))
@@ -82,8 +93,9 @@ def result_fit(res: dict, obs: Observations, result_name: str, obs_name: str) ->
            for b in obs.boards]
     med = float(np.median(rms))
     fits = not (med > MISFIT_NOISE_FACTOR * noise_mm and med > MISFIT_FLOOR_MM)
-    misfit = (f"median board residual {med:.0f} mm, {med / max(noise_mm, 1e-9):.0f} x the scans' noise "
-              f"({noise_mm:.1f} mm)")
+    misfit = f"median board residual {med:.0f} mm, " + (
+        f"{med / noise_mm:.0f} x the scans' noise ({noise_mm:.1f} mm)" if noise_mm > 0 else
+        f"above {MISFIT_FLOOR_MM:.0f} mm (the scans' noise unknown)")
     if other and not fits:
         raise ResultMismatch(f"{result_name}: computed from other observations than {obs_name} (field "
                              f"'observations': another fingerprint) and does not fit them ({misfit}): the result "
