@@ -296,6 +296,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     summary.board_rms_mm = rms_mm
     clim = overlay_clim_mm(np.concatenate(d_mm) if d_mm else [])  # one colour range for every board's overlay
     links, images = _board_plots(dataset, observations, res, Ti, out, summary, rms_mm, clim)
+    md += ["## Summary", "", "![the boards from above, residual RMS per board](summary.png)", ""]
     md += _boards_md(observations, res, Ti, rms_mm, mean_mm, links) + skipped_md
     every = summary.warnings + report_warnings(observations, rms_mm, T) + list(res.get("warnings") or [])
     summary.warnings = list(dict.fromkeys(every))  # alerts first; the method's board-set warnings are the library's too

@@ -65,6 +65,7 @@ def test_the_page_reads_in_order_and_escapes_its_text(reports):
     for needle in ("<code>T_lidar_cam</code>", "maps camera points into the lidar frame", "<code>T_cam_lidar</code>",
                    "1-sigma: rotation", "Capture plan:", "the scans&#x27; own noise", "face-on"):
         assert needle in text, needle
+    assert "](summary.png)" in reports["alone"][0].markdown.read_text()
     assert len(reports["alone"][0].board_views) == 5 and not reports["alone"][0].overlays
     assert len(reports["images"][0].overlays) == 4 and not reports["images"][0].board_views
     failed = reports["failed"][0].html.read_text()
