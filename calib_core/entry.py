@@ -13,6 +13,7 @@ from .data.observations import Observations
 from .data.result import CalibrationResult, observations_fingerprint
 from .errors import CalibrationError, SolveFailure, UncertaintyError
 from .geometry.mounting import MountingPrior
+from .methods.last_steps import PRIOR_CONTRADICTS
 from .model.residuals import range_residuals
 from .registry import METHODS, check_options, get_method
 
@@ -111,6 +112,9 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
         info["warnings"] = warnings + [w for w in v.warnings if w not in warnings]
         if not v.consistent and not m.paper:
             causes = [w for w in v.warnings if w.startswith("likely cause")]
+            if prior is not None and any(w.startswith(PRIOR_CONTRADICTS) for w in info["warnings"]):
+                causes.insert(0, f"likely cause: {PRIOR_CONTRADICTS} (see the warnings; calibrate without it or "
+                                 "widen its sigmas)")
             return CalibrationResult(method, False, None, f"{method}: the data contradict the answer: {v.reason}"
                                      + "".join(f"; {c}" for c in causes), cands, time.perf_counter() - t0,
                                      info=info)

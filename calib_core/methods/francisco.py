@@ -44,19 +44,21 @@ def msac_errors(obs: Observations, candidates: np.ndarray) -> np.ndarray:
     least-squares lines, which the code's Plucker line fit equals (its centred problem is block diagonal).
     """
     n, d = obs.planes_cam()
-    a_c = -n / (1e3 * d)[:, None]                                              # (N,3) 1/mm
+    with np.errstate(divide="ignore", invalid="ignore"):  # a plane through the camera centre has no dual point
+        a_c = -n / (1e3 * d)[:, None]                                          # (N,3) 1/mm
     lines = scan_lines(obs)
     p0 = np.column_stack([1e3 * lines.centroid, np.full(obs.n_boards, MSAC_SCAN_PLANE_Z_MM)])  # (N,3) mm
     u = np.column_stack([lines.direction, np.zeros(obs.n_boards)])           # (N,3)
     C = np.asarray(candidates, float).reshape(-1, 4, 4)
     t = 1e3 * C[:, :3, 3] + np.array([0.0, 0.0, MSAC_SCAN_PLANE_Z_MM])       # (M,3) mm
-    Ra = np.einsum("mij,nj->mni", C[:, :3, :3], a_c)                           # (M,N,3)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a_l = Ra / (1.0 - np.einsum("mni,mi->mn", Ra, t))[..., None]
-    r = np.stack([np.einsum("mni,ni->mn", a_l, p0) + 1.0, np.einsum("mni,ni->mn", a_l, u)], axis=-1)
     A = np.stack([p0, u], axis=1)                                              # (N,2,3)
     G = np.linalg.inv(A @ np.swapaxes(A, 1, 2))                                # (N,2,2)
-    return np.sqrt(np.maximum(np.einsum("mna,nab,mnb->mn", r, G, r), 0.0))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        Ra = np.einsum("mij,nj->mni", C[:, :3, :3], a_c)                       # (M,N,3)
+        a_l = Ra / (1.0 - np.einsum("mni,mi->mn", Ra, t))[..., None]
+        r = np.stack([np.einsum("mni,ni->mn", a_l, p0) + 1.0, np.einsum("mni,ni->mn", a_l, u)], axis=-1)
+        err = np.sqrt(np.maximum(np.einsum("mna,nab,mnb->mn", r, G, r), 0.0))
+    return np.where(np.isnan(err), np.inf, err)                               # no dual point: never an inlier
 
 
 def msac_select(obs: Observations, cands, threshold: float = MSAC_THRESHOLD_PER_MM):

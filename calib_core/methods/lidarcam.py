@@ -32,6 +32,7 @@ from .last_steps import (
     NO_CORNERS,
     fixed_calibration,
     fold_covariance,
+    prior_contradiction,
     prior_fixed,
     prior_info,
     range_covariance,
@@ -175,6 +176,7 @@ def finish(found: Found, opts: LidarcamOptions):
     if joint is not None:
         T, cov, jinfo = joint
         if prior is not None:  # the joint model's answer is the posterior's mode; its covariance the data's
+            jinfo.setdefault("warnings", []).extend(filter(None, [prior_contradiction(T, cov, prior)]))
             cov = with_prior(T, cov, prior)
     else:
         T, cov = best.T, fold_covariance(obs_u, best.T, deg) if deg.profile.any() else \
@@ -184,6 +186,7 @@ def finish(found: Found, opts: LidarcamOptions):
             cov, disp = widened_range_covariance(obs_u, T, cov, sigma_given, tests.info.get("boards_used"))
             jinfo.update(disp)
         if prior is not None:  # the refinement held the prior already: its information only
+            jinfo["warnings"].extend(filter(None, [prior_contradiction(T, cov, prior)]))
             cov = with_prior(T, cov, prior)
         if why is not None and why != NO_CORNERS:
             jinfo["warnings"].append(f"{why}; covariance of the range model only")
