@@ -186,8 +186,9 @@ def _nesting_depth(text: str) -> int:
     return int(np.cumsum(step).max(initial=0))
 
 
-def load_observations(path) -> Observations:
-    """Read and validate an observation JSON file; raises ObservationError naming file, board, field."""
+def read_json(path):
+    """The parsed JSON of a lidarcam file (size, encoding and nesting bounded first); ObservationError naming the
+    file otherwise. NaN/Infinity literals parse to floats: the caller's checks reject them naming the field."""
     path = Path(path)
     try:
         size = path.stat().st_size
@@ -202,10 +203,14 @@ def load_observations(path) -> Observations:
         raise ObservationError(f"brackets nested {depth} deep, more than the limit of {MAX_JSON_DEPTH}",
                                file=str(path))
     try:
-        # NaN/Infinity literals parse to floats here so that validation rejects them naming board and field
-        data = json.loads(text)
+        return json.loads(text)
     except (ValueError, RecursionError) as exc:
         raise ObservationError(f"not valid JSON ({str(exc)[:200]})", file=str(path)) from None
+
+
+def load_observations(path) -> Observations:
+    """Read and validate an observation JSON file; raises ObservationError naming file, board, field."""
+    data = read_json(path)
     return observations_from_dict(data, source=str(path))
 
 
