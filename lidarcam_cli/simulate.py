@@ -24,7 +24,9 @@ def add_parsers(subparsers) -> argparse.ArgumentParser:
         description="Simulate boards seen by a 2D lidar and a camera (docs/METHOD.md) and write them "
                     "with their ground truth as a lidarcam.observations/1 file.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--seed", type=int, default=0, help="base seed")
+    from .demo import seed_type
+
+    p.add_argument("--seed", type=seed_type, default=0, help="base seed (an integer >= 0)")
     p.add_argument("--trial", type=int, default=0, help="trial index (each trial has its own random stream)")
     p.add_argument("--out", required=True, help="output JSON path")
     g = p.add_argument_group("simulation options (SimOptions)")
