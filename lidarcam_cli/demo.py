@@ -95,19 +95,6 @@ def list_topics(path) -> int:
     return 0
 
 
-def seed_type(text: str) -> int:
-    """argparse type of a simulation seed: an integer >= 0 (numpy's seeds)."""
-    import argparse
-
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {v}")
-    return v
-
-
 def add_parsers(subparsers) -> None:
     """Register the ``demo`` verb on an argparse subparsers object."""
     p = subparsers.add_parser(
@@ -117,5 +104,7 @@ def add_parsers(subparsers) -> None:
                     "the lidarcam commands that calibrate each.")
     p.add_argument("out", help="folder to write (new, empty, or an earlier demo's, which is replaced; written "
                    "whole or not at all)")
+    from .argtypes import seed_type
+
     p.add_argument("--seed", type=seed_type, default=1, help="simulation seed (default: %(default)s)")
     p.set_defaults(func=cmd_demo)

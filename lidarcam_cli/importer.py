@@ -212,6 +212,8 @@ def cmd_import(args) -> int:
 
 def add_parsers(subparsers) -> None:
     """Register the ``import`` verb on an argparse subparsers object."""
+    from .argtypes import finite_float
+
     p = subparsers.add_parser("import", help="calibration data in other formats -> a dataset folder or observations",
                               description=__doc__.split("\n\n")[0], epilog="formats: " + ", ".join(FORMATS),
                               formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -223,8 +225,8 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--image-name", default="RGB{n}.png", help="radlocc: image file of laser line n "
                    "(default: %(default)s)")
     p.add_argument("--lines", help="radlocc: laser lines FIRST-LAST to read (1-based; default all)")
-    p.add_argument("--start-deg", type=float, help="ranges: bearing of the first beam (deg, counter-clockwise)")
-    p.add_argument("--step-deg", type=float, help="ranges: bearing step between beams (deg)")
+    p.add_argument("--start-deg", type=finite_float, help="ranges: bearing of the first beam (deg, counter-clockwise)")
+    p.add_argument("--step-deg", type=finite_float, help="ranges: bearing step between beams (deg)")
     p.add_argument("--unit", default="mm", choices=tuple(UNIT_M), help="ranges: range unit (default: %(default)s)")
     p.add_argument("--suffix", default=".log", help="ranges: scan file suffix (default: %(default)s)")
     p.add_argument("--camera", help="camera file: ROS / OpenCV YAML or XML, Kalibr, or MATLAB text "
@@ -232,7 +234,7 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--intrinsics", metavar="FX,FY,CX,CY", help="the camera matrix instead of --camera (pixels)")
     p.add_argument("--dist", metavar="K1,K2,P1,P2[,K3]", help="distortion with --intrinsics (OpenCV order)")
     p.add_argument("--board-grid", metavar="COLSxROWS", help="inner corners of the checkerboard, e.g. 9x6")
-    p.add_argument("--square", type=float, metavar="M", help="side of one square (metres)")
+    p.add_argument("--square", type=finite_float, metavar="M", help="side of one square (metres)")
     p.add_argument("--points", help="bouguet: segmented scan points CSV (pose,x_m,y_m; pose = image index)")
     p.add_argument("--poses", help="segmented: board poses CSV (pose, R_cam_board_00..22, t_cam_board_x/y/z_mm)")
     p.add_argument("--no-corners", action="store_true", help="bouguet: leave the detected corners out")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from dataclasses import MISSING, fields
 
@@ -24,7 +25,7 @@ def add_parsers(subparsers) -> argparse.ArgumentParser:
         description="Simulate boards seen by a 2D lidar and a camera (docs/METHOD.md) and write them "
                     "with their ground truth as a lidarcam.observations/1 file.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    from .demo import seed_type
+    from .argtypes import finite_float, seed_type
 
     p.add_argument("--seed", type=seed_type, default=0, help="base seed (an integer >= 0)")
     p.add_argument("--trial", type=int, default=0, help="trial index (each trial has its own random stream)")
@@ -36,7 +37,7 @@ def add_parsers(subparsers) -> argparse.ArgumentParser:
         if f.type == "bool":
             g.add_argument(*names, dest=f.name, action=argparse.BooleanOptionalAction, default=default)
         else:
-            kind = {"int": int, "float": float, "str": str}[f.type]
+            kind = {"int": int, "float": finite_float, "str": str}[f.type]
             g.add_argument(*names, dest=f.name, type=kind, default=default, metavar=f.type.upper())
     p.set_defaults(func=run)
     return p
@@ -55,8 +56,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         options = SimOptions(**{f.name: getattr(args, f.name) for f in fields(SimOptions)})
         obs = generate(options, seed=args.seed, trial=args.trial)
-    except (ValueError, SceneError) as exc:
-        print(f"lidarcam simulate: {exc}", file=sys.stderr)
+    except (ValueError, SceneError) as exc:  # SimOptions names its field: name the option instead
+        msg = re.sub(r"^SimOptions: (\w+)", lambda m: _flag(m.group(1)), str(exc))
+        print(f"lidarcam simulate: error: {msg}", file=sys.stderr)
         return 2
     save_observations(obs, args.out)
     print(f"wrote {args.out}: {obs.n_boards} boards, {sum(len(b.scan) for b in obs.boards)} scan points")

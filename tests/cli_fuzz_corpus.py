@@ -82,3 +82,61 @@ PREPARE = {
     "binary_board": _write("binboard.yaml", b"\x00\xff" * 300),
     "bad_db3": _write("badbag/badbag.db3", b"SQLite format 3\x00" + b"\x00" * 200),
 }
+
+
+def _bag(*extra: str, board: str = "{S}/board.yaml", bag: str = "{S}/badbag") -> tuple[str, ...]:
+    return ("bag", bag, "--image-topic", "/camera/image_raw", "--scan-topic", "/scan", "--camera-info-topic",
+            "/camera/camera_info", "--board", board, "--out", "{S}/bagds", *extra)
+
+
+def _cal(*extra: str, obs: str = "{S}/obs.json") -> tuple[str, ...]:
+    return ("calibrate", obs, *extra)
+
+
+PRIOR = ("--prior", "x=0,y=0,z=0.1,roll=0,pitch=-3,yaw=0")
+
+CASES = [
+    # import radlocc: the laser header, the image name, the grid, the square, the camera file
+    CliCase("radlocc_count_inf", _radlocc(), "field N", "laser_inf"),
+    CliCase("radlocc_count_nan", _radlocc(), "field N", "laser_nan"),
+    CliCase("radlocc_start_nan", _radlocc(), "field StartAngleRad", "laser_nan_start"),
+    CliCase("radlocc_image_name_unknown_brace", _radlocc("--image-name", "RGB{m}.png"), "--image-name"),
+    CliCase("radlocc_image_name_unclosed_brace", _radlocc("--image-name", "RGB{n.png"), "--image-name"),
+    CliCase("radlocc_image_name_no_brace", _radlocc("--image-name", "RGB.png"), "--image-name"),
+    CliCase("radlocc_grid_0x6", _radlocc()[:-6] + ("--board-grid", "0x6", "--square", "0.1", "--out", "{S}/ds"),
+            "--board-grid"),
+    CliCase("radlocc_square_in_mm", _radlocc()[:-4] + ("--square", "100", "--out", "{S}/ds"), "mm"),
+    CliCase("radlocc_square_nan", _radlocc()[:-4] + ("--square", "nan", "--out", "{S}/ds"), "--square"),
+    CliCase("radlocc_camera_xml_junk", _radlocc()[:5] + ("--camera", "{S}/cam.xml") + _radlocc()[7:], "cam.xml",
+            "xml_junk"),
+    CliCase("radlocc_camera_xml_nan", _radlocc()[:5] + ("--camera", "{S}/cam.xml") + _radlocc()[7:], "cam.xml",
+            "xml_nan"),
+    CliCase("radlocc_camera_xml_binary", _radlocc()[:5] + ("--camera", "{S}/cam.xml") + _radlocc()[7:], "cam.xml",
+            "xml_binary"),
+    CliCase("pcd_text_count", ("import", "pcd", "{S}/pcd", "--images", "{S}/img", "--camera", "{S}/camera.yaml",
+                               "--board-grid", "7x6", "--square", "0.1", "--out", "{S}/ds"), "000.pcd",
+            "pcd_text_count"),
+    # plan on a binary file
+    CliCase("plan_binary_rig", ("plan", "{S}/bin.yaml"), "bin.yaml", "binary_rig"),
+    # bag: a corrupt db3, a binary board file, a NaN time offset
+    CliCase("bag_corrupt_db3", _bag(), "badbag", "bad_db3"),
+    CliCase("bag_binary_board", _bag(board="{S}/binboard.yaml"), "binboard.yaml", "binary_board"),
+    CliCase("bag_time_offset_nan", _bag("--time-offset", "nan"), "--time-offset"),
+    CliCase("bag_time_offset_inf", _bag("--time-offset", "inf"), "--time-offset"),
+    # calibrate: intrinsics' sigmas, priors, fixed values
+    CliCase("std_intrinsics_1e9", _cal("--std-intrinsics", "1e9,1e9,1e9,1e9"), "std_intrinsics"),
+    CliCase("std_intrinsics_dist_1e9", _cal("--std-intrinsics", "1,1,1,1,1e9,0,0,0,0"), "std_intrinsics"),
+    CliCase("prior_sigma_1e-300", _cal(*PRIOR, "--prior-sigma", "1e-300mm,1e-300deg"), "--prior-sigma"),
+    CliCase("prior_sigma_1e300", _cal(*PRIOR, "--prior-sigma", "1e300mm,1e300deg"), "--prior-sigma"),
+    CliCase("prior_sigma_negative", _cal(*PRIOR, "--prior-sigma", "-50mm,10deg"), "--prior-sigma"),
+    CliCase("prior_sigma_no_unit", _cal(*PRIOR, "--prior-sigma", "50,10deg"), "--prior-sigma"),
+    CliCase("fix_roll_400", _cal("--fix", "roll=400"), "roll"),
+    CliCase("fix_z_in_degrees", _cal("--fix", "z=11deg"), "z"),
+    CliCase("fix_x_1e9", _cal("--fix", "x=1e9"), "x_m"),
+    CliCase("fix_nan", _cal("--fix", "pitch=nan"), "pitch"),
+    CliCase("calibrate_out_is_input", _cal("--out", "{S}/obs.json"), "obs.json"),
+    # demo, simulate
+    CliCase("demo_seed_negative", ("demo", "{S}/demo", "--seed", "-1"), "--seed"),
+    CliCase("simulate_noise_negative", ("simulate", "--noise-mm", "-5", "--out", "{S}/sim.json"), "--noise-mm"),
+]
+"""Each case: exit 2, one line ``lidarcam VERB: error: ...`` naming ``names``."""

@@ -82,7 +82,8 @@ class Camera:
         d12 = np.zeros(12)
         d12[:min(len(dist), 12)] = dist[:12]
         if self.std_intrinsics is not None:
-            object.__setattr__(self, "std_intrinsics", _checked_std(self.std_intrinsics, len(dist)))
+            object.__setattr__(self, "std_intrinsics", _checked_std(self.std_intrinsics, len(dist),
+                                                                    max(self.width, self.height)))
         K.setflags(write=False)
         d12.setflags(write=False)
         object.__setattr__(self, "K", K)
@@ -113,9 +114,11 @@ class Camera:
         return Camera(K, v[4:], self.width, self.height)
 
 
-def _checked_std(std, n_dist: int) -> np.ndarray:
+def _checked_std(std, n_dist: int, size_px: float) -> np.ndarray:
     """``std_intrinsics`` as a read-only float array; ObservationError naming the field when it is not a list of
-    4 or 4 + ``n_dist`` finite non-negative numbers."""
+    4 or 4 + ``n_dist`` finite non-negative numbers, or a pixel 1-sigma exceeds 1000 times the image's larger side
+    ``size_px`` or a distortion coefficient's exceeds 1e4 (an intrinsic that uncertain is unknown, not a prior:
+    its weight vanishes from the normal equations, which turn singular)."""
     try:
         s = np.array(std, dtype=float).ravel()
     except (TypeError, ValueError) as exc:
@@ -127,6 +130,12 @@ def _checked_std(std, n_dist: int) -> np.ndarray:
         raise _fail("contains NaN or inf", "std_intrinsics")
     if np.any(s < 0):
         raise _fail(f"negative standard deviation {s.min():g}", "std_intrinsics")
+    if np.any(s[:4] > 1000 * size_px):
+        raise _fail(f"a 1-sigma of {s[:4].max():g} px exceeds 1000 times the image's {size_px:g} px: the "
+                    "intrinsics would be unknown, not a prior", "std_intrinsics")
+    if np.any(s[4:] > 1e4):
+        raise _fail(f"a distortion coefficient's 1-sigma of {s[4:].max():g} exceeds 1e4: the distortion would be "
+                    "unknown, not a prior", "std_intrinsics")
     s.setflags(write=False)
     return s
 
