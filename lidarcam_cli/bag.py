@@ -7,6 +7,8 @@ recording -> a dataset folder (docs/dataset.md) of still frames paired with scan
 
 from __future__ import annotations
 
+from pathlib import Path
+
 
 def cmd_bag(args) -> int:
     """``lidarcam bag``: pick, pair and write; prints the reason counts and the sync (``--list-topics``: the
@@ -16,7 +18,8 @@ def cmd_bag(args) -> int:
     from rig.frombag import bag_to_dataset
     from rig.stills import PickOptions
 
-    from .outputs import writable_folder
+    from .importer import is_dataset_folder
+    from .outputs import replaced_folder
 
     opts = PickOptions(max_poses=args.max_poses, still_px=args.still_px, quiet_grey=args.quiet_grey,
                        min_run=args.min_run, scan_still_m=args.scan_still, min_angle_deg=args.min_angle,
@@ -30,11 +33,12 @@ def cmd_bag(args) -> int:
                            ("--board", args.board), ("--out", args.out)) if v is None]
     if need:
         raise DatasetError(f"{', '.join(need)} required (or --list-topics to see the bag's topics)", file=args.bag)
-    writable_folder(args.out, "--out")
     eo = ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma)
-    conv = bag_to_dataset(args.bag, args.out, args.image_topic, args.scan_topic, args.board,
-                          camera_info_topic=args.camera_info_topic, camera_path=args.camera, opts=opts,
-                          extract_opts=eo)
+    with replaced_folder(args.out, "--out", is_dataset_folder, "a dataset folder") as scratch:
+        conv = bag_to_dataset(args.bag, scratch, args.image_topic, args.scan_topic, args.board,
+                              camera_info_topic=args.camera_info_topic, camera_path=args.camera, opts=opts,
+                              extract_opts=eo)
+    conv.out = Path(args.out)
     print(conv.summary())
     est = conv.sync.get("estimate")
     if est is not None and not est["reliable"]:
