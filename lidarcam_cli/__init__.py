@@ -10,7 +10,7 @@ import sys
 from calib_core.errors import LidarcamError
 
 from . import bag, demo, importer, plan, rig, simulate
-from .extras import add_optional, missing_extra
+from .extras import add_optional, mark_missing, missing_extra
 from .intrinsics_flag import STD_INTRINSICS_HELP, with_std_intrinsics
 from .outputs import OutputError, writable_file
 from .wording import cli_hint
@@ -195,12 +195,13 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--parent-sensor", choices=("lidar", "camera"), default="lidar",
                     help="which sensor --parent-frame names (default: %(default)s, publishing T_lidar_cam)")
     sp.set_defaults(func=_cmd_calibrate)
-    add_optional(sub, "simulate", simulate.add_parsers)
+    add_optional(sub, "simulate", simulate.add_parsers, simulate.SUMMARY)
     rig.add_parsers(sub)
     importer.add_parsers(sub)
     bag.add_parsers(sub)
     demo.add_parsers(sub)
     plan.add_parsers(sub)
+    mark_missing(sub)
     return p
 
 

@@ -7,6 +7,7 @@ import re
 import sys
 from dataclasses import MISSING, fields
 
+SUMMARY = "write one simulated lidar-camera calibration problem (observations JSON)"
 # Short spellings kept next to the generated one-flag-per-field names.
 ALIASES = {"n_boards": ["--boards"]}
 
@@ -21,7 +22,7 @@ def add_parsers(subparsers) -> argparse.ArgumentParser:
     from simulate.options import SimOptions  # the simulator needs lidarcam[rig] (OpenCV)
 
     p = subparsers.add_parser(
-        "simulate", help="write one simulated lidar-camera calibration problem (observations JSON)",
+        "simulate", help=SUMMARY,
         description="Simulate boards seen by a 2D lidar and a camera (docs/METHOD.md) and write them "
                     "with their ground truth as a lidarcam.observations/1 file.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)

@@ -49,6 +49,9 @@ def make_sources(root: Path) -> Path:
     obs = generate(SimOptions(n_boards=5, pose_mode="pixel"), seed=2, trial=0)
     (root / "obs.json").write_text(json.dumps(observations_to_dict(obs)))
     (root / "board.yaml").write_text("cols: 7\nrows: 6\nsquare_m: 0.1\n")
+    from rig.plan_rig import template_text
+
+    (root / "rig.yaml").write_text(template_text())
     return root
 
 
@@ -65,7 +68,21 @@ def _write(name: str, data: bytes | str):
     return prep
 
 
+def _rig_edit(old: str, new: str):
+    def prep(root: Path) -> None:
+        p = root / "rig.yaml"
+        text = p.read_text()
+        assert old in text
+        p.write_text(text.replace(old, new))
+    return prep
+
+
 PREPARE = {
+    "rig_huge_grid": _rig_edit("steps: {distance_m: 3, bearing_deg: 7, height_m: 1, turn_deg: 5, lean_deg: 5, "
+                               "roll_deg: 1}", "steps: {distance_m: 30, bearing_deg: 70, height_m: 10, turn_deg: 50, "
+                               "lean_deg: 50, roll_deg: 10}"),
+    "rig_huge_beams": _rig_edit("resolution_deg: 0.25", "resolution_deg: 0.0000001"),
+    "rig_fov_1e6": _rig_edit("fov_deg: 180.0", "fov_deg: 1000000.0"),
     "laser_inf": _write("laser.txt", _laser_line(LASER_HEAD.replace(" 181", " inf")) + "\n"),
     "laser_nan": _write("laser.txt", _laser_line(LASER_HEAD.replace(" 181", " nan")) + "\n"),
     "laser_nan_start": _write("laser.txt", _laser_line(LASER_HEAD.replace("-1.5707963", "nan")) + "\n"),
@@ -118,6 +135,10 @@ CASES = [
             "pcd_text_count"),
     # plan on a binary file
     CliCase("plan_binary_rig", ("plan", "{S}/bin.yaml"), "bin.yaml", "binary_rig"),
+    CliCase("plan_rig_huge_grid", ("plan", "{S}/rig.yaml"), "workspace.steps", "rig_huge_grid"),
+    CliCase("plan_rig_huge_beams", ("plan", "{S}/rig.yaml"), "resolution_deg", "rig_huge_beams"),
+    CliCase("plan_rig_fov_1e6", ("plan", "{S}/rig.yaml"), "fov_deg", "rig_fov_1e6"),
+    CliCase("plan_next_huge", ("plan", "{S}/rig.yaml", "--next", "100000000"), "--next"),
     # bag: a corrupt db3, a binary board file, a NaN time offset
     CliCase("bag_corrupt_db3", _bag(), "badbag", "bad_db3"),
     CliCase("bag_binary_board", _bag(board="{S}/binboard.yaml"), "binboard.yaml", "binary_board"),
