@@ -20,6 +20,7 @@ def cmd_bag(args) -> int:
 
     from .importer import is_dataset_folder
     from .outputs import replaced_folder
+    from .wording import cli_hint
 
     opts = PickOptions(max_poses=args.max_poses, still_px=args.still_px, quiet_grey=args.quiet_grey,
                        min_run=args.min_run, scan_still_m=args.scan_still, min_angle_deg=args.min_angle,
@@ -48,7 +49,7 @@ def cmd_bag(args) -> int:
     if not conv.poses:
         print("no still frame passed: see the reasons in picking.json")
         return 1
-    print(f"capture plan: {_capture_verdict(conv.out, eo)}")
+    print(f"capture plan: {cli_hint(_capture_verdict(conv.out, eo))}")
     return 0
 
 
