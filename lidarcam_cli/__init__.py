@@ -48,6 +48,12 @@ def _print_ros(ros) -> None:
     print("  URDF:  " + ros.urdf_joint().replace("\n", "\n         "))
 
 
+def _sigmas(std) -> str:
+    """``fx 1.2, fy 1.2, cx 2, cy 2 px[, dist 0.01, ...]`` of a std_intrinsics vector."""
+    px = ", ".join(f"{n} {v:.3g}" for n, v in zip(("fx", "fy", "cx", "cy"), std[:4], strict=False)) + " px"
+    return px + (", dist " + ", ".join(f"{v:.3g}" for v in std[4:]) if len(std) > 4 else "")
+
+
 def _same_file(a, b) -> bool:
     """Whether the paths ``a`` and ``b`` name one existing file."""
     import os
@@ -70,7 +76,11 @@ def _cmd_calibrate(args) -> int:
             raise OutputError(f"{flag} {path}: is the observation file this run reads; give another name")
     obs = load_observations(args.observations)
     if args.std_intrinsics:
+        stated = None if obs.camera is None else obs.camera.std_intrinsics
         obs = with_std_intrinsics(obs, args.std_intrinsics)
+        if stated is not None:
+            print(f"intrinsics' 1-sigma: --std-intrinsics {args.std_intrinsics} used "
+                  f"({_sigmas(obs.camera.std_intrinsics)}), not the file's camera.std_intrinsics ({_sigmas(stated)})")
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
     if args.prior or args.prior_sigma:
         options["prior"] = parse_prior(args.prior, args.prior_sigma)
