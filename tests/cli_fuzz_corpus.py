@@ -49,7 +49,7 @@ def make_sources(root: Path) -> Path:
     obs = generate(SimOptions(n_boards=5, pose_mode="pixel"), seed=2, trial=0)
     (root / "obs.json").write_text(json.dumps(observations_to_dict(obs)))
     (root / "board.yaml").write_text("cols: 7\nrows: 6\nsquare_m: 0.1\n")
-    from rig.plan_rig import template_text
+    from lidarcam.rig.plan_rig import template_text
 
     (root / "rig.yaml").write_text(template_text())
     return root

@@ -42,7 +42,7 @@ BLOCKED = textwrap.dedent("""
             if name.split(".")[0] in BLOCK:
                 raise ModuleNotFoundError(f"No module named {name!r}", name=name)
     sys.meta_path.insert(0, Blocker())
-    from lidarcam_cli import main
+    from lidarcam.cli import main
     sys.exit(main(sys.argv[1:]))
 """)
 
@@ -54,7 +54,7 @@ def _lidarcam_without_extras(*argv: str, cwd: Path):
 
 @pytest.fixture(scope="module")
 def obs_file(tmp_path_factory):
-    from lidarcam_cli import main
+    from lidarcam.cli import main
 
     path = tmp_path_factory.mktemp("extras") / "obs.json"
     assert main(["simulate", "--boards", "6", "--seed", "1", "--out", str(path)]) == 0
@@ -69,7 +69,7 @@ def test_the_library_verbs_run_without_the_extras(obs_file):
 
 @pytest.mark.parametrize("argv", [["simulate", "--boards", "6", "--out", "s.json"],
                                   ["report", "obs.json", "r.json", "--out", "rep"],
-                                  ["plan", str(ROOT / "rig" / "plan_template.yaml")],
+                                  ["plan", str(ROOT / "lidarcam" / "rig" / "plan_template.yaml")],
                                   ["demo", "demo"]])
 def test_a_verb_of_a_missing_extra_is_one_line_naming_it(argv, obs_file):
     r = _lidarcam_without_extras(*argv, cwd=obs_file.parent)

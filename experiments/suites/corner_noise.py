@@ -26,7 +26,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from rig.markdown import md_table, num  # noqa: E402
+from lidarcam.rig.markdown import md_table, num  # noqa: E402
 
 from ..config.sweeps import experiment_cells  # noqa: E402
 from ..engine.catalog import PAPER_METHODS, method_colour, method_label, method_order  # noqa: E402

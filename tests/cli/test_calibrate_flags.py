@@ -11,7 +11,7 @@ import pytest
 
 from calib_core import CalibrationError, calibrate, load_observations, observations_to_dict
 from calib_core.geometry.mounting import MountingPrior, parse_text
-from lidarcam_cli import main
+from lidarcam.cli import main
 from simulate import SimOptions, generate
 
 

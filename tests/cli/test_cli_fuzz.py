@@ -8,7 +8,7 @@ import warnings
 import pytest
 from cli_fuzz_corpus import CASES, PREPARE, make_sources
 
-from lidarcam_cli import main
+from lidarcam.cli import main
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import pytest
 
-import lidarcam_cli.demo as demo
-from lidarcam_cli import main
+import lidarcam.cli.demo as demo
+from lidarcam.cli import main
 
 
 def _fake_writer(marker: str, interrupt: bool = False):

@@ -19,7 +19,7 @@ BLOCKED = textwrap.dedent("""
             if name.split(".")[0] in BLOCK:
                 raise ModuleNotFoundError(f"No module named {name!r}", name=name)
     sys.meta_path.insert(0, Blocker())
-    from lidarcam_cli import main
+    from lidarcam.cli import main
     sys.exit(main(sys.argv[1:]))
 """)
 
@@ -56,7 +56,7 @@ def test_help_without_the_rig_extra_names_it_for_every_verb_that_needs_it():
 def test_help_with_everything_installed_names_no_extra(capsys):
     import pytest
 
-    from lidarcam_cli import main
+    from lidarcam.cli import main
 
     with pytest.raises(SystemExit):
         main(["--help"])

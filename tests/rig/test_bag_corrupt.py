@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
-from lidarcam_cli import main
+from lidarcam.cli import main
 from simulate import SimOptions
 from simulate.recording import RecordingOptions, write_recording_bag
 

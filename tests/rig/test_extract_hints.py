@@ -9,7 +9,7 @@ import shutil
 
 import pytest
 
-from lidarcam_cli import main
+from lidarcam.cli import main
 from simulate import SimOptions
 from simulate.dataset import write_dataset
 
@@ -76,9 +76,9 @@ def test_no_usable_pose_is_exit_1(dataset, tmp_path, capsys):
 
 
 def test_the_capture_plan_of_extract_speaks_fix(dataset, tmp_path, capsys, monkeypatch):
-    import rig.report
+    import lidarcam.rig.report
 
-    monkeypatch.setattr(rig.report, "capture_verdict", lambda obs: "vertical boards: calibrate the rest with "
+    monkeypatch.setattr(lidarcam.rig.report, "capture_verdict", lambda obs: "vertical boards: calibrate the rest with "
                         "fixed={'roll_deg': ..., 'z_m': ...}")
     assert main(["extract", str(dataset), "--out", str(tmp_path / "o.json")]) == 0
     plan = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("capture plan:"))
