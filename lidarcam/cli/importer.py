@@ -120,7 +120,9 @@ def check_range_units(poses, unit: str | None) -> None:
         hint = "; check the unit the source states"
     else:
         raw = med / UNIT_M[unit]
-        hint = next((f"; the ranges look like {n}: --unit {n}" for n in UNIT_M if lo <= raw * UNIT_M[n] <= hi), "")
+        fits = [n for n in UNIT_M if lo <= raw * UNIT_M[n] <= hi]  # the likeliest: nearest a few metres
+        best = min(fits, key=lambda n: abs(math.log(raw * UNIT_M[n] / math.sqrt(lo * hi))), default=None)
+        hint = f"; the ranges look like {best}: --unit {best}" if best else ""
         unit = f"--unit {unit}"
     raise ImportUsageError(f"median range {med:g} m{f' with {unit}' if unit else ''} is not a plausible lidar "
                            f"range ({lo:g} to {hi:g} m){hint}")
@@ -176,11 +178,11 @@ def cmd_import(args) -> int:
     from calib_core.data.io import save_observations
     from lidarcam.rig import importing
 
-    from .outputs import replaced_folder, writable_file
+    from .outputs import replaceable_folder, replaced_folder, writable_file
 
     if args.format in DATASET_FORMATS:
         _need(args, "images", "board_grid", "square")
-        out = Path(args.out)
+        out = replaceable_folder(args.out, "--out", is_dataset_folder, "a dataset folder")
         _not_inside(out, SRC=args.src, **{"--images": args.images, "--camera": args.camera})
         grid = _grid(args)
         poses = _source_poses(args)

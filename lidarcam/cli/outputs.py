@@ -82,6 +82,16 @@ def _listing(p: Path, n: int = 4) -> str:
     return ", ".join(names[:n]) + (f" and {len(names) - n} more" if len(names) > n else "")
 
 
+def replaceable_folder(path, flag: str, own: Callable[[Path], bool], what: str) -> Path:
+    """``path`` as a Path once ``replaced_folder`` can write it (checked before any work); OutputError otherwise."""
+    p = Path(path)
+    writable_folder(p, flag)
+    _probe(_existing_ancestor(p.absolute().parent, flag, path), flag, path)  # the scratch folder goes beside it
+    if p.is_dir() and any(p.iterdir()) and not own(p):
+        raise OutputError(f"{flag} {path}: holds {_listing(p)}, which is not {what}; give a new or empty folder")
+    return p
+
+
 @contextmanager
 def replaced_folder(path, flag: str, own: Callable[[Path], bool], what: str):
     """Write a folder whole or not at all: yields a scratch folder beside ``path``; when the block ends it takes
@@ -90,11 +100,7 @@ def replaced_folder(path, flag: str, own: Callable[[Path], bool], what: str):
 
     A ``path`` holding anything else (``own`` false: another rig's poses, the user's files) is an OutputError
     before any work, naming what it holds; ``what`` names the verb's output for the messages."""
-    p = Path(path)
-    writable_folder(p, flag)
-    _probe(_existing_ancestor(p.absolute().parent, flag, path), flag, path)  # the scratch folder goes beside it
-    if p.is_dir() and any(p.iterdir()) and not own(p):
-        raise OutputError(f"{flag} {path}: holds {_listing(p)}, which is not {what}; give a new or empty folder")
+    p = replaceable_folder(path, flag, own, what)
     scratch = p.parent / f".{p.name}.partial-{os.getpid()}"
     if scratch.exists():
         shutil.rmtree(scratch)
