@@ -49,10 +49,32 @@ def make_sources(root: Path) -> Path:
     obs = generate(SimOptions(n_boards=5, pose_mode="pixel"), seed=2, trial=0)
     (root / "obs.json").write_text(json.dumps(observations_to_dict(obs)))
     (root / "board.yaml").write_text("cols: 7\nrows: 6\nsquare_m: 0.1\n")
+    _bouguet(root / "calib.mat")
+    (root / "points.csv").write_text("pose,x_m,y_m\n" + "".join(f"{k},{2.0 + 0.01 * i},{-0.2 + 0.02 * i}\n"
+                                                                 for k in (1, 2) for i in range(20)))
     from lidarcam.rig.plan_rig import template_text
 
     (root / "rig.yaml").write_text(template_text())
     return root
+
+
+def _bouguet(path: Path, **edit) -> None:
+    """A two-image Bouguet ``Calib_Results.mat`` (``edit``: fields replaced)."""
+    from scipy.io import savemat
+
+    X = np.array([[0, 23, 0, 23], [0, 0, 23, 23], [0, 0, 0, 0]], float)
+    d = {"fc": [[500.0], [600.0]], "cc": [[320.0], [240.0]], "alpha_c": [[0.0]],
+         "kc": [[0.1], [-0.2], [0.001], [0.002], [0.0]], "nx": [[640]], "ny": [[480]], "n_ima": [[2]],
+         "active_images": [[1, 1]], "dX": [[23.0]]}
+    for k in (1, 2):
+        d[f"Rc_{k}"], d[f"Tc_{k}"] = np.eye(3), np.array([[0.0], [0.0], [2000.0 + 100 * k]])
+        d[f"x_{k}"], d[f"X_{k}"] = np.arange(8.0).reshape(2, 4), X
+    d.update(edit)
+    savemat(path, d)
+
+
+def _mat(**edit):
+    return lambda root: _bouguet(root / "calib.mat", **edit)
 
 
 def _radlocc(*extra: str) -> tuple[str, ...]:
@@ -78,6 +100,13 @@ def _rig_edit(old: str, new: str):
 
 
 PREPARE = {
+    "mat_nx_nan": _mat(nx=[[np.nan]]),
+    "mat_ny_inf": _mat(ny=[[np.inf]]),
+    "mat_n_ima_inf": _mat(n_ima=[[np.inf]]),
+    "mat_n_ima_huge": _mat(n_ima=[[1e12]]),
+    "mat_no_active": _mat(active_images=[[0, 0]]),
+    "mat_fc_nan": _mat(fc=[[np.nan], [600.0]]),
+    "mat_dx_nan": _mat(dX=[[np.nan]]),
     "rig_huge_grid": _rig_edit("steps: {distance_m: 3, bearing_deg: 7, height_m: 1, turn_deg: 5, lean_deg: 5, "
                                "roll_deg: 1}", "steps: {distance_m: 30, bearing_deg: 70, height_m: 10, turn_deg: 50, "
                                "lean_deg: 50, roll_deg: 10}"),
@@ -133,6 +162,11 @@ CASES = [
     CliCase("pcd_text_count", ("import", "pcd", "{S}/pcd", "--images", "{S}/img", "--camera", "{S}/camera.yaml",
                                "--board-grid", "7x6", "--square", "0.1", "--out", "{S}/ds"), "000.pcd",
             "pcd_text_count"),
+    # import bouguet: NaN sizes, no active image, counts that are no counts
+    *[CliCase(f"bouguet_{k}", ("import", "bouguet", "{S}/calib.mat", "--points", "{S}/points.csv", "--out",
+                               "{S}/b.json"), field, f"mat_{k}")
+      for k, field in (("nx_nan", "nx"), ("ny_inf", "ny"), ("n_ima_inf", "n_ima"), ("n_ima_huge", "n_ima"),
+                       ("no_active", "no active image"), ("fc_nan", "fc"), ("dx_nan", "dX"))],
     # plan on a binary file
     CliCase("plan_binary_rig", ("plan", "{S}/bin.yaml"), "bin.yaml", "binary_rig"),
     CliCase("plan_rig_huge_grid", ("plan", "{S}/rig.yaml"), "workspace.steps", "rig_huge_grid"),
