@@ -17,6 +17,7 @@ At the edges (user options, reports) the names carry their units: ``roll_deg``, 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,9 +37,12 @@ R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
 def params_from_T(T_lidar_cam: np.ndarray) -> np.ndarray:
-    """``theta = (roll, pitch, yaw, x, y, z)`` (radians, metres) of a 4x4 ``T_lidar_cam``."""
+    """``theta = (roll, pitch, yaw, x, y, z)`` (radians, metres) of a 4x4 ``T_lidar_cam``; at pitch +-90 deg (the
+    singularity of the module docstring) roll is 0 and yaw carries the turn, without scipy's warning."""
     T = np.asarray(T_lidar_cam, float)
-    yaw, pitch, roll = Rotation.from_matrix(T[:3, :3] @ R_BODY_OPTICAL.T).as_euler("ZYX")
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Gimbal lock detected", category=UserWarning)
+        yaw, pitch, roll = Rotation.from_matrix(T[:3, :3] @ R_BODY_OPTICAL.T).as_euler("ZYX")
     return np.r_[roll, pitch, yaw, T[:3, 3]]
 
 

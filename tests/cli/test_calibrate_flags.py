@@ -83,3 +83,19 @@ def test_a_file_sigma_of_1e_300_holds_the_intrinsics_exact(obs_file, tmp_path):
     tiny.write_text(json.dumps(d))
     res, exact = calibrate(load_observations(tiny)), calibrate(load_observations(obs_file))
     assert res.ok == exact.ok and np.allclose(res.T_lidar_cam, exact.T_lidar_cam, atol=1e-9)
+
+
+@pytest.mark.parametrize("pose,sigma", [("x=1000,y=-1000,z=1000,roll=180,pitch=90,yaw=-180", "1000000mm,180deg"),
+                                        ("x=0,y=0,z=0.1,roll=0,pitch=-3,yaw=0", "0.001mm,0.0000573deg"),
+                                        ("x=0,y=0,z=0.1,roll=0,pitch=90,yaw=0", "0.001mm,180deg")])
+def test_extreme_priors_give_no_warning_and_no_nan(obs_file, tmp_path, capsys, pose, sigma):
+    import warnings
+
+    out = tmp_path / "r.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        code = main(["calibrate", str(obs_file), "--prior", pose, "--prior-sigma", sigma, "--out", str(out)])
+    assert code in (0, 1)
+    text = out.read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    assert "nan" not in capsys.readouterr().out.lower().replace("nanoseconds", "")
