@@ -99,3 +99,13 @@ def test_extreme_priors_give_no_warning_and_no_nan(obs_file, tmp_path, capsys, p
     text = out.read_text()
     assert "NaN" not in text and "Infinity" not in text
     assert "nan" not in capsys.readouterr().out.lower().replace("nanoseconds", "")
+
+
+@pytest.mark.parametrize("flag,value,says", [("--prior-sigma", "-50mm,10deg", "translation 1-sigma -50 mm"),
+                                             ("--std-intrinsics", "-1,1,1,1", "negative standard deviation"),
+                                             ("--fix", "-3", "bad item '-3'")])
+def test_a_value_starting_with_a_minus_reaches_its_own_check(obs_file, capsys, flag, value, says):
+    extra = ["--prior", "x=0,y=0,z=0.1,roll=0,pitch=-3,yaw=0"] if flag == "--prior-sigma" else []
+    assert main(["calibrate", str(obs_file), *extra, flag, value]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err, err
