@@ -190,6 +190,16 @@ CASES = [
     CliCase("fix_x_1e9", _cal("--fix", "x=1e9"), "x_m"),
     CliCase("fix_nan", _cal("--fix", "pitch=nan"), "pitch"),
     CliCase("calibrate_out_is_input", _cal("--out", "{S}/obs.json"), "obs.json"),
+    # extract, report, bag, simulate: numbers that are no value of their option
+    *[CliCase(f"{verb}_{flag[2:]}_{value}", (verb, *args, flag, value), flag)
+      for verb, args in (("extract", ("{S}/ds", "--out", "{S}/o.json")),
+                         ("report", ("{S}/ds", "{S}/r.json", "--out", "{S}/rep")))
+      for flag, value in (("--range-sigma", "nan"), ("--range-sigma", "-1"), ("--max-offset", "inf"),
+                          ("--max-board", "-2"), ("--max-reproj", "nan"), ("--max-curvature-chi2", "nan"))],
+    CliCase("bag_min_move_negative", _bag("--min-move", "-1"), "--min-move"),
+    CliCase("simulate_noise_nan", ("simulate", "--noise-mm", "nan", "--out", "{S}/sim.json"), "--noise-mm"),
+    CliCase("import_step_nan", ("import", "ranges", "{S}/img", "--images", "{S}/img", "--start-deg", "0",
+                                "--step-deg", "nan", "--out", "{S}/ds"), "--step-deg"),
     # demo, simulate
     CliCase("demo_seed_negative", ("demo", "{S}/demo", "--seed", "-1"), "--seed"),
     CliCase("simulate_noise_negative", ("simulate", "--noise-mm", "-5", "--out", "{S}/sim.json"), "--noise-mm"),

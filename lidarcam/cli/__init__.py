@@ -10,6 +10,7 @@ import sys
 from calib_core.errors import LidarcamError
 
 from . import bag, demo, importer, plan, rig, simulate
+from .argtypes import check_numbers
 from .extras import add_optional, mark_missing, missing_extra
 from .intrinsics_flag import STD_INTRINSICS_HELP, with_std_intrinsics
 from .outputs import OutputError, writable_file
@@ -212,6 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_parsers(sub)
     plan.add_parsers(sub)
     mark_missing(sub)
+    check_numbers(p)
     return p
 
 

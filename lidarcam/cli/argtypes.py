@@ -1,5 +1,5 @@
 """argparse types of the verbs' numeric options: a value argparse accepts is one the verb can use, and a bad
-one is argparse's one line naming the option (exit 2)."""
+one is argparse's one line naming the option (exit 2). ``check_numbers`` gives them to every verb's float options."""
 
 from __future__ import annotations
 
@@ -27,3 +27,41 @@ def seed_type(text: str) -> int:
     if v < 0:
         raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {v}")
     return v
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0 (a noise level, a bound, a tolerance)."""
+    v = finite_float(text)
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    return v
+
+
+def non_negative_float(text: str) -> float:
+    """A finite number >= 0 (0: automatic or off, as the option's help says)."""
+    v = finite_float(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
+    return v
+
+
+POSITIVE = {"--range-sigma", "--max-offset", "--max-reproj", "--max-curvature-chi2", "--max-board", "--still-px",
+            "--max-offset-time", "--sync-tol", "--square"}
+"""Options of the verbs whose value must be > 0."""
+NON_NEGATIVE = {"--quiet-grey", "--scan-still", "--min-angle", "--min-move"}
+"""Options whose value must be >= 0."""
+
+
+def check_numbers(parser: argparse.ArgumentParser) -> None:
+    """Give every float option of ``parser`` and its verbs a type that refuses NaN and inf, and the options of
+    ``POSITIVE`` / ``NON_NEGATIVE`` their sign: a bad value is argparse's one line naming the option."""
+    todo = [parser]
+    while todo:
+        p = todo.pop()
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                todo.extend(a.choices.values())
+            elif a.type in (float, finite_float):
+                names = set(a.option_strings)
+                a.type = (positive_float if names & POSITIVE else non_negative_float if names & NON_NEGATIVE
+                          else finite_float)
