@@ -167,6 +167,8 @@ CASES = [
                                "{S}/b.json"), field, f"mat_{k}")
       for k, field in (("nx_nan", "nx"), ("ny_inf", "ny"), ("n_ima_inf", "n_ima"), ("n_ima_huge", "n_ima"),
                        ("no_active", "no active image"), ("fc_nan", "fc"), ("dx_nan", "dX"))],
+    CliCase("bouguet_out_is_points", ("import", "bouguet", "{S}/calib.mat", "--points", "{S}/points.csv", "--out",
+                                      "{S}/points.csv"), "is the input file"),
     # plan on a binary file
     CliCase("plan_binary_rig", ("plan", "{S}/bin.yaml"), "bin.yaml", "binary_rig"),
     CliCase("plan_rig_huge_grid", ("plan", "{S}/rig.yaml"), "workspace.steps", "rig_huge_grid"),

@@ -13,7 +13,7 @@ from . import bag, demo, importer, plan, rig, simulate
 from .argtypes import check_numbers
 from .extras import add_optional, mark_missing, missing_extra
 from .intrinsics_flag import STD_INTRINSICS_HELP, with_std_intrinsics
-from .outputs import OutputError, writable_file
+from .outputs import not_an_input, writable_file
 from .wording import cli_hint
 
 
@@ -55,16 +55,6 @@ def _sigmas(std) -> str:
     return px + (", dist " + ", ".join(f"{v:.3g}" for v in std[4:]) if len(std) > 4 else "")
 
 
-def _same_file(a, b) -> bool:
-    """Whether the paths ``a`` and ``b`` name one existing file."""
-    import os
-
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
 def _cmd_calibrate(args) -> int:
     from calib_core import calibrate, get_method
     from calib_core.data.exports import frame_export
@@ -73,8 +63,7 @@ def _cmd_calibrate(args) -> int:
     frames = _frames(args)
     for flag, path in (("--out", args.out), ("--yaml", args.yaml)):
         writable_file(path, flag)
-        if path is not None and _same_file(path, args.observations):
-            raise OutputError(f"{flag} {path}: is the observation file this run reads; give another name")
+        not_an_input(path, flag, args.observations)
     obs = load_observations(args.observations)
     if args.std_intrinsics:
         stated = None if obs.camera is None else obs.camera.std_intrinsics

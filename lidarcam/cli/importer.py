@@ -178,7 +178,7 @@ def cmd_import(args) -> int:
     from calib_core.data.io import save_observations
     from lidarcam.rig import importing
 
-    from .outputs import replaceable_folder, replaced_folder, writable_file
+    from .outputs import not_an_input, replaceable_folder, replaced_folder, writable_file
 
     if args.format in DATASET_FORMATS:
         _need(args, "images", "board_grid", "square")
@@ -196,6 +196,7 @@ def cmd_import(args) -> int:
               f"{out} --outline-kind {args.outline_kind} --out obs.json")
         return 0
     writable_file(args.out, "--out", parents=True)
+    not_an_input(args.out, "--out", args.src, args.points, args.poses)
     if args.format == "bouguet":
         _need(args, "points")
         obs = importing.observations_from_bouguet(args.src, args.points, args.outline_kind,

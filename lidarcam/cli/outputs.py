@@ -77,6 +77,19 @@ def writable_folder(path, flag: str = "--out") -> Path | None:
     return p
 
 
+def not_an_input(path, flag: str, *inputs) -> None:
+    """OutputError when the output ``path`` is one of the files the verb reads (``inputs``: paths or None)."""
+    if path is None:
+        return
+    for src in inputs:
+        try:
+            same = src is not None and os.path.samefile(path, src)
+        except OSError:
+            same = False
+        if same:
+            raise OutputError(f"{flag} {path}: is the input file {src} this run reads; give another name")
+
+
 def _listing(p: Path, n: int = 4) -> str:
     names = sorted(e.name for e in p.iterdir())
     return ", ".join(names[:n]) + (f" and {len(names) - n} more" if len(names) > n else "")

@@ -61,7 +61,7 @@ def test_out_is_never_the_input(obs_file, tmp_path, capsys):
     assert main(["calibrate", str(obs_file), "--yaml", str(obs_file)]) == 2
     assert obs_file.read_bytes() == before
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and all("is the observation file" in ln for ln in err)
+    assert len(err) == 2 and all("is the input file" in ln for ln in err)
 
 
 def test_std_intrinsics_on_a_file_that_states_its_own_says_which(obs_file, tmp_path, capsys):
