@@ -225,16 +225,24 @@ def data_warnings(obs: Observations) -> list[str]:
     return [msg for _, msg in unit_causes(obs) + copy_causes(obs)]
 
 
-def orientation_warnings(T: np.ndarray) -> list[tuple[str, str]]:
+def orientation_warnings(T: np.ndarray, scan_direction: str | None = None,
+                         source: str | None = None) -> list[tuple[str, str]]:
     """An answer with the lidar upside down against the camera: its z axis (up, the scan plane's normal) along
     the camera's +y (down). A lidar may be mounted so; more often its scans are mirrored (angle direction
-    reversed), which a 2D scan cannot tell from an upside-down mount."""
+    reversed), which a 2D scan cannot tell from an upside-down mount. ``scan_direction`` (``cw`` / ``ccw``) and
+    its ``source``: how the scans were read (``Observations.meta``); ``source`` ``default`` or None: not declared."""
     up = float(np.asarray(T, float)[2, 1])      # lidar z in camera coordinates, its y component
-    if up > 0.5:
-        return [("mirrored", "the answer has the lidar upside down against the camera (lidar z along the camera's "
-                             "+y, down): if the lidar is mounted upright, its scans are mirrored (angle direction "
-                             "reversed)")]
-    return []
+    if up <= 0.5:
+        return []
+    head = "the answer has the lidar upside down against the camera (lidar z along the camera's +y, down)"
+    if scan_direction in ("cw", "ccw") and source not in (None, "default"):
+        name = {"cw": "clockwise", "ccw": "counter-clockwise"}[scan_direction]
+        other = "ccw" if scan_direction == "cw" else "cw"
+        return [("mirrored", f"{head} with its scans read {name} as declared ({source}): if the lidar is mounted "
+                             f"upright, that declaration is wrong (scan direction {other} fits it upright)")]
+    return [("mirrored", f"{head}: if the lidar is mounted upright, its scans are mirrored (angle direction "
+                         "reversed): declare it clockwise (--scan-direction cw of lidarcam extract, import or bag, "
+                         "or scan_direction: cw in the dataset's lidar.yaml)")]
 
 
 def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | None = None,
@@ -247,7 +255,8 @@ def check(obs: Observations, T_lidar_cam: np.ndarray, *, range_sigma_m: float | 
     if board_ids is not None:
         for st in stats:
             st["board"] = int(board_ids[st["board"]])
-    found = unit_causes(obs) + copy_causes(obs, board_ids) + orientation_warnings(T_lidar_cam)
+    found = unit_causes(obs) + copy_causes(obs, board_ids) + orientation_warnings(
+        T_lidar_cam, obs.meta.get("scan_direction"), obs.meta.get("scan_direction_source"))
     warnings = [msg for _, msg in found]
     names = tuple(dict.fromkeys(n for n, _ in found))
     bad = [s for s in stats if s["bad"]]

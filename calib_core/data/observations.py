@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ObservationError
+from ..geometry.polygon import check_simple_polygon
 from ..geometry.transforms import ROTATION_TOL, project_to_so3, rotation_defect
 from .camera import Camera
 
@@ -22,6 +23,9 @@ MIN_RANGE_M = 1e-3
 """Scan points closer than this to the lidar (metres) are not measurements (a no-return is often written 0)."""
 MIN_CORNERS = 4
 """Fewest image corners a board may carry (a planar pose needs 4)."""
+MAX_DISTANCE_M = 1e6
+"""Farthest a scan point or a board may lie from its sensor (metres): far beyond a unit mistake (millimetres read as
+metres stay below it, and the verdict names those), so only a garbage value (1e300) is refused when loaded."""
 
 
 class OutlineKind(StrEnum):
@@ -103,38 +107,6 @@ def orthonormalised(T, name: str) -> tuple[np.ndarray, str | None]:
     return A, None
 
 
-def _segments_cross(p1, p2, q1, q2) -> bool:
-    """True when closed segments p1p2 and q1q2 intersect (2D)."""
-    def orient(a, b, c):
-        return np.sign((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
-
-    def on_seg(a, b, c):
-        return min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= c[1] <= max(a[1], b[1])
-
-    o1, o2, o3, o4 = orient(p1, p2, q1), orient(p1, p2, q2), orient(q1, q2, p1), orient(q1, q2, p2)
-    if o1 != o2 and o3 != o4:
-        return True
-    return bool((o1 == 0 and on_seg(p1, p2, q1)) or (o2 == 0 and on_seg(p1, p2, q2))
-                or (o3 == 0 and on_seg(q1, q2, p1)) or (o4 == 0 and on_seg(q1, q2, p2)))
-
-
-def check_simple_polygon(outline: np.ndarray) -> str | None:
-    """Why ``outline`` (V,2) is not a simple polygon with positive area, or None when it is."""
-    V = len(outline)
-    if V < 3:
-        return f"needs at least 3 vertices, got {V}"
-    x, y = outline[:, 0], outline[:, 1]
-    area = 0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
-    if abs(area) < 1e-12:
-        return "has zero area"
-    for i in range(V):
-        for j in range(i + 1, V):
-            adjacent = j == i + 1 or (i == 0 and j == V - 1)  # adjacent edges share a vertex
-            if not adjacent and _segments_cross(outline[i], outline[(i + 1) % V], outline[j], outline[(j + 1) % V]):
-                return f"is not a simple polygon (edges {i} and {j} cross)"
-    return None
-
-
 def check_outline_kind(kind) -> str:
     """``kind`` when it is one of ``OUTLINE_KINDS``; ObservationError naming the field otherwise."""
     if not isinstance(kind, str) or kind not in OUTLINE_KINDS:
@@ -178,6 +150,9 @@ class BoardObservation:
             what = "is a reflection or singular" if not np.isfinite(defect) else \
                 f"is not orthonormal (|R^T R - I| = {defect:.2g} > {ROTATION_TOL:g})"
             raise ObservationError(f"rotation {what}", field="T_cam_board")
+        if np.abs(T[:3, 3]).max() > MAX_DISTANCE_M:
+            raise ObservationError(f"translation {np.abs(T[:3, 3]).max():.3g} m, beyond {MAX_DISTANCE_M:g} m",
+                                   field="T_cam_board")
         check_outline_kind(self.outline_kind)
         outline = None if self.outline is None and self.outline_kind == "none" else self._checked_outline()
         scan = numeric_array(self.scan, "scan", (None, 2), MAX_SCAN_POINTS)
@@ -187,6 +162,8 @@ class BoardObservation:
                                    "mm: a no-return, not a measurement; leave it out)", field="scan")
         if len(scan) < MIN_SCAN_POINTS:
             raise ObservationError(f"fewer than {MIN_SCAN_POINTS} scan points ({len(scan)})", field="scan")
+        if len(far := np.flatnonzero(np.abs(scan).max(axis=1) > MAX_DISTANCE_M)):
+            raise ObservationError(f"scan point {far[0]} lies beyond {MAX_DISTANCE_M:g} m", field="scan")
         object.__setattr__(self, "T_cam_board", T)
         object.__setattr__(self, "outline", outline)
         object.__setattr__(self, "scan", scan)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from scipy.stats import chi2
 
 from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, fixed_key, undetermined_directions
 from ..data.lines import range_sigma
@@ -19,8 +20,8 @@ from ..model.residuals import range_linearised
 from ..refine.dispersion import widened_covariance
 from ..refine.joint import JointOptions
 from ..refine.joint_step import joint_step
-from ..refine.partial import calibrate_fixed, fixed_starts
-from ..refine.refine import F_SCALE_SIGMAS
+from ..refine.partial import fixed_starts, refine_free
+from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV
 from ..refine.uncertainty import inverse_information, range_board_scores, refinement_covariance
 
 
@@ -113,7 +114,7 @@ def widened_range_covariance(obs: Observations, T: np.ndarray, cov: np.ndarray, 
 def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray], *,
                       residual: str = "range", loss: str = "linear", f_scale_m: float | None = None,
                       f_scale_sigmas: float = F_SCALE_SIGMAS, range_sigma_m: float | None = None,
-                      max_nfev: int = 100,
+                      max_nfev: int = MAX_NFEV,
                       fixed_sigma: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Calibrate the free mounting parameters with ``fixed`` ones held (``refine.partial``): from the closed-form
     planar start when roll, pitch and z are given, else from ``full_start()`` (a full calibration's answer);
@@ -123,7 +124,7 @@ def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], n
     mask, values = parse_fixed(fixed)
     sigma = range_sigma(obs, range_sigma_m)
     starts = fixed_starts(obs, mask, values, full_start)
-    T, info = calibrate_fixed(obs, mask, values, starts, residual=residual, loss=loss,
+    T, info = refine_free(obs, mask, values, starts, residual=residual, loss=loss,
                               f_scale_m=f_scale_m if f_scale_m is not None else f_scale_sigmas * sigma,
                               range_sigma_m=range_sigma_m, max_nfev=max_nfev, fixed_sigma=fixed_sigma)
     return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "refine_residual": residual,
@@ -137,6 +138,36 @@ def with_prior(T: np.ndarray, cov: np.ndarray, prior: MountingPrior) -> np.ndarr
     J = prior.jacobian(T)
     post = np.linalg.inv(np.linalg.inv(cov) + J.T @ J)
     return 0.5 * (post + post.T)
+
+
+PRIOR_CONTRADICTS = "the mounting prior contradicts the boards"
+"""How a warning of ``prior_contradiction`` begins (``calibrate`` names it as the likely cause of a refusal)."""
+PRIOR_ALPHA = 1e-3
+"""False-alarm rate of the test of a mounting prior against the boards (``prior_contradiction``)."""
+
+
+def prior_contradiction(T: np.ndarray, cov: np.ndarray, prior: MountingPrior) -> str | None:
+    """A warning when the mounting ``prior`` and the boards disagree beyond both their uncertainties, else None.
+
+    At the posterior's mode ``T``, with ``cov`` the data's covariance alone, the prior's normalised residual ``r``
+    and its Jacobian ``J`` (``MountingPrior.jacobian``) give, to first order, the prior's residual at the answer
+    of the data alone: ``nu = S r`` with ``S = I + J cov J^T``; when prior and boards agree,
+    ``nu^T S^-1 nu = r^T S r`` is chi-square with 6 degrees of freedom. The warning names how far the boards alone
+    put the camera from the prior's pose (degrees, millimetres)."""
+    r, J = prior.residuals(T), prior.jacobian(T)
+    S = np.eye(6) + J @ cov @ J.T
+    stat = float(r @ S @ r)
+    p = float(chi2.sf(stat, 6))
+    if not (np.isfinite(stat) and p < PRIOR_ALPHA):
+        return None
+    nu = S @ r
+    rot_deg, trans_mm = np.degrees(np.linalg.norm(nu[:3]) * prior.sigma_rot_rad), \
+        1000 * np.linalg.norm(nu[3:]) * prior.sigma_trans_m
+    return (f"{PRIOR_CONTRADICTS} (chi-square {stat:.1f} on 6 degrees of freedom, p = "
+            f"{p:.1e}): the boards alone put the camera about {rot_deg:.2f} deg and {trans_mm:.0f} mm from the "
+            f"prior's pose, beyond the prior's 1-sigma ({np.degrees(prior.sigma_rot_rad):.2f} deg, "
+            f"{1000 * prior.sigma_trans_m:.0f} mm) and the boards' own; the answer is pulled toward the prior: "
+            "check its values or widen its sigmas")
 
 
 def prior_fixed(prior: MountingPrior, deg: Degeneracy) -> tuple[dict, np.ndarray]:

@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import (
+    REASON_NONFINITE,
     REASON_PLANES,
     REASON_SCAN_LINES,
     SCAN_LINE_PAIRS,
@@ -82,7 +83,9 @@ def solve_triples(n: np.ndarray, d: np.ndarray, p: np.ndarray, u: np.ndarray, *,
     bad_planes, bad_lines = ~(sv >= min_plane_sv), ~(sin.min(axis=1) >= min_line_sin)
     reasons[idx[bad_lines]] = REASON_SCAN_LINES
     reasons[idx[bad_planes]] = REASON_PLANES
-    ok = ~(bad_planes | bad_lines)
+    through = ~(np.abs(d).min(axis=1) > 0)          # a plane through the camera centre has no dual point
+    reasons[idx[through & ~bad_planes & ~bad_lines]] = REASON_NONFINITE
+    ok = ~(bad_planes | bad_lines | through)
     idx, n, d, p, u = idx[ok], n[ok], d[ok], p[ok], u[ok]
 
     a = -n / (1e3 * d)[..., None]                                             # (K,3,3) dual points, 1/mm

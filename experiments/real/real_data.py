@@ -32,7 +32,7 @@ from calib_core.geometry.transforms import invert_T
 from calib_core.refine.joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL
 from lidarcam.rig import public_sets as ps
 from lidarcam.rig.dataset import DatasetError
-from lidarcam.rig.extract import extract, format_diagnostics
+from lidarcam.rig.extract import direction_line, extract, format_diagnostics, noise_line
 from lidarcam.rig.intrinsics import format_intrinsics, refit_camera
 from lidarcam.rig.markdown import md_table
 from lidarcam.rig.report import capture_verdict, save_overlay
@@ -132,7 +132,8 @@ def _observations(rs) -> tuple:
     merged = ", ".join(f"{k} + {'/'.join(v)}" for k, v in obs.meta.get("merged", {}).items()) or "none"
     md = ["### Extraction", "", "```", format_diagnostics(diags), "```", "",
           f"{sum(d.used for d in diags)} of {len(diags)} poses used, {obs.n_boards} boards after merging "
-          f"near-duplicates (merged: {merged}).", ""]
+          f"near-duplicates (merged: {merged}). {noise_line(obs.meta)[0].upper()}{noise_line(obs.meta)[1:]}; "
+          f"{direction_line(obs.meta)}.", ""]
     return obs, md, intr
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from lidarcam.rig.extract_options import SCAN_DIRECTIONS
+
 
 def cmd_bag(args) -> int:
     """``lidarcam bag``: pick, pair and write; prints the reason counts and the sync (``--list-topics``: the
@@ -34,11 +36,14 @@ def cmd_bag(args) -> int:
                            ("--board", args.board), ("--out", args.out)) if v is None]
     if need:
         raise DatasetError(f"{', '.join(need)} required (or --list-topics to see the bag's topics)", file=args.bag)
+    from .rig import check_noise_flags
+
+    check_noise_flags(args)
     eo = ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma)
     with replaced_folder(args.out, "--out", is_dataset_folder, "a dataset folder") as scratch:
         conv = bag_to_dataset(args.bag, scratch, args.image_topic, args.scan_topic, args.board,
                               camera_info_topic=args.camera_info_topic, camera_path=args.camera, opts=opts,
-                              extract_opts=eo)
+                              extract_opts=eo, scan_direction=args.scan_direction)
     conv.out = Path(args.out)
     print(conv.summary())
     est = conv.sync.get("estimate")
@@ -109,7 +114,12 @@ def add_parsers(subparsers) -> None:
     g = p.add_argument_group("scan segment")
     g.add_argument("--max-offset", type=finite_float, default=0.5, metavar="M",
                    help="bound on the lidar-camera separation (default: %(default)s m)")
-    g.add_argument("--range-sigma", type=finite_float, default=0.02, metavar="M",
-                   help="lidar range noise, 1 sigma (default: %(default)s m)")
+    g.add_argument("--range-sigma", type=float, default=None, metavar="M",
+                   help="lidar range noise, 1 sigma (default: 0.02 m for the picking; the capture plan's extraction "
+                   "estimates it from the boards' segments, as lidarcam extract does)")
+    g.add_argument("--scan-direction", choices=SCAN_DIRECTIONS, default=None,
+                   help="which way the lidar counts its bearings: ccw (counter-clockwise about its z axis, up; "
+                   "ROS's convention) or cw (a driver that counts clockwise: read mirrored); written to the "
+                   "folder's lidar.yaml (default: nothing declared, ccw)")
     p.set_defaults(func=cmd_bag)
 

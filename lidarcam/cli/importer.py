@@ -18,6 +18,11 @@ Formats with board poses and segmented scan points write ``lidarcam.observations
 
 ``--outline-kind`` (default ``lower_bound``: none of these formats holds the physical board's outline) is written
 into the observations; for a dataset folder give it to ``extract``.
+
+``--scan-direction cw`` declares a lidar that counts its bearings clockwise: a dataset folder gets ``lidar.yaml``
+(``extract`` then reads its scans mirrored), observations get their points mirrored. For ``radlocc`` it is read,
+when not given, from a settings file beside the laser log or the camera file that states ``Laser_Direction``
+(1 clockwise, 2 counter-clockwise).
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ from pathlib import Path
 
 from calib_core.data.observations import OUTLINE_KINDS
 from calib_core.errors import LidarcamError
+from lidarcam.rig.extract_options import SCAN_DIRECTIONS
 
 FORMATS = ("radlocc", "pcd", "ranges", "bouguet", "segmented")
 DATASET_FORMATS = ("radlocc", "pcd", "ranges")
@@ -158,13 +164,12 @@ def _source_poses(args):
 
 def is_dataset_folder(folder: Path) -> bool:
     """Whether ``folder`` holds a dataset folder and nothing else (``camera.yaml``, ``board.yaml``, pose images and
-    scans, the bag verb's ``picking.json``): an earlier import, which a new import replaces whole."""
+    scans, ``lidar.yaml``, the bag verb's ``picking.json``): an earlier import, which a new import replaces whole."""
     from lidarcam.rig.dataset import IMAGE_SUFFIXES
 
     names = {e.name for e in folder.iterdir()}
-    rest = [e for e in folder.iterdir() if e.name not in ("camera.yaml", "board.yaml", "picking.json")]
     return {"camera.yaml", "board.yaml"} <= names and all(
-        e.is_file() and e.suffix.lower() in (*IMAGE_SUFFIXES, ".csv") for e in rest)
+        e.is_file() and e.suffix.lower() in (*IMAGE_SUFFIXES, ".csv", ".yaml", ".json") for e in folder.iterdir())
 
 
 def _not_inside(out: Path, **sources) -> None:
@@ -172,6 +177,22 @@ def _not_inside(out: Path, **sources) -> None:
     for flag, src in sources.items():
         if src is not None and Path(src).resolve().is_relative_to(out.resolve()):
             raise ImportUsageError(f"--out {out}: holds the source {flag} {src}; write the dataset elsewhere")
+
+
+def _direction(args) -> tuple[str | None, str]:
+    """(declared scan direction or None, where it comes from): ``--scan-direction``, else for radlocc a settings
+    file's ``Laser_Direction`` beside the laser log or the camera file."""
+    if args.scan_direction is not None:
+        return args.scan_direction, f"--scan-direction {args.scan_direction} of lidarcam import"
+    if args.format == "radlocc":
+        from lidarcam.rig.importers.radlocc import laser_direction
+
+        folders = [Path(args.src).parent] + ([Path(args.camera).parent] if args.camera else [])
+        found = laser_direction(folders)
+        if found is not None:
+            direction, path, value = found
+            return direction, f"Laser_Direction {value} in {path}"
+    return None, ""
 
 
 def cmd_import(args) -> int:
@@ -190,8 +211,11 @@ def cmd_import(args) -> int:
         size = importing.image_size(poses[0].image)
         camera = importing.source_camera(args.camera, _numbers(args.intrinsics, "--intrinsics", 4),
                                          _numbers(args.dist, "--dist"), size)
+        direction, why = _direction(args)
         with replaced_folder(out, "--out", is_dataset_folder, "a dataset folder") as scratch:
-            importing.write_dataset_folder(scratch, poses, camera, grid)
+            importing.write_dataset_folder(scratch, poses, camera, grid, direction, why)
+        if direction is not None:
+            print(f"scan direction {direction} ({why}): written to {out}/lidar.yaml")
         print(f"wrote {out}/ ({len(poses)} poses: {', '.join(p.name for p in poses)}); next: lidarcam extract "
               f"{out} --outline-kind {args.outline_kind} --out obs.json")
         return 0
@@ -204,6 +228,9 @@ def cmd_import(args) -> int:
     else:
         _need(args, "poses")
         obs = importing.observations_from_segmented(args.src, args.poses, _grid(args), args.outline_kind)
+    if args.scan_direction == "cw":
+        obs = importing.mirror_observations(obs, "--scan-direction cw of lidarcam import")
+        print("scan direction cw (--scan-direction): the scan points read mirrored (y -> -y)")
     for name, why in obs.meta.get("skipped", {}).items():
         print(f"skipped {name}: {why}")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
@@ -243,4 +270,8 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--no-corners", action="store_true", help="bouguet: leave the detected corners out")
     p.add_argument("--outline-kind", choices=OUTLINE_KINDS, default="lower_bound",
                    help="what the pattern's outline says of the board (default: %(default)s)")
+    p.add_argument("--scan-direction", choices=SCAN_DIRECTIONS, default=None,
+                   help="which way the lidar counts its bearings: ccw (counter-clockwise about its z axis, up) or "
+                   "cw (read mirrored); a dataset folder gets lidar.yaml; default: radlocc's Laser_Direction from a "
+                   "settings file beside the laser log or camera file, else nothing declared (ccw)")
     p.set_defaults(func=cmd_import)

@@ -12,12 +12,26 @@ from __future__ import annotations
 import argparse
 
 from calib_core.data.observations import OUTLINE_KINDS
-from lidarcam.rig.extract_options import CURVATURE_CHI2
+from lidarcam.rig.extract_options import CURVATURE_CHI2, SCAN_DIRECTIONS
+
+
+def check_noise_flags(args) -> None:
+    """``--range-sigma`` and ``--max-curvature-chi2``, when given, must be positive finite numbers."""
+    import math
+
+    from lidarcam.rig.extract_options import ExtractionError
+
+    for flag, v in (("--range-sigma", args.range_sigma), ("--max-curvature-chi2",
+                                                          getattr(args, "max_curvature_chi2", None))):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise ExtractionError(f"{flag} must be a positive number, got {v!r} (leave it out to estimate it from "
+                                  "the boards' scan segments)")
 
 
 def _options(args):
     from lidarcam.rig.extract import ExtractOptions
 
+    check_noise_flags(args)
     return ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma,
                           max_reproj_px=args.max_reproj, outline_kind=args.outline_kind,
                           max_curvature_chi2=args.max_curvature_chi2, max_board_m=args.max_board)
@@ -28,7 +42,7 @@ def _dataset(args):
     from lidarcam.rig.dataset import load_dataset
     from lidarcam.rig.intrinsics import format_intrinsics, refit_camera
 
-    ds = load_dataset(args.dataset)
+    ds = load_dataset(args.dataset, args.scan_direction)
     if args.refit_intrinsics:
         ds, fit = refit_camera(ds)
         print("intrinsics refitted from the images: " + format_intrinsics(fit)[0])
@@ -38,8 +52,9 @@ def _dataset(args):
 def _add_extract_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-offset", type=float, default=0.5, metavar="M",
                    help="bound on the lidar-camera separation in metres (default: %(default)s)")
-    p.add_argument("--range-sigma", type=float, default=0.02, metavar="M",
-                   help="lidar range noise, 1 sigma, metres (default: %(default)s)")
+    p.add_argument("--range-sigma", type=float, default=None, metavar="M",
+                   help="lidar range noise, 1 sigma, metres (default: estimated from the boards' scan segments, "
+                   "their scatter about a line, colour bias included; 0.02 with fewer than 3 segments)")
     p.add_argument("--max-reproj", type=float, default=2.0, metavar="PX",
                    help="reject a board whose corner reprojection RMS exceeds this (default: %(default)s px)")
     p.add_argument("--outline-kind", choices=OUTLINE_KINDS, default="exact",
@@ -47,9 +62,13 @@ def _add_extract_options(p: argparse.ArgumentParser) -> None:
                    "printed pattern on a larger board: the scan may run past it) or none (not known)")
     p.add_argument("--refit-intrinsics", action="store_true",
                    help="fit the camera from the dataset's own images instead of camera.yaml (rough intrinsics)")
-    p.add_argument("--max-curvature-chi2", type=float, default=CURVATURE_CHI2, metavar="X",
+    p.add_argument("--max-curvature-chi2", type=float, default=None, metavar="X",
                    help="refuse a segment as an arc above this curvature statistic (chi-square(1) units of the "
-                   "range noise; raise it for a lidar whose range depends on the surface colour; default %(default)s)")
+                   f"range noise; default: {CURVATURE_CHI2} times how much the boards' own segments bend, e.g. "
+                   "a lidar whose range depends on the surface colour)")
+    p.add_argument("--scan-direction", choices=SCAN_DIRECTIONS, default=None,
+                   help="which way the scans count their bearings: ccw (counter-clockwise about the lidar's z axis, "
+                   "up; ROS's convention) or cw (read mirrored); default: the dataset's lidar.yaml, else ccw")
     p.add_argument("--max-board", type=float, default=2.0, metavar="M",
                    help="longest accepted board segment when the outline is not exact (default: %(default)s m)")
 
@@ -61,7 +80,7 @@ def cmd_extract(args) -> int:
     from pathlib import Path
 
     from calib_core.data.io import save_observations
-    from lidarcam.rig.extract import extract, format_diagnostics
+    from lidarcam.rig.extract import direction_line, extract, format_diagnostics, noise_line
     from lidarcam.rig.report import capture_verdict
 
     from .hints import square_hint
@@ -73,6 +92,8 @@ def cmd_extract(args) -> int:
     ds = _dataset(args)
     obs, diags = extract(ds, _options(args))
     print(format_diagnostics(diags))
+    print(direction_line(obs.meta))
+    print(noise_line(obs.meta))
     if args.diagnostics:
         Path(args.diagnostics).write_text(json.dumps([d.to_dict() for d in diags], indent=1) + "\n")
         print(f"wrote {args.diagnostics}")

@@ -27,10 +27,15 @@ from calib_core.geometry.transforms import transform_points
 from .dataset import Dataset, DatasetError, Pose, Scan
 from .detect import BoardDetection, detect_board
 from .extract_options import CURVATURE_CHI2, AmbiguousSegment, ExtractionError, ExtractOptions, PoseDiagnostics
+from .scan_noise import NoiseEstimate, estimate_noise
 from .segment import describe_segment, find_board_segment
 
 __all__ = ["CURVATURE_CHI2", "AmbiguousSegment", "ExtractOptions", "ExtractionError", "PoseDiagnostics", "extract",
-           "extract_pose", "format_diagnostics"]
+           "direction_line", "extract_pose", "format_diagnostics", "noise_line"]
+
+
+NOISE_ROUNDS = 4
+"""Most rounds of segment search and noise estimate (``_estimate_noise``)."""
 
 
 # --------------------------------------------------------------------------------------------------- per pose
@@ -182,7 +187,10 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
     then each pose's board segment is searched for, and a group's boards are merged into one
     (``opts.merge_duplicates``). ``Observations.meta`` holds ``poses`` (the pose name of each board, in order),
     ``skipped`` (pose -> reason), ``merged`` (pose -> the near-duplicates merged into its board),
-    ``reproj_rms_px`` per board and ``dataset`` (the folder). Every board carries its detected corners (distorted
+    ``reproj_rms_px`` per board, ``dataset`` (the folder), ``scan_direction`` and ``scan_direction_source`` (how
+    the scans were read: ``lidarcam.rig.dataset.direction``) and ``extraction_noise`` (the range noise and arc
+    threshold used and whether each was given or estimated from the boards' segments: ``lidarcam.rig.scan_noise``; the
+    options' None values are estimated before the segment search). Every board carries its detected corners (distorted
     pixels, canonical order) and their board-frame positions, and the observations the camera intrinsics, so the
     joint model over corners and ranges applies (``meta["camera_note"]`` says why not when the intrinsics do not
     fit ``calib_core.data.camera.Camera``). The ground truth of a simulated dataset
@@ -201,6 +209,8 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
                                opts.static_tol_m)
     boards, diags = [], []
     camera, camera_note = _camera(dataset)
+    noise = _estimate_noise(dataset, dets, statics, opts)
+    opts = replace(opts, range_sigma_m=noise.range_sigma_m, max_curvature_chi2=noise.max_curvature_chi2)
     for k, pose in enumerate(dataset.poses):
         det = dets[pose.name]
         if isinstance(det, Exception):
@@ -222,11 +232,46 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
             "poses": [reps[i].name for i in range(len(boards))],
             "skipped": {d.name: d.reason for d in diags if not d.used},
             "merged": merged,
-            "reproj_rms_px": [reps[i].reproj_rms_px for i in range(len(boards))]}
+            "reproj_rms_px": [reps[i].reproj_rms_px for i in range(len(boards))],
+            "extraction_noise": noise.to_dict(),
+            "scan_direction": dataset.scan_direction, "scan_direction_source": dataset.scan_direction_source}
     if camera is None:
         boards = [replace(b, corners_px=None, corners_board=None) for b in boards]
         meta["camera_note"] = camera_note
     return Observations(tuple(boards), None if gt is None else np.asarray(gt, float), meta, camera), diags
+
+
+def _estimate_noise(dataset: Dataset, dets: dict, statics: list, opts: ExtractOptions) -> NoiseEstimate:
+    """The range noise and arc threshold (``lidarcam.rig.scan_noise``) from each pose's board segment, found with no arc
+    test; options given are kept. The segments depend on the noise (breakpoints, split tolerance), so the search and the
+    estimate are repeated from the default until the noise changes by less than 5% (at most ``NOISE_ROUNDS``)."""
+    if opts.range_sigma_m is not None and opts.max_curvature_chi2 is not None:
+        return estimate_noise([], opts.range_sigma_m, opts.max_curvature_chi2)
+    sigma, est = opts.sigma_m, None
+    for _ in range(NOISE_ROUNDS):
+        survey = replace(opts, range_sigma_m=sigma, max_curvature_chi2=math.inf, skip_ambiguous=False)
+        est = estimate_noise(_board_segments(dataset, dets, statics, survey), opts.range_sigma_m,
+                             opts.max_curvature_chi2)
+        if est.range_source != "estimated" or abs(est.range_sigma_m - sigma) < 0.05 * sigma:
+            break
+        sigma = est.range_sigma_m
+    return est
+
+
+def _board_segments(dataset: Dataset, dets: dict, statics: list, opts: ExtractOptions) -> list[np.ndarray]:
+    """Each detected pose's board segment (K,2 lidar points) as the segment search finds it with ``opts``."""
+    segments = []
+    for k, pose in enumerate(dataset.poses):
+        det = dets[pose.name]
+        if isinstance(det, Exception) or pose.error is not None or pose.window is not None:
+            continue
+        try:
+            idx = find_board_segment(pose.scan, det.T_cam_board, dataset.board, opts, dataset.background, None,
+                                     statics[k])
+        except ExtractionError:
+            continue
+        segments.append(pose.scan.points[idx])
+    return segments
 
 
 def _camera(dataset: Dataset) -> tuple[Camera | None, str]:
@@ -237,6 +282,26 @@ def _camera(dataset: Dataset) -> tuple[Camera | None, str]:
         return Camera(c.K, c.dist, c.width, c.height, c.std_intrinsics), ""
     except ObservationError as err:
         return None, f"image corners left out, the joint model cannot use the camera: {err}"
+
+
+def direction_line(meta: dict) -> str:
+    """How the scans were read: ``scans read clockwise (lidar.yaml): bearings mirrored``."""
+    d, src = meta.get("scan_direction", "ccw"), meta.get("scan_direction_source", "default")
+    if src == "default":
+        return "scans read counter-clockwise (no scan direction declared: --scan-direction or lidar.yaml)"
+    return f"scans read {'clockwise' if d == 'cw' else 'counter-clockwise'} ({src})" + \
+        (": bearings mirrored" if d == "cw" else "")
+
+
+def noise_line(meta: dict) -> str:
+    """The extraction's range noise and arc test with their sources, from ``Observations.meta``."""
+    n = meta.get("extraction_noise")
+    if not n:
+        return "range noise: not recorded"
+    return NoiseEstimate(n["range_sigma_m"], n["range_source"], n["max_curvature_chi2"], n["curvature_source"],
+                         n.get("n_segments", 0),
+                         tuple(math.nan if q is None else q for q in n.get("curvature_quartiles", [None, None])),
+                         n.get("why", "")).describe()
 
 
 def format_diagnostics(diags: list[PoseDiagnostics]) -> str:

@@ -27,7 +27,13 @@ class AmbiguousSegment(ExtractionError):
 
 CURVATURE_CHI2 = 15.14
 """A segment is refused as not straight when a parabola along its line explains more of its scatter than a line
-by more than this chi-square(1) quantile (1 - 1e-4) in units of the range noise: an arc, not a board."""
+by more than this chi-square(1) quantile (1 - 1e-4) in units of the range noise: an arc, not a board (scaled by the
+boards' own dispersion when estimated, ``lidarcam.rig.scan_noise``)."""
+SCAN_DIRECTIONS = ("ccw", "cw")
+"""Which way a lidar counts its bearings about its z axis (up): ``ccw`` (the default, ROS's REP 103) or ``cw`` (its
+scans are read mirrored: ``lidarcam.rig.dataset.direction``)."""
+DEFAULT_RANGE_SIGMA = 0.02
+"""Range noise (m) where it is neither given nor estimated (a single pose, fewer than 3 board segments)."""
 
 
 @dataclass(frozen=True)
@@ -38,10 +44,12 @@ class ExtractOptions:
         max_offset_m: bound on the lidar-camera separation; a board point's lidar range must lie within the
             camera's distances to the board +- this.
         max_reproj_px: a detection whose corner reprojection RMS exceeds this is rejected.
-        range_sigma_m: assumed lidar range noise (1 sigma), used in the breakpoint and split thresholds.
+        range_sigma_m: lidar range noise (1 sigma), used in the breakpoint, split and arc tests; None: estimated
+            from the boards' segments by ``lidarcam.rig.extract.extract`` (``lidarcam.rig.scan_noise``;
+            ``DEFAULT_RANGE_SIGMA`` where it cannot be).
         breakpoint_lambda_deg: Borges-Aldon breakpoint angle (smaller = more permissive of oblique surfaces).
         split_tol_m: split a segment where a point lies further than this from its chord; merge neighbours whose
-            union fits a line within it. 0 means ``max(0.05, 4 * range_sigma_m)``.
+            union fits a line within it. 0 means ``max(0.05, 4 * sigma_m)``.
         min_points: fewest scan points on a board.
         min_length_frac: shortest accepted segment, as a fraction of the outline's shorter side.
         length_slack_m: accepted excess of the segment length over the board's diagonal (noise at the ends).
@@ -55,8 +63,8 @@ class ExtractOptions:
         (lidarcam.rig.multipose).
         static_tol_m: range agreement for a point to count as the same return in another pose.
         max_curvature_chi2: a segment whose parabola fit beats the line by more than this (chi-square(1) units of
-            the range noise) is refused as an arc (``CURVATURE_CHI2``; raise it for a lidar whose range depends on
-            the surface's colour).
+            the range noise) is refused as an arc; None: ``CURVATURE_CHI2`` scaled by how much the boards' own
+            segments bend (``lidarcam.rig.scan_noise``: a lidar whose range depends on the surface's colour bends them).
         outline_kind: what ``board.outline`` says of the physical board, written into the observations
             (``calib_core.data.observations.OUTLINE_KINDS``): ``exact`` (default), ``lower_bound`` (the board may be
             larger, e.g. a printed sheet on a larger board: segments longer than the outline's chord are not
@@ -73,7 +81,7 @@ class ExtractOptions:
 
     max_offset_m: float = 0.5
     max_reproj_px: float = 2.0
-    range_sigma_m: float = 0.02
+    range_sigma_m: float | None = None
     breakpoint_lambda_deg: float = 10.0
     split_tol_m: float = 0.0
     min_points: int = 5
@@ -86,7 +94,7 @@ class ExtractOptions:
     auto_background: bool = True
     static_tol_m: float = 0.03
     outline_kind: str = "exact"
-    max_curvature_chi2: float = CURVATURE_CHI2
+    max_curvature_chi2: float | None = None
     max_board_m: float = 2.0
     skip_ambiguous: bool = True
     ambiguity_margin: float = 0.1
@@ -98,6 +106,9 @@ class ExtractOptions:
     def __post_init__(self) -> None:
         if self.outline_kind not in OUTLINE_KINDS:
             raise ExtractionError(f"outline_kind must be one of {', '.join(OUTLINE_KINDS)}, got {self.outline_kind!r}")
+        for name, v in (("range_sigma_m", self.range_sigma_m), ("max_curvature_chi2", self.max_curvature_chi2)):
+            if v is not None and not (v > 0 and (math.isfinite(v) or name == "max_curvature_chi2")):
+                raise ExtractionError(f"{name} must be a positive number (or None: estimated), got {v!r}")
 
     @property
     def outline_known(self) -> bool:
@@ -105,8 +116,18 @@ class ExtractOptions:
         return self.outline_kind == "exact"
 
     @property
+    def sigma_m(self) -> float:
+        """The range noise in use (m): ``range_sigma_m``, or ``DEFAULT_RANGE_SIGMA`` before it is estimated."""
+        return DEFAULT_RANGE_SIGMA if self.range_sigma_m is None else self.range_sigma_m
+
+    @property
+    def curvature_chi2(self) -> float:
+        """The arc threshold in use: ``max_curvature_chi2``, or ``CURVATURE_CHI2`` before it is estimated."""
+        return CURVATURE_CHI2 if self.max_curvature_chi2 is None else self.max_curvature_chi2
+
+    @property
     def split_tol(self) -> float:
-        return self.split_tol_m if self.split_tol_m > 0 else max(0.05, 4.0 * self.range_sigma_m)
+        return self.split_tol_m if self.split_tol_m > 0 else max(0.05, 4.0 * self.sigma_m)
 
 
 @dataclass

@@ -177,7 +177,7 @@ def _scan_still(ctx: _Ctx, run: tuple[int, int], c: int, k: int, bearing: np.nda
         except ExtractionError:
             raise ExtractionError(f"scan moving: no board segment in the scan {abs(j - k)} scans away") from None
         dm, db, n = stills.scan_segment_shift(step, (bearing, rng), (s2.bearing[i2], s2.range[i2]))
-        tol = o.scan_still_m if o.scan_still_m > 0 else stills.median_shift_tolerance(ctx.eo.range_sigma_m, n)
+        tol = o.scan_still_m if o.scan_still_m > 0 else stills.median_shift_tolerance(ctx.eo.sigma_m, n)
         dm = dm if math.isfinite(dm) else math.inf
         if dm > tol or db > o.scan_still_beams:
             raise ExtractionError(f"scan moving: board segment shifted {1000 * dm:.1f} mm (> {1000 * tol:.1f} mm) "
@@ -285,12 +285,16 @@ def _png(gray: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
-def _write(out: Path, camera: CameraModel, board_path: Path, st: Streams, poses: list[dict]) -> None:
+def _write(out: Path, camera: CameraModel, board_path: Path, st: Streams, poses: list[dict],
+           scan_direction: str | None = None) -> None:
     from .bag import camera_yaml
+    from .dataset import lidar_yaml
 
     out.mkdir(parents=True, exist_ok=True)
     (out / "camera.yaml").write_text(camera_yaml(camera))
     shutil.copyfile(board_path, out / "board.yaml")
+    if scan_direction is not None:
+        (out / "lidar.yaml").write_text(lidar_yaml(scan_direction, "declared to lidarcam bag (--scan-direction)"))
     for n, p in enumerate(poses):
         name = f"{n:03d}"
         p["pose"] = name
@@ -301,8 +305,12 @@ def _write(out: Path, camera: CameraModel, board_path: Path, st: Streams, poses:
 
 def bag_to_dataset(bag, out, image_topic: str, scan_topic: str, board_path, *, camera_info_topic: str | None = None,
                    camera_path=None, opts: stills.PickOptions | None = None,
-                   extract_opts: ExtractOptions | None = None) -> BagConversion:
+                   extract_opts: ExtractOptions | None = None, scan_direction: str | None = None) -> BagConversion:
     """Convert a recording into a dataset folder ``out`` (module docstring); returns what was done.
+
+    ``scan_direction`` (``cw`` / ``ccw``, or None: nothing declared) is written into ``lidar.yaml``: the scans
+    are written as the LaserScan messages count them (``angle_min + i angle_increment``), and a driver that counts
+    clockwise without saying so is declared ``cw`` (the picking reads ranges only, so it does not depend on it).
 
     The camera comes from ``camera_info_topic`` or, when None, from ``camera_path`` (camera.yaml); the board from
     ``board_path`` (board.yaml). Raises BagError / DatasetError for a bad bag, topic or file.
@@ -322,7 +330,7 @@ def bag_to_dataset(bag, out, image_topic: str, scan_topic: str, board_path, *, c
         pairing, sync = _sync(st, motion, opts)
         ctx = _Ctx(src, image_topic, st, camera, board, opts, eo, pairing)
         log, poses, _, spread = pick(ctx, motion)
-    _write(out, camera, board_path, st, poses)
+    _write(out, camera, board_path, st, poses, scan_direction)
     for p in poses:
         log[p["frame"]].update(kept=True, pose=p["pose"],
                                reason=f"kept: pose {p['pose']}, corners moved {p['corner_motion_px']:.2f} px, scan "

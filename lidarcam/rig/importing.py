@@ -121,15 +121,23 @@ def board_yaml(board: BoardSpec) -> str:
     return (f"cols: {board.cols}\nrows: {board.rows}\nsquare_m: {board.square!r}\noutline_m:\n{outline}\n")
 
 
-def write_dataset_folder(out, poses: list[SourcePose], camera: CameraModel, board: BoardSpec) -> Path:
+def write_dataset_folder(out, poses: list[SourcePose], camera: CameraModel, board: BoardSpec,
+                         scan_direction: str | None = None, why: str = "") -> Path:
     """Write the dataset folder (docs/dataset.md) of ``poses``: ``camera.yaml``, ``board.yaml``, per pose its image
-    (copied, its suffix kept) and ``<name>.csv`` (``bearing_rad,range_m``). Returns the folder."""
+    (copied, its suffix kept) and ``<name>.csv`` (``bearing_rad,range_m``, as the source counts them), and
+    ``lidar.yaml`` when a ``scan_direction`` is declared (``why``: where the declaration comes from; an earlier
+    lidar.yaml is removed when none is). Returns the folder."""
     from .bag import camera_yaml
+    from .dataset import lidar_yaml
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "camera.yaml").write_text(camera_yaml(camera))
     (out / "board.yaml").write_text(board_yaml(board))
+    if scan_direction is not None:
+        (out / "lidar.yaml").write_text(lidar_yaml(scan_direction, why))
+    elif (out / "lidar.yaml").exists():
+        (out / "lidar.yaml").unlink()
     for p in poses:
         shutil.copyfile(p.image, out / f"{p.name}{p.image.suffix.lower()}")
         np.savetxt(out / f"{p.name}.csv", np.column_stack([p.scan.bearing, p.scan.range]), delimiter=",",
@@ -137,10 +145,26 @@ def write_dataset_folder(out, poses: list[SourcePose], camera: CameraModel, boar
     return out
 
 
-def as_dataset(poses: list[SourcePose], camera: CameraModel, board: BoardSpec, root) -> Dataset:
+def as_dataset(poses: list[SourcePose], camera: CameraModel, board: BoardSpec, root,
+               scan_direction: str | None = None) -> Dataset:
     """The ``Dataset`` that ``write_dataset_folder`` then ``load_dataset`` give, without writing (the importers
-    name poses in ``load_dataset``'s order: line numbers ascending, or 000, 001, ...)."""
-    return Dataset(Path(root), camera, board, tuple(Pose(p.name, p.image, p.scan) for p in poses))
+    name poses in ``load_dataset``'s order: line numbers ascending, or 000, 001, ...); ``cw`` scans mirrored."""
+    from .dataset import mirror_scan
+
+    cw = scan_direction == "cw"
+    return Dataset(Path(root), camera, board, tuple(Pose(p.name, p.image, mirror_scan(p.scan) if cw else p.scan)
+                                                    for p in poses),
+                   scan_direction=scan_direction or "ccw",
+                   scan_direction_source="default" if scan_direction is None else "lidar.yaml")
+
+
+def mirror_observations(obs: Observations, source: str) -> Observations:
+    """Observations whose scan points are read mirrored (``y -> -y``: a clockwise lidar), the declaration recorded
+    in ``meta`` (``scan_direction`` ``cw``, ``scan_direction_source`` ``source``)."""
+    from dataclasses import replace
+
+    boards = tuple(replace(b, scan=_by_bearing(b.scan * np.array([1.0, -1.0]))) for b in obs.boards)
+    return replace(obs, boards=boards, meta={**obs.meta, "scan_direction": "cw", "scan_direction_source": source})
 
 
 def _by_bearing(points: np.ndarray) -> np.ndarray:

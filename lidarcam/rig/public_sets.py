@@ -27,7 +27,7 @@ from calib_core.data.observations import Observations
 from .dataset import BoardSpec, CameraModel, Dataset, DatasetError
 from .extract_options import ExtractOptions
 from .importers.bouguet import read_bouguet
-from .importers.radlocc import T_lidar_cam_from_radlocc
+from .importers.radlocc import T_lidar_cam_from_radlocc, laser_direction
 from .importing import (
     as_dataset,
     observations_from_bouguet,
@@ -108,15 +108,18 @@ def load_kazmierczak(folder, first: int = 31, last: int = 61) -> RealSet:
     poses = radlocc_poses(folder / "laser.txt", folder / "images", range(first, last + 1), "RGB{n}.png")
     camera = source_camera(folder / "author_calib_xml" / "out_camera_data.xml", None, None, (640, 480))
     board = pattern_board(9, 6, 0.09)
-    # the Hokuyo's range depends on the square's colour, which bends the board's segment by a few cm: the arc
-    # test is loosened for this rig (its board segments score 19-33 against the default 15)
-    opts = ExtractOptions(outline_kind="lower_bound", range_sigma_m=0.03, max_curvature_chi2=60.0)
-    return RealSet(KAZMIERCZAK, folder, board, camera, dataset=as_dataset(poses, camera, board, folder),
-                   options=opts, refit_intrinsics=True,
+    # the author's settings say Laser_Direction 1 (clockwise), as `lidarcam import radlocc` reads them
+    found = laser_direction([folder, folder / "author_calib_xml"])
+    direction = None if found is None else found[0]
+    return RealSet(KAZMIERCZAK, folder, board, camera,
+                   dataset=as_dataset(poses, camera, board, folder, direction),
+                   options=ExtractOptions(outline_kind="lower_bound"), refit_intrinsics=True,
                    notes=[f"images RGB{first}..RGB{last} with RADLOCC laser lines {first}..{last} (line n = image n)",
                           "board 9 x 6 inner corners, 90 mm squares; outline unknown (the pattern's, a lower bound)",
-                          "extraction: range sigma 30 mm and arc threshold 60 (the Hokuyo reads the black and white "
-                          "squares at ranges a few cm apart)"])
+                          "scans clockwise (Laser_Direction 1 in author_calib_xml/CamCalibConfig.xml): read mirrored"
+                          if direction == "cw" else "no scan direction declared",
+                          "extraction: range noise and arc test estimated from the boards' segments (the Hokuyo "
+                          "reads the black and white squares at ranges a few cm apart)"])
 
 
 def load_acfr(folder, square_m: float = 0.019) -> RealSet:

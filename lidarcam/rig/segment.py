@@ -90,7 +90,7 @@ def split_and_merge(scan: Scan, keep: np.ndarray | None = None, opts: ExtractOpt
     if len(idx) < opts.min_points:
         return []
     sub = Scan(scan.bearing[idx], scan.range[idx], scan.points[idx])
-    cuts = breakpoints(sub, opts.range_sigma_m, opts.breakpoint_lambda_deg)
+    cuts = breakpoints(sub, opts.sigma_m, opts.breakpoint_lambda_deg)
     # a removed point in between also breaks the run
     cuts = np.union1d(cuts, np.flatnonzero(np.diff(idx) > 1))
     bounds = np.concatenate([[0], cuts + 1, [len(idx)]])
@@ -230,8 +230,8 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
             why = f"length {length:.2f} m > diagonal {board.diagonal:.2f} m"
         elif length < min_len:
             why = f"length {length:.2f} m < {min_len:.2f} m"
-        elif (curv := curvature_statistic(scan.points[idx], opts.range_sigma_m)) > opts.max_curvature_chi2:
-            why = (f"not straight within the noise (curvature statistic {curv:.3g} > {opts.max_curvature_chi2:g}): "
+        elif (curv := curvature_statistic(scan.points[idx], opts.sigma_m)) > opts.curvature_chi2:
+            why = (f"not straight within the noise (curvature statistic {curv:.3g} > {opts.curvature_chi2:.4g}): "
                    "an arc (a pillar, a curved object), not a board")
         if why:
             rejected.append(why)

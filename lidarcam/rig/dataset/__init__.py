@@ -9,6 +9,7 @@ Layout of a dataset folder::
     scans.csv          alternative to the per-pose CSVs: one file keyed by a ``pose`` column
     background.csv     optional: a scan without the board (same columns)
     windows.yaml       optional: per-pose manual bearing window, overrides the automatic segment search
+    lidar.yaml         optional: ``scan_direction: cw | ccw`` (default ccw; cw: the scans are read mirrored)
     ground_truth.yaml  optional: written by ``simulate.dataset``; never read by extraction
 
 ``load_dataset`` fails as a whole (``DatasetError``) only when the shared files are bad (folder, camera.yaml,
@@ -16,6 +17,7 @@ board.yaml, background.csv, windows.yaml); a bad image or scan makes that pose's
 naming the file and line, and the other poses go on.
 """
 
+from .direction import SCAN_DIRECTIONS, check_scan_direction, lidar_yaml, load_lidar, mirror_scan
 from .load import IMAGE_SUFFIXES, RESERVED_STEMS, load_dataset
 from .model import BoardSpec, CameraModel, Dataset, DatasetError, Pose, Scan
 from .scans import csv_rows, make_scan, read_keyed_scans, read_scan_csv, same_pose
@@ -31,7 +33,8 @@ from .yaml_files import (
 )
 
 __all__ = [
-    "IMAGE_SUFFIXES", "RESERVED_STEMS", "BoardSpec", "CameraModel", "Dataset", "DatasetError", "Pose", "Scan",
-    "board_from_dict", "camera_from_dict", "csv_rows", "load_board", "load_camera", "load_dataset", "load_ground_truth",
-    "load_windows", "make_scan", "matrix_field", "read_keyed_scans", "read_scan_csv", "read_yaml", "same_pose",
+    "IMAGE_SUFFIXES", "RESERVED_STEMS", "SCAN_DIRECTIONS", "BoardSpec", "CameraModel", "Dataset", "DatasetError",
+    "Pose", "Scan", "board_from_dict", "camera_from_dict", "check_scan_direction", "csv_rows", "lidar_yaml",
+    "load_board", "load_camera", "load_dataset", "load_ground_truth", "load_lidar", "load_windows", "make_scan",
+    "matrix_field", "mirror_scan", "read_keyed_scans", "read_scan_csv", "read_yaml", "same_pose",
 ]

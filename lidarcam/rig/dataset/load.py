@@ -5,12 +5,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .direction import check_scan_direction, load_lidar, mirror_scan, mirror_window
 from .model import Dataset, DatasetError, Pose, Scan
 from .scans import read_keyed_scans, read_scan_csv, same_pose
 from .yaml_files import load_board, load_camera, load_ground_truth, load_windows
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
-RESERVED_STEMS = {"camera", "board", "background", "scans", "windows", "ground_truth"}
+RESERVED_STEMS = {"camera", "board", "background", "scans", "windows", "ground_truth", "lidar"}
 
 
 def _sort_key(name: str):
@@ -69,8 +70,19 @@ def _pose_scan(name: str, root: Path, csvs: dict[str, Path], keyed: dict[str, Sc
     return keyed[k]
 
 
-def load_dataset(root) -> Dataset:
+def _direction(root: Path, given: str | None) -> tuple[str, str]:
+    """(scan direction, its source): ``given`` when not None, else lidar.yaml's ``scan_direction``, else ccw."""
+    if given is not None:
+        return check_scan_direction(given), "given"
+    declared = load_lidar(root / "lidar.yaml").get("scan_direction") if (root / "lidar.yaml").exists() else None
+    return (declared, "lidar.yaml") if declared else ("ccw", "default")
+
+
+def load_dataset(root, scan_direction: str | None = None) -> Dataset:
     """Load a dataset folder (layout in the package docstring and docs/dataset.md).
+
+    ``scan_direction`` (``cw`` or ``ccw``) overrides lidar.yaml's; with ``cw`` every scan, the background and the
+    windows are read mirrored (``lidarcam.rig.dataset.direction``).
 
     Raises DatasetError when the folder, camera.yaml, board.yaml, background.csv, windows.yaml or the header of
     scans.csv is bad. Per-pose problems (missing/unreadable image, image size differing from camera.yaml, missing
@@ -79,6 +91,7 @@ def load_dataset(root) -> Dataset:
     root = Path(root)
     if not root.is_dir():
         raise DatasetError("not a dataset folder (does not exist or is not a directory)", file=root)
+    direction, direction_source = _direction(root, scan_direction)
     camera = load_camera(root / "camera.yaml")
     board = load_board(root / "board.yaml")
     windows = load_windows(root / "windows.yaml") if (root / "windows.yaml").exists() else {}
@@ -105,4 +118,8 @@ def load_dataset(root) -> Dataset:
     unknown = [k for k in windows if not any(same_pose(k, p.name) for p in poses)]
     if unknown:
         raise DatasetError(f"windows for unknown poses {unknown}", file=root / "windows.yaml")
-    return Dataset(root, camera, board, tuple(poses), background, ground_truth)
+    if direction == "cw":
+        poses = [Pose(p.name, p.image_path, None if p.scan is None else mirror_scan(p.scan),
+                      None if p.window is None else mirror_window(p.window), p.error, p.corners) for p in poses]
+        background = None if background is None else mirror_scan(background)
+    return Dataset(root, camera, board, tuple(poses), background, ground_truth, direction, direction_source)

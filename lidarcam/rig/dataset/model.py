@@ -133,7 +133,11 @@ class Pose:
 
 @dataclass(frozen=True, eq=False)
 class Dataset:
-    """A loaded dataset folder. ``poses`` are sorted by name (numerically when all names are digits)."""
+    """A loaded dataset folder. ``poses`` are sorted by name (numerically when all names are digits).
+
+    ``scan_direction``: which way the scan files count their bearings (``ccw`` or ``cw``; the scans here are
+    already read counter-clockwise, ``lidarcam.rig.dataset.direction``); ``scan_direction_source``: ``default`` (nothing
+    declared), ``lidar.yaml`` or ``given`` (by the caller, e.g. ``--scan-direction``)."""
 
     root: Path
     camera: CameraModel
@@ -141,6 +145,8 @@ class Dataset:
     poses: tuple[Pose, ...]
     background: Scan | None = None
     ground_truth: dict = field(default_factory=dict)
+    scan_direction: str = "ccw"
+    scan_direction_source: str = "default"
 
     def pose(self, name: str) -> Pose:
         for p in self.poses:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from calib_core.data.observations import check_simple_polygon
+from calib_core.geometry.polygon import check_simple_polygon
 
 from .model import BoardSpec, CameraModel, DatasetError
 

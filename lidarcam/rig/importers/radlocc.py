@@ -9,6 +9,9 @@ return. ``RangeUnitType`` gives the unit of the ranges: 1 mm, 2 cm, 3 m (RADLOCC
 are ``StartAngle + i * AngleIncrement`` counter-clockwise from the lidar x axis (a negative increment is a
 clockwise sweep). Lines whose header does not parse are errors unless the caller restricts ``lines``.
 
+The scan direction is not in the log: RADLOCC-style settings files (e.g. ``CamCalibConfig.xml``) state it as
+``Laser_Direction`` (1 clockwise, 2 counter-clockwise); ``laser_direction`` finds it beside the log or the camera file.
+
 RADLOCC writes laser points as ``[y; 0; x]`` and its result as ``Lpts = PHI (Cpts - DELTA)`` (DELTA in mm, the
 camera-frame position of the lidar origin). ``T_lidar_cam_from_radlocc`` converts that to the project's
 ``T_lidar_cam`` for lidar points ``[x, y, 0]``.
@@ -109,6 +112,39 @@ def read_radlocc_laser(path, lines: range | None = None) -> list[RadloccScan]:
     if not out:
         raise DatasetError("no laser lines", file=path)
     return out
+
+
+LASER_DIRECTION = {1: "cw", 2: "ccw"}
+"""``Laser_Direction`` of a RADLOCC-style settings file: 1 for clockwise, 2 for counter-clockwise."""
+_LASER_DIRECTION = re.compile(r"<Laser_Direction>\s*([^<\s]*)\s*</Laser_Direction>|^\s*Laser_Direction\s*:\s*(\S+)",
+                              re.M)
+SETTINGS_SUFFIXES = (".xml", ".yaml", ".yml")
+MAX_SETTINGS_BYTES = 1 << 20
+
+
+def laser_direction(folders) -> tuple[str, Path, str] | None:
+    """The scan direction a settings file in ``folders`` declares: (``cw`` | ``ccw``, the file, its value as
+    written), from the first file (sorted by name) holding a ``Laser_Direction`` of 1 or 2; None when none does.
+    XML (``<Laser_Direction>1</Laser_Direction>``) and YAML (``Laser_Direction: 1``) files under 1 MiB are read."""
+    seen = set()
+    for folder in folders:
+        folder = Path(folder)
+        if not folder.is_dir() or folder.resolve() in seen:
+            continue
+        seen.add(folder.resolve())
+        for f in sorted(p for p in folder.iterdir() if p.suffix.lower() in SETTINGS_SUFFIXES and p.is_file()):
+            try:
+                if f.stat().st_size > MAX_SETTINGS_BYTES:
+                    continue
+                text = f.read_text(errors="replace")
+            except OSError:
+                continue
+            text = re.sub(r"<!--.*?-->", "", text, flags=re.S) if f.suffix.lower() == ".xml" else text
+            for m in _LASER_DIRECTION.finditer(text):
+                value = (m.group(1) or m.group(2) or "").strip().strip('"')
+                if value.lstrip("+").isdigit() and int(value) in LASER_DIRECTION:
+                    return LASER_DIRECTION[int(value)], f, value
+    return None
 
 
 def T_lidar_cam_from_radlocc(PHI, DELTA_mm) -> np.ndarray:
