@@ -196,8 +196,9 @@ CASES = [
     *[CliCase(f"{verb}_{flag[2:]}_{value}", (verb, *args, flag, value), flag)
       for verb, args in (("extract", ("{S}/ds", "--out", "{S}/o.json")),
                          ("report", ("{S}/ds", "{S}/r.json", "--out", "{S}/rep")))
-      for flag, value in (("--range-sigma", "nan"), ("--range-sigma", "-1"), ("--max-offset", "inf"),
-                          ("--max-board", "-2"), ("--max-reproj", "nan"), ("--max-curvature-chi2", "nan"))],
+      for flag, value in (("--max-offset", "inf"), ("--max-offset", "nan"), ("--max-board", "-2"),
+                          ("--max-reproj", "nan"), ("--max-reproj", "0"))],
+    # (--range-sigma and --max-curvature-chi2: extract's own check, tests/rig/test_scan_noise.py)
     CliCase("bag_min_move_negative", _bag("--min-move", "-1"), "--min-move"),
     CliCase("simulate_noise_nan", ("simulate", "--noise-mm", "nan", "--out", "{S}/sim.json"), "--noise-mm"),
     CliCase("import_step_nan", ("import", "ranges", "{S}/img", "--images", "{S}/img", "--start-deg", "0",

@@ -126,7 +126,7 @@ def parse_prior(pose: str | None, sigma: str | None):
     for item in filter(None, (p.strip() for p in sigma.split(","))):
         kind, value = parse_quantity(item, "--prior-sigma")
         if kind is None:
-            raise CalibrationError(f"--prior-sigma: {item!r} carries no unit; expected e.g. 50mm,10deg")
+            raise CalibrationError(f"--prior-sigma: bad item {item!r}: no unit; expected e.g. 50mm,10deg")
         which = ("rotation", "translation")[kind]
         if which in sig:
             raise CalibrationError(f"--prior-sigma: two {which} sigmas")

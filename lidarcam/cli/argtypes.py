@@ -45,11 +45,14 @@ def non_negative_float(text: str) -> float:
     return v
 
 
-POSITIVE = {"--range-sigma", "--max-offset", "--max-reproj", "--max-curvature-chi2", "--max-board", "--still-px",
+POSITIVE = {"--max-offset", "--max-reproj", "--max-board", "--still-px",
             "--max-offset-time", "--sync-tol", "--square"}
 """Options of the verbs whose value must be > 0."""
 NON_NEGATIVE = {"--quiet-grey", "--scan-still", "--min-angle", "--min-move"}
 """Options whose value must be >= 0."""
+OWN_CHECK = {"--range-sigma", "--max-curvature-chi2"}
+"""Options their verb checks itself, with a hint (``lidarcam.cli.rig.check_noise_flags``: leave it out to estimate
+it): left as they are."""
 
 
 def check_numbers(parser: argparse.ArgumentParser) -> None:
@@ -61,7 +64,7 @@ def check_numbers(parser: argparse.ArgumentParser) -> None:
         for a in p._actions:
             if isinstance(a, argparse._SubParsersAction):
                 todo.extend(a.choices.values())
-            elif a.type in (float, finite_float):
+            elif a.type in (float, finite_float) and not set(a.option_strings) & OWN_CHECK:
                 names = set(a.option_strings)
                 a.type = (positive_float if names & POSITIVE else non_negative_float if names & NON_NEGATIVE
                           else finite_float)
