@@ -10,7 +10,7 @@ import numpy as np
 from .checks.diagnose import data_causes, judge
 from .checks.verdict import check, data_warnings
 from .data.observations import Observations
-from .data.result import CalibrationResult
+from .data.result import CalibrationResult, observations_fingerprint
 from .errors import CalibrationError, SolveFailure, UncertaintyError
 from .geometry.mounting import MountingPrior
 from .methods.last_steps import PRIOR_CONTRADICTS
@@ -118,4 +118,5 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
             return CalibrationResult(method, False, None, f"{method}: the data contradict the answer: {v.reason}"
                                      + "".join(f"; {c}" for c in causes), cands, time.perf_counter() - t0,
                                      info=info)
+    info["observations"] = observations_fingerprint(observations)
     return CalibrationResult(method, True, T, None, cands, time.perf_counter() - t0, cov, info=info)

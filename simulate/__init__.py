@@ -23,6 +23,7 @@ from .camera import (
     pose_from_corners,
     render_board_image,
 )
+from .lens import is_default, lens_corners, pose_of, true_camera
 from .lidar import beam_bearings, board_ranges, cast_scan
 from .options import SimOptions, contamination_hash, contamination_on, settings_hash
 from .outliers import contaminate, contamination_rng
@@ -66,6 +67,7 @@ def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0, stream: i
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     spec = BoardSpec.of(o)
     user_cam = erroneous_camera(o, rng_intrinsics) if o.intrinsics_error_on else None
+    lens = None if is_default(o) else true_camera(o)
     bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
     P = checkerboard_corners(o)
     cam_poses: list[np.ndarray] = []
@@ -79,11 +81,9 @@ def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0, stream: i
             if hits < o.min_points_per_board:
                 return False
         try:
-            T, uv = observe_board(K, invert_T(T_lidar_cam) @ T_lidar_board, spec, o.pose_mode, o.cam_width,
-                                   o.cam_height, rng_cam, o.pixel_noise_px, o.image_noise_std,
-                                   o.render_supersample)
+            T, uv = _observed(o, K, lens, invert_T(T_lidar_cam) @ T_lidar_board, spec, P, rng_cam)
             if user_cam is not None:  # the user's pose: PnP with the intrinsics they have
-                T = pose_from_corners(user_cam.K, P, uv, user_cam.dist)
+                T = pose_from_corners(user_cam.K, P, uv, user_cam.dist) if lens is None else pose_of(user_cam, P, uv)
         except CameraError:
             return False
         cam_poses.append(T)
@@ -106,14 +106,32 @@ def simulate_trial(options: SimOptions, seed: int = 0, trial: int = 0, stream: i
     return scene, scans, cam_poses, corners
 
 
+def _observed(o: SimOptions, K: np.ndarray, lens, T_cam_board: np.ndarray, spec: BoardSpec, P: np.ndarray,
+              rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray | None]:
+    """``observe_board`` through the plain pinhole, or through the lens ``lens`` (``simulate.lens``) when given."""
+    if lens is None:
+        return observe_board(K, T_cam_board, spec, o.pose_mode, o.cam_width, o.cam_height, rng, o.pixel_noise_px,
+                             o.image_noise_std, o.render_supersample)
+    if o.pose_mode == "exact":
+        return np.array(T_cam_board, float), None
+    if o.pose_mode == "image":
+        from .lens_render import image_corners
+
+        uv = image_corners(lens, T_cam_board, spec, rng, o.image_noise_std, o.render_supersample)
+        return pose_of(lens, P, uv), uv
+    return lens_corners(lens, T_cam_board, P, o.pixel_noise_px, rng)
+
+
 def file_camera(options: SimOptions, seed: int = 0, trial: int = 0, stream: int | None = None) -> Camera | None:
     """The camera a trial's file states: None in ``exact`` mode, the erroneous one (``simulate.rig``) with an
-    intrinsics error, else the true pinhole (no distortion)."""
+    intrinsics error, else the true camera (the pinhole without distortion, or the lens ``cam_model``)."""
     o = options
     if o.pose_mode == "exact":
         return None
     if o.intrinsics_error_on:
         return erroneous_camera(o, rig_rngs(o, seed, trial, stream)[1])
+    if not is_default(o):
+        return true_camera(o)
     return Camera(camera_matrix(o.focal_px, o.cam_width, o.cam_height), [], o.cam_width, o.cam_height)
 
 
@@ -169,6 +187,7 @@ def observe_poses(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board: n
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     spec = BoardSpec.of(o)
     camera = file_camera(o, seed, trial)
+    lens = None if is_default(o) else true_camera(o)
     bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
     T_cam = invert_T(np.asarray(T_lidar_cam, float))
     P = checkerboard_corners(o)
@@ -178,10 +197,9 @@ def observe_poses(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board: n
         outline, kind = (spec.outline(), "exact") if m is None else file_outline(o, m)
         seen = spec.outline() if m is None else physical_outline(o, m)
         scan = cast_scan(bearings, T[None], seen, o.lidar_max_range_m, o.noise_mm / 1000.0, rng_lidar)[0]
-        T_cb, uv = observe_board(K, T_cam @ T, spec, o.pose_mode, o.cam_width, o.cam_height, rng_cam,
-                                 o.pixel_noise_px, o.image_noise_std, o.render_supersample)
+        T_cb, uv = _observed(o, K, lens, T_cam @ T, spec, P, rng_cam)
         if o.intrinsics_error_on:
-            T_cb = pose_from_corners(camera.K, P, uv, camera.dist)
+            T_cb = pose_from_corners(camera.K, P, uv, camera.dist) if lens is None else pose_of(camera, P, uv)
         boards.append(BoardObservation(T_cb, outline, scan, uv, None if uv is None else P, outline_kind=kind))
         margins.append(m)
     meta = {"generator": GENERATOR, "options": o.to_dict(), "seed": int(seed), "trial": int(trial)}

@@ -34,10 +34,13 @@ class SimOptions:
     (the paper's "variance 20 mm" read as a standard deviation).
 
     Camera: pinhole, ``focal_px``, ``cam_width`` x ``cam_height``, principal point at the image centre
-    ((W-1)/2, (H-1)/2) in OpenCV's pixel-centre convention. ``pose_mode``: ``exact`` (true board poses),
-    ``pixel`` (project the inner corners, add ``pixel_noise_px`` Gaussian noise, solvePnP IPPE), ``image``
+    ((W-1)/2, (H-1)/2) in OpenCV's pixel-centre convention; ``cam_model`` and ``cam_params`` choose the lens
+    (``simulate.lens``: any model of ``calib_core.data.cameras`` on that K; ``image`` mode renders through it,
+    ``simulate.lens_render``; the pose is then fitted through the model). ``pose_mode``: ``exact`` (true board
+    poses), ``pixel`` (project the inner corners, add ``pixel_noise_px`` Gaussian noise, solvePnP IPPE), ``image``
     (render at ``render_supersample`` x supersampling, add ``image_noise_std`` grey-level noise, detect with
-    findChessboardCornersSB, solvePnP IPPE). Boards must project at least ``image_margin_px`` inside the
+    findChessboardCornersSB, solvePnP IPPE).
+    Boards must project at least ``image_margin_px`` inside the
     image and lie at least ``min_depth_m`` in front of the camera.
 
     Extrinsic: ``T_lidar_cam`` = nominal axis change (camera z -> lidar x, x -> -y, y -> -z) times a rotation
@@ -108,6 +111,8 @@ class SimOptions:
     principal_point_error_px: float = 0.0
     distortion_error: float = 0.0
     std_intrinsics_known: bool = True
+    cam_model: str = "pinhole-radtan"
+    cam_params: str = ""
 
     def __post_init__(self) -> None:
         def need(cond: bool, msg: str) -> None:
@@ -176,6 +181,12 @@ class SimOptions:
         need(self.focal_error_rel < 0.1, f"focal_error_rel must be < 0.1, got {self.focal_error_rel}")
         need(self.pose_mode != "exact" or not self.intrinsics_error_on,
              "an intrinsics error needs pose_mode pixel or image (exact poses come from no camera)")
+        if (self.cam_model, self.cam_params) != (CAMERA_DEFAULTS["cam_model"], CAMERA_DEFAULTS["cam_params"]):
+            from .lens import true_camera  # the lens models; ValueError naming the option when not valid
+
+            true_camera(self)
+            need(self.distortion_error == 0 or self.cam_model == "pinhole-radtan",
+                 "distortion_error draws OpenCV coefficients: it needs cam_model pinhole-radtan")
 
     @property
     def intrinsics_error_on(self) -> bool:
@@ -210,8 +221,13 @@ RIG_DEFAULTS = {"board_margin_min_m": 0.0, "board_margin_max_m": 0.0, "outline_k
 before these options existed; when on they are part of both."""
 
 
+CAMERA_DEFAULTS = {"cam_model": "pinhole-radtan", "cam_params": ""}
+"""The lens options (``simulate.lens``) and their defaults (the distortion-free pinhole); like the rig options, left
+out of ``settings_hash`` and ``hashed_settings`` at these values."""
+
+
 def _at_default(k: str, v) -> bool:
-    for defaults in (CONTAMINATION_DEFAULTS, RIG_DEFAULTS):
+    for defaults in (CONTAMINATION_DEFAULTS, RIG_DEFAULTS, CAMERA_DEFAULTS):
         if k in defaults and v == defaults[k]:
             return True
     return False

@@ -8,11 +8,14 @@ Each condition draws from its own random stream (``rig_rngs``), never from the g
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from calib_core.data.camera import Camera
 
 from .camera import BoardSpec, camera_matrix
+from .lens import is_default, true_camera
 from .options import SimOptions
 
 RIG_STREAMS = (3, 4)
@@ -91,4 +94,23 @@ def erroneous_camera(options: SimOptions, rng: np.random.Generator) -> Camera:
     err = rng.normal(0.0, 1.0, len(std)) * std
     K_err = np.array([[K[0, 0] + err[0], 0.0, K[0, 2] + err[2]], [0.0, K[1, 1] + err[1], K[1, 2] + err[3]],
                       [0.0, 0.0, 1.0]])
+    if not is_default(o):
+        return _erroneous_lens(o, K_err, err[4:], std)
     return Camera(K_err, err[4:], o.cam_width, o.cam_height, std if o.std_intrinsics_known else None)
+
+
+def _erroneous_lens(o: SimOptions, K_err: np.ndarray, dist_err: np.ndarray, std: np.ndarray):
+    """``erroneous_camera`` for a lens (``simulate.lens``): its parameters exact, the drawn error on K and (OpenCV
+    lenses) the first four coefficients; the stated 1-sigma has a 0 for every value drawn without error."""
+    cam = true_camera(o, K_err)
+    if len(dist_err):
+        k = cam.intrinsics
+        k[cam.n_core:cam.n_core + len(dist_err)] += dist_err
+        cam = cam.with_intrinsics(k)
+    if not o.std_intrinsics_known:
+        return cam
+    n_dist = len(cam.to_dict()["dist"]) if len(dist_err) else 0
+    full = np.zeros(cam.n_core + n_dist)
+    full[:4] = std[:4]
+    full[cam.n_core:cam.n_core + len(std) - 4] = std[4:]
+    return replace(cam, dist=cam.to_dict()["dist"], std_intrinsics=full)

@@ -13,6 +13,7 @@ import numpy as np
 from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix
 
 from .camera import BoardSpec, camera_matrix
+from .lens import edge_points, in_view, is_default, true_camera
 from .lidar import beam_bearings, board_ranges, scan_chords
 from .options import SimOptions
 
@@ -131,14 +132,19 @@ def check_candidates(options: SimOptions, T_lidar_cam: np.ndarray, T_lidar_board
     T_cam_board = invert_T(T_lidar_cam)[None] @ T_lidar_board
     P = np.einsum("mij,vj->mvi", T_cam_board[:, :3, :3], np.column_stack([outline, np.zeros(len(outline))]))
     P += T_cam_board[:, None, :3, 3]
-    mark(np.any(P[..., 2] < o.min_depth_m, axis=1), 0)
-    K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = (P @ K.T)[..., :2] / P[..., 2:3]
-    m = o.image_margin_px
-    inside = ((uv[..., 0] >= m) & (uv[..., 0] <= o.cam_width - 1 - m)
-              & (uv[..., 1] >= m) & (uv[..., 1] <= o.cam_height - 1 - m))
-    mark(~np.all(inside, axis=1), 1)
+    if is_default(o):
+        mark(np.any(P[..., 2] < o.min_depth_m, axis=1), 0)
+        K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = (P @ K.T)[..., :2] / P[..., 2:3]
+        m = o.image_margin_px
+        inside = ((uv[..., 0] >= m) & (uv[..., 0] <= o.cam_width - 1 - m)
+                  & (uv[..., 1] >= m) & (uv[..., 1] <= o.cam_height - 1 - m))
+        mark(~np.all(inside, axis=1), 1)
+    else:   # through the lens: the outline's edges (a lens bends them), every point in the model and the image
+        mark(np.any(np.linalg.norm(P, axis=2) < o.min_depth_m, axis=1), 0)
+        E = np.einsum("mij,vj->mvi", T_cam_board[:, :3, :3], edge_points(outline)) + T_cam_board[:, None, :3, 3]
+        mark(~in_view(true_camera(o), E, o.image_margin_px, o.min_depth_m), 1)
     chords = scan_chords(T_lidar_board, outline)
     mark(np.isnan(chords[:, 0, 0]), 2)
     ang = np.arctan2(chords[..., 1], chords[..., 0])                 # (n,2), ordered

@@ -33,6 +33,7 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import norm
 
+from ..data.camera import Camera, view_depth
 from ..data.lines import MIN_SPREAD_M, range_sigma
 from ..data.observations import MIN_RANGE_M, Observations, ScanData
 from ..model.residuals import outside_outline, points_in_boards, range_residuals
@@ -111,11 +112,15 @@ def measured_points(obs: Observations) -> ScanData:
 
 
 def board_depths(obs: Observations) -> np.ndarray:
-    """(N,) depth (metres) of each board's centre (``BoardObservation.centre``) in the camera frame (camera z)."""
+    """(N,) depth (metres) of each board's centre (``BoardObservation.centre``) in the camera frame (camera z; for a
+    wide-angle camera model ``view_depth``)."""
     out = []
     for b in obs.boards:
         c = b.centre
-        out.append(float(b.T_cam_board[2, :2] @ c + b.T_cam_board[2, 3]))
+        if obs.camera is None or isinstance(obs.camera, Camera):
+            out.append(float(b.T_cam_board[2, :2] @ c + b.T_cam_board[2, 3]))
+        else:   # a wide-angle model: the distance where its field takes the centre (``view_depth``)
+            out.append(float(view_depth(obs.camera, b.T_cam_board[:3, :2] @ c + b.T_cam_board[:3, 3])))
     return np.array(out)
 
 
@@ -160,7 +165,9 @@ def board_tests(obs: Observations, T: np.ndarray, sigma: float) -> list[dict]:
         if depth[i] < MIN_DEPTH_M:
             st["bad"].append(f"its pose puts it {depth[i]:.2f} m deep, not in front of the camera")
         elif len(b.scan):
-            zc = (b.scan_3d.mean(axis=0) - t) @ R[:, 2]
+            c = b.scan_3d.mean(axis=0) - t
+            zc = c @ R[:, 2] if obs.camera is None or isinstance(obs.camera, Camera) else \
+                float(view_depth(obs.camera, c @ R))
             if zc <= 0:
                 st["bad"].append(f"under this answer its scan lies behind the camera (depth {zc:.2f} m)")
         out.append(st)

@@ -12,7 +12,8 @@ import numpy as np
 from ..errors import ObservationError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import invert_T, quaternion_xyzw
-from .camera import Camera
+from .camera import Camera, CameraModel
+from .cameras import camera_class
 from .exports import FrameExport
 from .observations import MAX_BOARDS, BoardObservation, Observations, check_outline_kind, orthonormalised
 
@@ -74,15 +75,39 @@ def _corners_dict(b: BoardObservation) -> dict:
     return {"corners_px": b.corners_px.tolist(), "corners_board": b.corners_board.tolist()}
 
 
-def camera_from_dict(raw) -> Camera:
-    """The optional file-level ``camera`` object: ``K`` (3x3), ``dist`` (OpenCV order), ``width``, ``height`` and
-    the optional ``std_intrinsics`` (1-sigma of fx, fy, cx, cy[, dist], ``Camera``)."""
+def camera_from_dict(raw) -> CameraModel:
+    """The optional file-level ``camera`` object: ``K`` (3x3), ``dist`` (OpenCV order for ``radtan``, k1..k4 for
+    ``equidistant``), ``width``, ``height``, the optional ``std_intrinsics`` (1-sigma of fx, fy, cx, cy[, the
+    model's parameters][, dist]) and, optionally, Kalibr's ``camera_model`` (``pinhole`` when absent: ``Camera``),
+    ``distortion_model`` and the model's parameters (``xi``, ``alpha``, ``beta``: ``calib_core.data.cameras``)."""
     if not isinstance(raw, dict):
         raise ObservationError("must be an object", field="camera")
     for key in ("K", "width", "height"):
         if key not in raw:
             raise ObservationError("missing key", field=f"camera.{key}")
-    return Camera(raw["K"], raw.get("dist") or [], raw["width"], raw["height"], raw.get("std_intrinsics"))
+    args = (raw["K"], raw.get("dist") or [], raw["width"], raw["height"], raw.get("std_intrinsics"))
+    if "camera_model" not in raw and "distortion_model" not in raw:
+        return Camera(*args)
+    model, dist_model = raw.get("camera_model", "pinhole"), raw.get("distortion_model")
+    if not isinstance(model, str) or not (dist_model is None or isinstance(dist_model, str)):
+        raise ObservationError("camera_model and distortion_model must be strings", field="camera.camera_model")
+    try:
+        cls = camera_class(model, dist_model)
+    except KeyError as exc:
+        raise ObservationError(exc.args[0], field="camera.camera_model") from None
+    unknown = sorted(set(raw) - CAMERA_KEYS - set(cls.param_names))
+    if unknown:
+        raise ObservationError(f"unknown key for the {model} model (its parameters: "
+                               f"{', '.join(cls.param_names) or 'none'})", field=f"camera.{unknown[0]}")
+    params = {n: raw[n] for n in cls.param_names if n in raw}
+    for n, v in params.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ObservationError(f"must be a number, got {v!r}"[:120], field=f"camera.{n}")
+    return cls(*args, **params)
+
+
+CAMERA_KEYS = {"K", "dist", "width", "height", "std_intrinsics", "camera_model", "distortion_model"}
+"""The ``camera`` object's keys every model shares (a model adds its parameters)."""
 
 
 def observations_from_dict(data, source: str | None = None) -> Observations:
@@ -161,8 +186,9 @@ def _nesting_depth(text: str) -> int:
     return int(np.cumsum(step).max(initial=0))
 
 
-def load_observations(path) -> Observations:
-    """Read and validate an observation JSON file; raises ObservationError naming file, board, field."""
+def read_json(path):
+    """The parsed JSON of a lidarcam file (size, encoding and nesting bounded first); ObservationError naming the
+    file otherwise. NaN/Infinity literals parse to floats: the caller's checks reject them naming the field."""
     path = Path(path)
     try:
         size = path.stat().st_size
@@ -177,10 +203,14 @@ def load_observations(path) -> Observations:
         raise ObservationError(f"brackets nested {depth} deep, more than the limit of {MAX_JSON_DEPTH}",
                                file=str(path))
     try:
-        # NaN/Infinity literals parse to floats here so that validation rejects them naming board and field
-        data = json.loads(text)
+        return json.loads(text)
     except (ValueError, RecursionError) as exc:
         raise ObservationError(f"not valid JSON ({str(exc)[:200]})", file=str(path)) from None
+
+
+def load_observations(path) -> Observations:
+    """Read and validate an observation JSON file; raises ObservationError naming file, board, field."""
+    data = read_json(path)
     return observations_from_dict(data, source=str(path))
 
 

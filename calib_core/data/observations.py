@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import ObservationError
 from ..geometry.polygon import check_simple_polygon
 from ..geometry.transforms import ROTATION_TOL, project_to_so3, rotation_defect
-from .camera import Camera
+from .camera import CameraModel
 
 MIN_SCAN_POINTS = 2
 MIN_RANGE_M = 1e-3
@@ -292,13 +292,13 @@ class Observations:
         T_lidar_cam_true: optional 4x4 true extrinsic (maps camera points into the lidar frame;
             the paper's ``p_L = R p_C + t``).
         meta: free-form provenance (simulator settings, seed, source file); not used by the solvers.
-        camera: optional intrinsics (``calib_core.data.camera.Camera``); required when a board carries corners.
+        camera: optional camera model (``calib_core.data.cameras``); required when a board carries corners.
     """
 
     boards: tuple[BoardObservation, ...]
     T_lidar_cam_true: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
-    camera: Camera | None = None
+    camera: CameraModel | None = None
 
     def __post_init__(self) -> None:
         boards = tuple(self.boards)
@@ -310,8 +310,8 @@ class Observations:
             if b.has_corners and self.camera is None:
                 raise ObservationError("image corners given but the file has no camera intrinsics", board=i,
                                        field="camera")
-        if self.camera is not None and not isinstance(self.camera, Camera):
-            raise ObservationError(f"not a Camera ({type(self.camera).__name__})", field="camera")
+        if self.camera is not None and not isinstance(self.camera, CameraModel):
+            raise ObservationError(f"not a camera model ({type(self.camera).__name__})", field="camera")
         object.__setattr__(self, "boards", boards)
         if self.T_lidar_cam_true is not None:
             T = _frozen_array(self.T_lidar_cam_true, "ground_truth.T_lidar_cam", (4, 4))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,7 +17,7 @@ from .outcome import Outcome
 RESULT_SCHEMA = "lidarcam.result/1"
 
 JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior",
-             "intrinsics", "board_dispersion", "covariance_bend", "residual_rms")
+             "intrinsics", "board_dispersion", "covariance_bend", "residual_rms", "observations")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
@@ -24,13 +25,27 @@ answers a refused tie could not decide between (``alternatives``: each ``{"T_lid
 log-likelihood, "mounting": its parameters}``, best first), the mounting prior given (``prior``), how the joint
 model treated the camera's intrinsics (``calib_core.model.intrinsics``), and the boards' dispersion test
 (``board_dispersion``, ``calib_core.refine.dispersion``: whether the covariance was widened to the boards' spread), and
-the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.refine.bend``), and the range
+the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.refine.bend``), the range
 residuals' RMS over the boards used at the method's start and at its answer (``residual_rms``: ``start_m``,
-``answer_m``, metres). The file's ``noise`` field names each range-noise figure by its source (``data.outcome.Noise``,
-metres)."""
+``answer_m``, metres), and which observations the answer was computed from (``observations``:
+``observations_fingerprint``). The file's ``noise`` field names each range-noise figure by its source
+(``data.outcome.Noise``, metres)."""
 BEND_REPORTED = 0.5
 """The summary names the covariance's bend (``covariance_bend``) when a re-fit departed from the Gaussian by this
 many sigmas or more."""
+
+
+def observations_fingerprint(obs) -> dict:
+    """What identifies the observations a result was computed from: ``{"boards": N, "sha256": hex}``, the hash
+    over each board's scan points, camera pose, outline and corners (not the file's bytes nor its ``meta``: a
+    re-extraction of the same dataset gives the same fingerprint, another board set another)."""
+    h = hashlib.sha256()
+    for b in obs.boards:
+        for a in (b.scan, b.T_cam_board, b.outline, b.corners_px):
+            a = np.zeros(0) if a is None else np.ascontiguousarray(a, float)
+            h.update(str(a.shape).encode())
+            h.update(a.tobytes())
+    return {"boards": int(obs.n_boards), "sha256": h.hexdigest()}
 
 
 @dataclass(frozen=True, eq=False)
@@ -227,18 +242,21 @@ class CalibrationResult:
 
 
 def load_result(path) -> dict:
-    """Read a ``lidarcam.result/1`` JSON file into a dict with numpy 4x4 arrays (None where not ok)."""
+    """Read a ``lidarcam.result/1`` JSON file into a dict with numpy 4x4 arrays (None where not ok); every field
+    checked (``result_check.check_result_dict``): ObservationError naming the file and the field otherwise."""
     from ..errors import ObservationError
+    from .io import read_json
+    from .result_check import check_result_dict
 
-    try:
-        d = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
-        raise ObservationError(f"cannot read result ({exc})", file=str(path)) from None
+    d = read_json(path)
+    if not isinstance(d, dict):
+        raise ObservationError(f"expected a JSON object at the top, got {type(d).__name__}", file=str(path))
     if d.get("schema") != RESULT_SCHEMA:
         raise ObservationError(f"expected schema {RESULT_SCHEMA!r}", file=str(path), field="schema")
-    for k in ("T_lidar_cam", "T_cam_lidar", "covariance"):
-        if d.get(k) is not None:
-            d[k] = np.asarray(d[k], float)
+    try:
+        d = check_result_dict(d)
+    except ObservationError as err:
+        raise err.within(file=str(path)) from None
     d.setdefault("warnings", [])            # optional fields: files written before they existed lack them
     d.setdefault("boards_used", None)
     d.setdefault("boards_rejected", [])

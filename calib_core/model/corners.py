@@ -1,6 +1,6 @@
 """The joint model's residuals: every corner's reprojection and every scan point's range against its board's current
 plane, with their Jacobians in the parameters of ``calib_core.refine.joint`` (board poses ``(phi_i, d_i)``, left
-perturbation in the camera frame; the extrinsic ``(w, dt)``; the camera's intrinsics, ``Camera.intrinsics`` order).
+perturbation in the camera frame; the extrinsic ``(w, dt)``; the camera's intrinsics, ``camera.intrinsics`` order).
 Units: pixels for corners, metres for ranges.
 """
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..data.camera import Camera, intrinsics_jacobian, project
+from ..data.camera import CameraModel, intrinsics_jacobian, project
 from ..data.observations import Observations, ScanData
 from ..errors import JointError
 from ..geometry.transforms import rotvec_to_matrix, skew
@@ -35,18 +35,21 @@ def board_poses(obs: Observations, x_boards: np.ndarray | None = None, T0: np.nd
     return T
 
 
-def corner_residuals(obs: Observations, T_cam_board: np.ndarray, jacobian: bool = False, camera: Camera | None = None,
-                     free: np.ndarray | None = None):
+def corner_residuals(obs: Observations, T_cam_board: np.ndarray, jacobian: bool = False,
+                     camera: CameraModel | None = None, free: np.ndarray | None = None):
     """Reprojection errors (J,2) in pixels of every corner under board poses ``T_cam_board`` (N,4,4) through
     ``camera`` (default the file's); with ``jacobian`` also (J,2,6) d e/d(phi, d) of each corner's own board, and
-    with ``free`` (indices into ``Camera.intrinsics``) also (J,2,len(free)) d e/d(those intrinsics)."""
+    with ``free`` (indices into ``camera.intrinsics``) also (J,2,len(free)) d e/d(those intrinsics)."""
     camera = obs.camera if camera is None else camera
     P, uv, idx = _corner_arrays(obs)
     RP = np.einsum("jab,jb->ja", T_cam_board[idx, :3, :3], P)
     X = RP + T_cam_board[idx, :3, 3]
-    if np.any(X[:, 2] <= 0):
-        bad = int(idx[np.argmax(X[:, 2] <= 0)])
-        raise JointError(f"board {bad}: a corner lies behind the camera under the current pose")
+    out = ~camera.valid(X)
+    if np.any(out):
+        bad = int(idx[np.argmax(out)])
+        where = "behind the camera" if X[np.argmax(out), 2] <= 0 and camera.name == "pinhole-radtan" else \
+            f"outside the {camera.name} model's field of view"
+        raise JointError(f"board {bad}: a corner lies {where} under the current pose")
     if not jacobian:
         return project(camera, X) - uv
     proj, Jp = project(camera, X, jacobian=True)

@@ -1,13 +1,14 @@
 """The camera's intrinsics as unknowns of the joint model, with the Gaussian prior the observation file states
 (``camera.std_intrinsics``, the 1-sigma of a prior calibration such as ``cv2.calibrateCameraExtended``'s).
 
-The intrinsics (``Camera.intrinsics`` order: fx, fy, cx, cy in pixels, then the distortion coefficients) are shared
-by every board, so they join the extrinsic in the global block of the joint model's normal equations: the global
-parameters are ``(w, dt, dk)`` with ``dk`` the change of the free intrinsics (those with a 1-sigma > 0) from the
-file's values. Corner rows touch their board's pose and ``dk``, range rows their board's pose and ``(w, dt)``, and
-one prior row per free intrinsic, ``(k - k0) / std``, touches ``dk`` alone. The Schur complement over the board poses
-keeps each step's cost linear in the number of boards; the extrinsic's covariance is the ``(w, dt)`` block of the
-inverse of the global information, so it holds the camera-side error the intrinsics carry into every board pose.
+The intrinsics (``camera.intrinsics`` order: fx, fy, cx, cy in pixels, the model's parameters such as ``xi``, then
+the distortion coefficients) are shared by every board, so they join the extrinsic in the global block of the joint
+model's normal equations: the global parameters are ``(w, dt, dk)`` with ``dk`` the change of the free intrinsics
+(those with a 1-sigma > 0) from the file's values. Corner rows touch their board's pose and ``dk``, range rows their
+board's pose and ``(w, dt)``, and one prior row per free intrinsic, ``(k - k0) / std``, touches ``dk`` alone. The
+Schur complement over the board poses keeps each step's cost linear in the number of boards; the extrinsic's
+covariance is the ``(w, dt)`` block of the inverse of the global information, so it holds the camera-side error the
+intrinsics carry into every board pose.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..data.camera import Camera
+from ..data.camera import CameraModel
 
 EXACT_BELOW = 1e-9
 """A 1-sigma of an intrinsic below this (pixels, or unitless for distortion) holds it exact."""
@@ -34,17 +35,17 @@ class IntrinsicsPrior:
 
     Attributes:
         camera: the file's camera (its intrinsics are the prior's mean).
-        free: indices into ``Camera.intrinsics`` of the intrinsics with a 1-sigma > 0 (the others stay fixed).
+        free: indices into ``camera.intrinsics`` of the intrinsics with a 1-sigma > 0 (the others stay fixed).
         k0: (m,) their prior mean (the file's values); std: (m,) their 1-sigma (pixels, or unitless).
     """
 
-    camera: Camera
+    camera: CameraModel
     free: np.ndarray
     k0: np.ndarray
     std: np.ndarray
 
     @classmethod
-    def of(cls, camera: Camera | None) -> IntrinsicsPrior | None:
+    def of(cls, camera: CameraModel | None) -> IntrinsicsPrior | None:
         """The prior of ``camera``'s ``std_intrinsics``; None when it has none or every 1-sigma is 0 (a 1-sigma
         under ``EXACT_BELOW`` is 0: its weight would overflow the normal equations)."""
         if camera is None or camera.std_intrinsics is None:
@@ -59,7 +60,7 @@ class IntrinsicsPrior:
         """Number of free intrinsics."""
         return len(self.free)
 
-    def camera_at(self, k: np.ndarray) -> Camera:
+    def camera_at(self, k: np.ndarray) -> CameraModel:
         """The camera with its free intrinsics at ``k`` (m,)."""
         v = self.camera.intrinsics
         v[self.free] = k

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..data.camera import Camera, view_depth
 from ..data.observations import Observations
 from .residuals import scan_endpoints
 
@@ -53,7 +54,10 @@ def plausibility(obs: Observations, candidates: np.ndarray) -> dict[str, np.ndar
     mb = np.einsum("mna,nka->mnk", m, beams)                                 # (M,N,2)
     with np.errstate(divide="ignore", invalid="ignore"):
         front = (c[..., None] / mb > 0).all(axis=-1)
-    depth = np.einsum("mna,ma->mn", centres[None] - t[:, None], R[:, :, 2])  # z of R^T (c - t)
+    if obs.camera is None or isinstance(obs.camera, Camera):
+        depth = np.einsum("mna,ma->mn", centres[None] - t[:, None], R[:, :, 2])  # z of R^T (c - t)
+    else:       # a wide-angle model: the centroid in its field (beside or behind its axis too)
+        depth = view_depth(obs.camera, np.einsum("mna,mab->mnb", centres[None] - t[:, None], R))
     return {"same_side": c * d[None] > 0, "lidar_front": front, "camera_front": depth > 0}
 
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..data.camera import Camera, project
+from ..data.camera import Camera, CameraModel, project
 from ..data.observations import BoardObservation, Observations
 from ..geometry.beams import beam_bearings, board_ranges
 from ..geometry.transforms import invert_T, make_T, rotvec_to_matrix
@@ -70,7 +70,7 @@ class PlanRig:
         workspace: where the board can go.
     """
 
-    camera: Camera
+    camera: CameraModel
     T_lidar_cam: np.ndarray
     outline: np.ndarray
     corners_board: np.ndarray
@@ -114,9 +114,13 @@ def feasibility(rig: PlanRig, T_lidar_board: np.ndarray) -> tuple[np.ndarray, np
     P = np.concatenate([np.column_stack([outline, np.zeros(len(outline))]), rig.corners_board])
     X = np.einsum("mij,vj->mvi", T_cb[:, :3, :3], P) + T_cb[:, None, :3, 3]
     reason = np.full(len(T), -1)
-    bad = np.any(X[..., 2] < rig.min_depth_m, axis=1)
+    if isinstance(rig.camera, Camera):
+        bad = np.any(X[..., 2] < rig.min_depth_m, axis=1)
+    else:   # a wide-angle model sees beside and behind the axis: its domain, at min_depth_m or more
+        bad = ~np.all(rig.camera.valid(X) & (np.linalg.norm(X, axis=-1) >= rig.min_depth_m), axis=1)
     reason[bad] = 0
-    uv = project(rig.camera, np.where(X[..., 2:] > 0, X, 1.0))
+    with np.errstate(all="ignore"):
+        uv = project(rig.camera, np.where(X[..., 2:] > 0, X, 1.0) if isinstance(rig.camera, Camera) else X)
     m, cam = rig.image_margin_px, rig.camera
     inside = np.all((uv[..., 0] >= m) & (uv[..., 0] <= cam.width - 1 - m) & (uv[..., 1] >= m)
                     & (uv[..., 1] <= cam.height - 1 - m), axis=1)

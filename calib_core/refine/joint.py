@@ -5,7 +5,7 @@ Cramer-Rao bound of that model.
 Unknowns: ``T_lidar_cam = (exp([w]x) R0, t0 + dt)`` (left rotation perturbation in the lidar frame, as in
 ``calib_core.model.residuals``) and per board ``T_cam_board_i = (exp([phi_i]x) Phi0_i, Delta0_i + d_i)`` (left
 perturbation in the camera frame); the parameter vector is ``(w, dt, phi_0, d_0, phi_1, d_1, ...)``.
-Residuals: every corner's reprojection through the OpenCV model (``calib_core.data.camera.project``) minus its
+Residuals: every corner's reprojection through the camera's model (``calib_core.data.camera.project``) minus its
 detection, divided by the corner noise std ``corner_sigma_px`` (pixels, per coordinate), and every scan point's
 range residual (``calib_core.model.residuals.range_residuals`` against its board's current plane) divided by the range
 noise std ``range_sigma_m``. Each board's residuals touch only its own pose and the extrinsic, so the Jacobian is
@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..data.camera import Camera
+from ..data.camera import CameraModel
 from ..data.lines import range_sigma, residual_sigma
 from ..data.observations import Observations
 from ..data.outcome import CovarianceModel
@@ -222,7 +222,7 @@ class JointResult:
     cost: float
     iterations: int
     converged: bool
-    camera: Camera | None = None
+    camera: CameraModel | None = None
     intrinsics: np.ndarray | None = None
 
 
@@ -340,7 +340,7 @@ def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: 
 
 
 def board_scores(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
-                 range_sigma_m: float, camera: Camera | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 range_sigma_m: float, camera: CameraModel | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each board's score (N,6), the gradient of its normalised cost in the extrinsic (rad, m), its pose profiled
     out to first order (``g_e - H_eb H_bb^-1 g_b``), and its information (N,6,6; ``board_informations``), at
     ``camera``'s intrinsics (default the file's): what ``refine.dispersion`` tests."""

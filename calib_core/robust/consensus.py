@@ -32,6 +32,7 @@ import functools
 import numpy as np
 from scipy.stats import chi2
 
+from ..data.camera import Camera, view_depth
 from ..data.lines import ScanLines, scan_lines
 from ..data.observations import Observations
 from ..model.chords import lower_bound_boards
@@ -84,7 +85,10 @@ def _statistics(obs: Observations, L: ScanLines, var: tuple, T: np.ndarray, outl
         sin = nu[..., 0] * L.normal[None, :, 1] - nu[..., 1] * L.normal[None, :, 0]
         q = off**2 / var[0] + sin**2 / var[1]
     # scan centre's depth in {C} (z of R^T (p_L - t)) and the scan ends in each board's frame (``board_frames``)
-    depth = ((L.ends.mean(axis=1)[None] - t[:, None]) @ R[:, :, 2:3])[..., 0]
+    if obs.camera is None or isinstance(obs.camera, Camera):
+        depth = ((L.ends.mean(axis=1)[None] - t[:, None]) @ R[:, :, 2:3])[..., 0]
+    else:   # a wide-angle model: the scan centre in its field (``view_depth``)
+        depth = view_depth(obs.camera, (L.ends.mean(axis=1)[None] - t[:, None]) @ R)
     A, c = board_frames(obs, T, rows=2)
     p_W = L.ends[None] @ A.swapaxes(-1, -2) + c[:, :, None, :]                 # (M,N,2,2)
     for idx, outline in outline_groups(obs):          # boards sharing one outline at once

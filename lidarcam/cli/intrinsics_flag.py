@@ -40,7 +40,8 @@ def parse_std_intrinsics(text: str, K: np.ndarray) -> np.ndarray:
 def with_std_intrinsics(obs, text: str):
     """``obs`` with its camera's ``std_intrinsics`` set from the flag ``text``; CalibrationError (one line) when the
     file has no camera or the values are not valid for it."""
-    from calib_core.data.camera import Camera
+    from dataclasses import replace
+
     from calib_core.data.observations import Observations
     from calib_core.errors import CalibrationError, ObservationError
 
@@ -49,11 +50,14 @@ def with_std_intrinsics(obs, text: str):
     c = obs.camera
     std = parse_std_intrinsics(text, c.K)
     dist = c.to_dict()["dist"]
-    if len(std) not in (4, 4 + len(dist)):
-        raise CalibrationError(f"--std-intrinsics: {len(std)} values; expected 4 (fx fy cx cy) or {4 + len(dist)} "
-                               f"(with the file's {len(dist)} distortion coefficients)")
+    core = ("fx", "fy", "cx", "cy") + c.param_names
+    if len(std) == 4 < len(core):      # the model's own parameters (xi, alpha, ...) taken as exact
+        std = np.r_[std, np.zeros(len(core) - 4)]
+    if len(std) not in (len(core), len(core) + len(dist)):
+        raise CalibrationError(f"--std-intrinsics: {len(std)} values; expected {len(core)} ({' '.join(core)}) or "
+                               f"{len(core) + len(dist)} (with the file's {len(dist)} distortion coefficients)")
     try:
-        camera = Camera(c.K, dist, c.width, c.height, std)
+        camera = replace(c, dist=dist, std_intrinsics=std)
     except ObservationError as err:
         raise CalibrationError(f"--std-intrinsics: {err}") from None
     return Observations(obs.boards, obs.T_lidar_cam_true, obs.meta, camera)

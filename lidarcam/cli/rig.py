@@ -111,13 +111,15 @@ def cmd_extract(args) -> int:
 
 
 def cmd_report(args) -> int:
-    """``lidarcam report``: overlays, residual plots and report.md for a result on a dataset."""
+    """``lidarcam report``: the result checked against the observations (``rig.result_match``), then overlays,
+    residual plots, report.md and report.html for it on a dataset or an observation file."""
     from pathlib import Path
 
     from calib_core.data.io import load_observations
     from calib_core.data.result import load_result
     from lidarcam.rig.extract import extract
     from lidarcam.rig.report import write_report
+    from lidarcam.rig.result_match import result_fit
 
     from .outputs import writable_folder
 
@@ -135,13 +137,16 @@ def cmd_report(args) -> int:
 
             c = obs.camera
             ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist))
-    summary = write_report(ds, obs, res, args.out)
+    fit = result_fit(res, obs, args.result, args.obs or args.dataset)
+    summary = write_report(ds, obs, res, args.out, alerts=fit.warnings)
     from .wording import cli_hint
 
     for w in summary.warnings:
         print(f"warning: {cli_hint(w)}")
-    print(f"wrote {summary.markdown} ({len(summary.overlays)} overlays, {len(summary.residual_plots)} residual plots)")
-    return 0 if res.get("ok") else 1
+    views = f", {len(summary.board_views)} board views" if summary.board_views else ""
+    print(f"wrote {summary.html} and {summary.markdown.name} ({len(summary.overlays)} overlays, "
+          f"{len(summary.residual_plots)} residual plots{views})")
+    return 0 if res.get("ok") and fit.fits else 1
 
 
 def add_parsers(subparsers) -> None:
@@ -155,9 +160,12 @@ def add_parsers(subparsers) -> None:
     _add_extract_options(p)
     p.set_defaults(func=cmd_extract)
 
-    p = subparsers.add_parser("report", help="overlays, residual plots and report.md of a calibration result",
-                              description="Project the scans into the images through the result's extrinsic, "
-                                          "plot residuals per board and write report.md.")
+    p = subparsers.add_parser("report", help="report.html (one self-contained page) and report.md of a calibration "
+                              "result: overlays, residuals, verdict",
+                              description="Check that the result belongs to these boards, project the scans into the "
+                                          "images through the result's extrinsic (boards face-on for observations "
+                                          "without images), plot residuals per board and write report.html and "
+                                          "report.md. Exit 1 when the result failed or does not fit the boards.")
     p.add_argument("dataset", help="dataset folder, or an observation JSON (no overlays then)")
     p.add_argument("result", help="lidarcam.result/1 JSON (from lidarcam calibrate --out)")
     p.add_argument("--out", required=True, help="folder to write the report into")

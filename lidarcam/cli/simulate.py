@@ -19,7 +19,8 @@ def _flag(name: str) -> str:
 def add_parsers(subparsers) -> argparse.ArgumentParser:
     """Register ``simulate`` on an argparse ``subparsers``; one flag per SimOptions field, plus
     ``--seed``, ``--trial`` and ``--out``. Sets ``func`` to ``run``."""
-    from simulate.options import SimOptions  # the simulator needs lidarcam[rig] (OpenCV)
+    from simulate.lens import LENSES  # the simulator needs lidarcam[rig] (OpenCV)
+    from simulate.options import SimOptions
 
     p = subparsers.add_parser(
         "simulate", help=SUMMARY,
@@ -31,6 +32,10 @@ def add_parsers(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=seed_type, default=0, help="base seed (an integer >= 0)")
     p.add_argument("--trial", type=int, default=0, help="trial index (each trial has its own random stream)")
     p.add_argument("--out", required=True, help="output JSON path")
+    p.add_argument("--lens", choices=sorted(LENSES), default=None,
+                   help="a lens preset (simulate.lens): sets cam_model, cam_params and the focal length and image size "
+                        "it was designed for, unless given by their own flags; fisheye150: equidistant, 150 deg "
+                        "across; ds180: double sphere, 180 deg across")
     g = p.add_argument_group("simulation options (SimOptions)")
     for f in fields(SimOptions):
         default = f.default if f.default is not MISSING else None
@@ -55,7 +60,12 @@ def run(args: argparse.Namespace) -> int:
 
     writable_file(args.out, "--out")
     try:
-        options = SimOptions(**{f.name: getattr(args, f.name) for f in fields(SimOptions)})
+        given = {f.name: getattr(args, f.name) for f in fields(SimOptions)}
+        if args.lens:   # the preset's fields, where the flags left them at their defaults
+            from simulate.lens import LENSES
+
+            given.update({k: v for k, v in LENSES[args.lens].items() if given[k] == SimOptions().to_dict()[k]})
+        options = SimOptions(**given)
         obs = generate(options, seed=args.seed, trial=args.trial)
     except (ValueError, SceneError) as exc:  # SimOptions names its field: name the option instead
         msg = re.sub(r"^SimOptions: (\w+)", lambda m: _flag(m.group(1)), str(exc))

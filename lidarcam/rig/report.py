@@ -23,17 +23,22 @@ from calib_core.refine.uncertainty import normal_spread_deg
 from .dataset import Dataset
 from .markdown import md_table, num
 from .overlay import board_plane_distances, draw_overlay, overlay_clim_mm, project_scan, save_overlay
+from .report_figures import board_view, summary_figure
+from .report_html import BoardCard, HtmlReport, write_html
 
 OUTLIER_FACTOR = 3.0
 
 
 @dataclass
 class ReportSummary:
-    """What ``write_report`` wrote and found: file paths, per-board residual RMS (mm), warnings."""
+    """What ``write_report`` wrote and found: file paths (``report.md``, ``report.html``, the overlays, the residual
+    plots and, for boards without an image, the face-on views), per-board residual RMS (mm), warnings."""
 
     markdown: Path
+    html: Path | None = None
     overlays: list[Path] = field(default_factory=list)
     residual_plots: list[Path] = field(default_factory=list)
+    board_views: list[Path] = field(default_factory=list)
     board_rms_mm: list[float] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
@@ -115,6 +120,14 @@ def _pose_name(observations: Observations, i: int) -> str:
     return str(names[i]) if names and i < len(names) else f"{i:03d}"
 
 
+def _bearing_deg(scan: np.ndarray) -> np.ndarray:
+    """Bearings (deg) of scan points (K,2), continuous across +-180 deg (a board behind the lidar stays one run):
+    within 180 deg of the points' mean direction."""
+    a = np.arctan2(scan[:, 1], scan[:, 0])
+    c = np.arctan2(np.sin(a).mean(), np.cos(a).mean())
+    return np.degrees(c + np.angle(np.exp(1j * (a - c))))
+
+
 def _residual_plot(path: Path, bearing_deg: np.ndarray, dist_mm: np.ndarray, title: str) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -165,18 +178,20 @@ def _extrinsic_md(res: dict, T: np.ndarray, Ti: np.ndarray) -> list[str]:
 
 
 def _board_plots(dataset: Dataset | None, observations: Observations, res: dict, Ti: np.ndarray, out: Path,
-                 summary: ReportSummary, rms_mm: list[float], clim: float) -> list[str]:
-    """Per board: its residual plot and (with a dataset) its overlay written under ``out``; the markdown links."""
+                 summary: ReportSummary, rms_mm: list[float], clim: float) -> tuple[list[str], list[list]]:
+    """Per board: its residual plot and its overlay (with a dataset) or, without an image, its face-on view
+    (``lidarcam.rig.report_figures.board_view``), written under ``out``; the markdown links and each board's
+    (file, caption) list."""
     rejected = {int(r["index"]): r for r in res.get("boards_rejected") or []}
-    links = []
+    links, images = [], []
     for i, b in enumerate(observations.boards):
         name = _pose_name(observations, i)
-        bearing = np.degrees(np.arctan2(b.scan[:, 1], b.scan[:, 0]))
+        bearing = _bearing_deg(b.scan)
         d = 1000 * board_plane_distances(Ti, b.T_cam_board, b.scan)
         rp = out / f"residual_{name}.png"
         _residual_plot(rp, bearing, d, f"pose {name} (board {i}): {len(d)} points")
         summary.residual_plots.append(rp)
-        link = f"[residuals](residual_{name}.png)"
+        link, figs = f"[residuals](residual_{name}.png)", []
         if dataset is not None:
             try:
                 pose = dataset.pose(name)
@@ -188,10 +203,19 @@ def _board_plots(dataset: Dataset | None, observations: Observations, res: dict,
                          rejected[i]["reason"] if i in rejected else None)
                 summary.overlays.append(op)
                 link = f"[overlay](overlay_{name}.png), " + link
+                figs.append((op, f"pose {name}: the scan projected into the image through the extrinsic"))
             except (KeyError, LidarcamError) as err:
                 summary.warnings.append(f"pose {name}: no overlay ({err})")
+        if not figs:  # no image: the board face-on, the scan laid on it
+            bv = board_view(out / f"board_{name}.png", Ti, b, clim, f"pose {name} (board {i}) face-on, scan "
+                            f"through the extrinsic: RMS {rms_mm[i]:.1f} mm")
+            summary.board_views.append(bv)
+            link = f"[board view](board_{name}.png), " + link
+            figs.append((bv, f"pose {name}: the board face-on with its scan points through the extrinsic"))
+        figs.append((rp, f"pose {name}: point-to-plane residuals against bearing"))
         links.append(link)
-    return links
+        images.append(figs)
+    return links, images
 
 
 def _boards_md(observations: Observations, res: dict, Ti: np.ndarray, rms_mm: list[float], mean_mm: list[float],
@@ -220,29 +244,41 @@ def _boards_md(observations: Observations, res: dict, Ti: np.ndarray, rms_mm: li
     return md
 
 
-def write_report(dataset: Dataset | None, observations: Observations, result, out_dir) -> ReportSummary:
+def write_report(dataset: Dataset | None, observations: Observations, result, out_dir, alerts=()) -> ReportSummary:
     """Write the report of ``result`` on ``observations`` (extracted from ``dataset``) into ``out_dir``.
 
     Files: ``overlay_<pose>.png`` (the image with the whole scan projected through ``T_cam_lidar``, coloured by
     the signed distance to that board's plane in mm; the board's own points larger, the board outline from the
     camera pose in yellow), ``residual_<pose>.png`` (point-to-plane distance of the board's points against
     bearing), ``extrinsic.yaml`` and ``report.md`` (the extrinsic both ways with quaternion (x, y, z, w) and
-    translation, 1-sigma where the result has a covariance, per-board residual RMS, skipped poses, warnings).
-    ``dataset`` may be None (no overlays). ``result``: a CalibrationResult, a ``load_result`` dict or a path.
+    translation, 1-sigma where the result has a covariance, per-board residual RMS, skipped poses, warnings),
+    ``summary.png`` (``lidarcam.rig.report_figures.summary_figure``) and ``report.html``
+    (``lidarcam.rig.report_html``: all of it on one self-contained page, warnings first). ``dataset`` may be None
+    (no overlays: ``board_<pose>.png``, each board face-on with its scan, instead). ``result``: a CalibrationResult,
+    a ``load_result`` dict or a path.
+    ``alerts``: warnings that come first, under the title and in ``ReportSummary.warnings`` (e.g.
+    ``lidarcam.rig.result_match.result_fit``'s: the result does not fit these boards).
     """
     res = _as_result(result)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    md = [f"# lidarcam calibration report ({res['method']})", ""]
-    if dataset is not None:
-        md += [f"Dataset: `{dataset.root}`, {len(dataset.poses)} poses, {observations.n_boards} used.", ""]
+    title = f"lidarcam calibration report ({res['method']})"
+    md = [f"# {title}", ""]
+    intro = [f"Dataset: {dataset.root}, {len(dataset.poses)} poses, {observations.n_boards} used."] \
+        if dataset is not None else [f"Observations: {observations.n_boards} boards (no images: each board is "
+                                     "shown face-on with its scan instead of an overlay)."]
+    md += [intro[0].replace(f"{dataset.root}", f"`{dataset.root}`") if dataset is not None else intro[0], ""]
+    md += [f"**Warning: {a}**" for a in alerts] + ([""] if alerts else [])
     skipped = (observations.meta or {}).get("skipped") or {}
     skipped_md = ["## Skipped poses", ""] + [f"- `{k}`: {v}" for k, v in skipped.items()] + [""] if skipped else []
-    summary = ReportSummary(out / "report.md")
+    summary = ReportSummary(out / "report.md", out / "report.html", warnings=list(alerts))
+    page = HtmlReport(title, intro, summary.warnings, alerts=len(alerts), result=res, skipped=skipped)
     if not res["ok"] or res["T_lidar_cam"] is None:
         md += ["**The calibration failed**: " + str(res.get("reason")), ""] + skipped_md
         summary.warnings.append(f"calibration failed: {res.get('reason')}")
         summary.markdown.write_text("\n".join(md) + "\n")
+        page.failure = str(res.get("reason"))
+        write_html(summary.html, page)
         return summary
 
     T = np.asarray(res["T_lidar_cam"], float)
@@ -251,22 +287,78 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     md += _extrinsic_md(res, T, Ti) + _mounting_md(res)
     if observations.T_lidar_cam_true is not None:
         e_R, e_t = pose_errors(T, observations.T_lidar_cam_true)
-        md += [f"Against the ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm.", ""]
+        page.truth = f"Against the ground truth: e_R = {float(e_R):.4f} deg, e_t = {1000 * float(e_t):.1f} mm."
+        md += [page.truth, ""]
 
     d_mm = [1000 * board_plane_distances(Ti, b.T_cam_board, b.scan) for b in observations.boards]
     rms_mm = [float(np.sqrt(np.mean(d ** 2))) for d in d_mm]
     mean_mm = [float(np.mean(d)) for d in d_mm]
     summary.board_rms_mm = rms_mm
     clim = overlay_clim_mm(np.concatenate(d_mm) if d_mm else [])  # one colour range for every board's overlay
-    links = _board_plots(dataset, observations, res, Ti, out, summary, rms_mm, clim)
+    links, images = _board_plots(dataset, observations, res, Ti, out, summary, rms_mm, clim)
+    md += ["## Summary", "", "![the boards from above, residual RMS per board](summary.png)", ""]
     md += _boards_md(observations, res, Ti, rms_mm, mean_mm, links) + skipped_md
-    every = report_warnings(observations, rms_mm, T) + list(res.get("warnings") or []) + summary.warnings
-    summary.warnings = list(dict.fromkeys(every))  # the method's own board-set warnings are the library's too
+    every = summary.warnings + report_warnings(observations, rms_mm, T) + list(res.get("warnings") or [])
+    summary.warnings = list(dict.fromkeys(every))  # alerts first; the method's board-set warnings are the library's too
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
-    md += ["## Capture plan", "", capture_verdict(observations, T), ""]
-    md += ["## Extrinsic as YAML", "", "```yaml", (out / "extrinsic.yaml").read_text().rstrip(), "```", ""]
+    page.capture = capture_verdict(observations, T)
+    page.yaml = (out / "extrinsic.yaml").read_text().rstrip()
+    md += ["## Capture plan", "", page.capture, ""]
+    md += ["## Extrinsic as YAML", "", "```yaml", page.yaml, "```", ""]
     summary.markdown.write_text("\n".join(md) + "\n")
+    _fill_page(page, observations, res, T, rms_mm, mean_mm, images, out, summary.warnings)
+    write_html(summary.html, page)
     return summary
+
+
+def _headline(res: dict, n_boards: int, n_rejected: int, rms_mm: list[float], noise_mm: float | None,
+              misfit: bool) -> str:
+    """The answer at a glance: whether it fits (``misfit``: the median residual is above the level at which
+    ``lidarcam.rig.result_match`` says it does not), the 1-sigma, the boards used, the median residual against the
+    scans' noise."""
+    verdict = res.get("verdict") if isinstance(res.get("verdict"), dict) else {}
+    state = "does not fit these boards" if misfit else "the method's own test finds the data contradict it" \
+        if verdict.get("consistent") is False else "ok"
+    parts = [f"{res['method']}: {state}"]
+    cov = res.get("covariance")
+    if cov is not None:
+        cov = np.asarray(cov, float)
+        parts.append(f"1-sigma {sigma_rot_deg(cov):.2f} deg, {1000 * sigma_trans_m(cov):.1f} mm")
+    parts.append(f"{n_boards - n_rejected} of {n_boards} boards used")
+    if rms_mm:
+        med = float(np.median(rms_mm))
+        parts.append(f"median board residual {med:.1f} mm" + (f" ({med / noise_mm:.1f} x the scans' noise)"
+                                                               if noise_mm else ""))
+    return "; ".join(parts)
+
+
+def _fill_page(page: HtmlReport, observations: Observations, res: dict, T: np.ndarray, rms_mm: list[float],
+               mean_mm: list[float], images: list[list], out: Path, warnings: list[str]) -> None:
+    """The HTML page's answer, summary figure, fit line and board cards."""
+    from .result_match import MISFIT_FLOOR_MM, MISFIT_NOISE_FACTOR, scan_noise_mm
+
+    page.warnings, page.T_lidar_cam = warnings, T
+    rejected = {int(r["index"]): str(r["reason"]) for r in res.get("boards_rejected") or []}
+    names = [_pose_name(observations, i) for i in range(observations.n_boards)]
+    noise = scan_noise_mm(observations)
+    misfit = None if noise is None else max(MISFIT_NOISE_FACTOR * noise, MISFIT_FLOOR_MM)
+    page.summary_png = summary_figure(out / "summary.png", observations, T, rms_mm, names, set(rejected),
+                                      noise if noise is not None else math.nan, misfit)
+    finite = [r for r in rms_mm if math.isfinite(r)]
+    if finite and noise is not None:
+        med = float(np.median(finite))
+        page.fit = (f"Median board residual RMS {med:.1f} mm against the scans' own noise {noise:.1f} mm (from "
+                    f"their lines alone): {med / max(noise, 1e-9):.1f} x; above {misfit:.0f} mm the result would "
+                    "not fit these boards.")
+    misfits = bool(finite) and misfit is not None and float(np.median(finite)) > misfit
+    page.headline = _headline(res, observations.n_boards, len(rejected), finite, noise, misfits)
+    reproj = (observations.meta or {}).get("reproj_rms_px") or []
+    page.cards = [BoardCard(i, names[i], len(b.scan), rms_mm[i], mean_mm[i],
+                            reproj[i] if i < len(reproj) and isinstance(reproj[i], (int, float)) else None,
+                            rejected.get(i), images[i]) for i, b in enumerate(observations.boards)]
+    if observations.n_boards >= 2:
+        page.totals = [f"Board set: largest angle between two board normals {pair_angle_deg(observations):.1f} deg; "
+                       f"normals {normal_spread_deg(observations):.1f} deg from one plane (spread)."]
 
 
 __all__ = ["ReportSummary", "board_plane_distances", "capture_verdict", "project_scan", "report_warnings",

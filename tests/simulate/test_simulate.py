@@ -22,7 +22,7 @@ from simulate.camera import (
     render_board_image,
 )
 from simulate.lidar import beam_bearings, board_ranges, cast_scan, scan_chords
-from simulate.options import CONTAMINATION_DEFAULTS, RIG_DEFAULTS, settings_hash
+from simulate.options import CAMERA_DEFAULTS, CONTAMINATION_DEFAULTS, RIG_DEFAULTS, settings_hash
 from simulate.scene import R_LIDAR_CAM_NOMINAL, sample_scene
 
 STEP = np.radians(0.25)
@@ -260,9 +260,10 @@ def test_same_seed_same_data_other_seed_or_trial_different():
 def test_settings_hash_is_stable_and_type_blind():
     assert settings_hash(SimOptions(board_size_m=1)) == settings_hash(SimOptions(board_size_m=1.0))
     assert settings_hash(SimOptions(noise_mm=10.0)) != settings_hash(SimOptions(noise_mm=20.0))
-    # the contamination options are not hashed, nor the rig options at their defaults: the clean settings keep
-    # the streams they had before them
-    d = {k: v for k, v in SimOptions().to_dict().items() if k not in CONTAMINATION_DEFAULTS and k not in RIG_DEFAULTS}
+    # the contamination options are not hashed, nor the rig and lens options at their defaults: the clean settings
+    # keep the streams they had before them
+    d = {k: v for k, v in SimOptions().to_dict().items()
+         if k not in CONTAMINATION_DEFAULTS and k not in RIG_DEFAULTS and k not in CAMERA_DEFAULTS}
     text = json.dumps(d, sort_keys=True, separators=(",", ":"))
     assert settings_hash(SimOptions()) == zlib.crc32(text.encode())
     assert settings_hash(SimOptions(wrong_segments=1, gross_outlier_frac=0.1)) == settings_hash(SimOptions())
