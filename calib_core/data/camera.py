@@ -202,8 +202,8 @@ def _checked_core(cam) -> np.ndarray:
 def _checked_std(std, n_dist: int, n_core: int = 4, size_px: float | None = None) -> np.ndarray:
     """``std_intrinsics`` as a read-only float array; ObservationError naming the field when it is not a list of
     ``n_core`` or ``n_core`` + ``n_dist`` finite non-negative numbers, or (given ``size_px``, the image's larger
-    side) a pixel 1-sigma of fx fy cx cy exceeds 1000 times it or another 1-sigma exceeds 1e4 (an intrinsic that uncertain is unknown, not a prior:
-    its weight vanishes from the normal equations, which turn singular)."""
+    side) a 1-sigma of fx fy cx cy exceeds 1000 times it or another 1-sigma exceeds 1e4: an intrinsic that
+    uncertain is unknown, not a prior (its weight vanishes from the normal equations, which turn singular)."""
     try:
         s = np.array(std, dtype=float).ravel()
     except (TypeError, ValueError) as exc:
