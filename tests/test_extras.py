@@ -69,7 +69,7 @@ def test_the_library_verbs_run_without_the_extras(obs_file):
 
 @pytest.mark.parametrize("argv", [["simulate", "--boards", "6", "--out", "s.json"],
                                   ["report", "obs.json", "r.json", "--out", "rep"],
-                                  ["plan", str(ROOT / "conf" / "plan" / "rig.yaml")],
+                                  ["plan", str(ROOT / "lidarcam" / "rig" / "plan_template.yaml")],
                                   ["demo", "demo"]])
 def test_a_verb_of_a_missing_extra_is_one_line_naming_it(argv, obs_file):
     r = _lidarcam_without_extras(*argv, cwd=obs_file.parent)

@@ -48,21 +48,26 @@ def _use_lines() -> list[str]:
     return [ln.split("  #")[0].strip() for ln in block.splitlines() if ln.startswith("lidarcam ")]
 
 
-PLACEHOLDERS = ("DATASET", "SRC", "REC", "OUT", "/tmp/demo", "|")
-"""Words of the Use lines that stand for the reader's own data (those lines are run by test_real_rigs/test_demo)."""
+PLACEHOLDERS = ("DATASET", "SRC", "REC", "OUT", "|", "conf/")
+"""Words that would stand for the reader's own data or the checkout: none may be left in the Use block."""
 
 
-def test_the_use_lines_on_the_readmes_own_obs_json_run_as_written(tmp_path, monkeypatch, capsys):
+def test_the_use_block_runs_top_to_bottom_on_the_files_it_makes(tmp_path, monkeypatch, capsys):
+    """Every line, in order, in an empty folder (no checkout files), ``/tmp/demo`` moved under it; ``> FILE``
+    writes the line's output there, as a shell would."""
     import shlex
 
     from lidarcam.cli import main
 
-    lines = [ln for ln in _use_lines() if not any(p in ln for p in PLACEHOLDERS)]
-    assert lines[0].startswith("lidarcam simulate") and any("--fix" in ln for ln in lines)
-    assert any("plan" in ln and "--from obs.json" in ln for ln in lines)
+    lines = _use_lines()
+    assert len(lines) >= 15 and not [ln for ln in lines if any(p in ln for p in PLACEHOLDERS)]
+    assert lines[0].startswith("lidarcam demo /tmp/demo") and any("--fix" in ln for ln in lines)
+    assert any("plan --template >" in ln for ln in lines) and any("--std-intrinsics" in ln for ln in lines)
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "conf").symlink_to(README.parent / "conf")
     for ln in lines:
-        code = main(shlex.split(ln)[1:])
+        argv, _, target = ln.replace("/tmp/demo", str(tmp_path / "demo")).partition(" > ")
+        code = main(shlex.split(argv)[1:])
         out, err = capsys.readouterr()
         assert code == 0, f"{ln}: exit {code}: {err or out[-300:]}"
+        if target:
+            (tmp_path / target.strip()).write_text(out)

@@ -95,7 +95,8 @@ class Camera(CameraModel):
         d12 = np.zeros(12)
         d12[:min(len(dist), 12)] = dist[:12]
         if self.std_intrinsics is not None:
-            object.__setattr__(self, "std_intrinsics", _checked_std(self.std_intrinsics, len(dist)))
+            object.__setattr__(self, "std_intrinsics", _checked_std(self.std_intrinsics, len(dist),
+                                                                    size_px=max(self.width, self.height)))
         K.setflags(write=False)
         d12.setflags(write=False)
         object.__setattr__(self, "K", K)
@@ -198,9 +199,11 @@ def _checked_core(cam) -> np.ndarray:
     return K
 
 
-def _checked_std(std, n_dist: int, n_core: int = 4) -> np.ndarray:
+def _checked_std(std, n_dist: int, n_core: int = 4, size_px: float | None = None) -> np.ndarray:
     """``std_intrinsics`` as a read-only float array; ObservationError naming the field when it is not a list of
-    4 or 4 + ``n_dist`` finite non-negative numbers."""
+    ``n_core`` or ``n_core`` + ``n_dist`` finite non-negative numbers, or (given ``size_px``, the image's larger
+    side) a 1-sigma of fx fy cx cy exceeds 1000 times it or another 1-sigma exceeds 1e4: an intrinsic that
+    uncertain is unknown, not a prior (its weight vanishes from the normal equations, which turn singular)."""
     try:
         s = np.array(std, dtype=float).ravel()
     except (TypeError, ValueError) as exc:
@@ -213,6 +216,12 @@ def _checked_std(std, n_dist: int, n_core: int = 4) -> np.ndarray:
         raise _fail("contains NaN or inf", "std_intrinsics")
     if np.any(s < 0):
         raise _fail(f"negative standard deviation {s.min():g}", "std_intrinsics")
+    if size_px is not None and np.any(s[:4] > 1000 * size_px):
+        raise _fail(f"a 1-sigma of {s[:4].max():g} px exceeds 1000 times the image's {size_px:g} px: the "
+                    "intrinsics would be unknown, not a prior", "std_intrinsics")
+    if size_px is not None and np.any(s[4:] > 1e4):
+        raise _fail(f"a distortion coefficient's 1-sigma of {s[4:].max():g} exceeds 1e4: the distortion would be "
+                    "unknown, not a prior", "std_intrinsics")
     s.setflags(write=False)
     return s
 

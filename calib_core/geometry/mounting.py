@@ -17,6 +17,7 @@ At the edges (user options, reports) the names carry their units: ``roll_deg``, 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,9 +37,12 @@ R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
 def params_from_T(T_lidar_cam: np.ndarray) -> np.ndarray:
-    """``theta = (roll, pitch, yaw, x, y, z)`` (radians, metres) of a 4x4 ``T_lidar_cam``."""
+    """``theta = (roll, pitch, yaw, x, y, z)`` (radians, metres) of a 4x4 ``T_lidar_cam``; at pitch +-90 deg (the
+    singularity of the module docstring) roll is 0 and yaw carries the turn, without scipy's warning."""
     T = np.asarray(T_lidar_cam, float)
-    yaw, pitch, roll = Rotation.from_matrix(T[:3, :3] @ R_BODY_OPTICAL.T).as_euler("ZYX")
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Gimbal lock detected", category=UserWarning)
+        yaw, pitch, roll = Rotation.from_matrix(T[:3, :3] @ R_BODY_OPTICAL.T).as_euler("ZYX")
     return np.r_[roll, pitch, yaw, T[:3, 3]]
 
 
@@ -65,9 +69,57 @@ def params_jacobian(theta: np.ndarray) -> np.ndarray:
     return M
 
 
+RANGES = (180.0, 90.0, 180.0, 1000.0, 1000.0, 1000.0)
+"""Largest magnitude of each parameter (degrees, metres): Z-Y-X angles in [-180, 180] with pitch in [-90, 90]."""
+
+UNITS = {"deg": (0, 1.0), "rad": (0, 180.0 / np.pi), "m": (1, 1.0), "cm": (1, 0.01), "mm": (1, 0.001)}
+"""Units a value may carry at the edges: unit -> (0 angle / 1 length, factor to degrees or metres)."""
+
+
+def parse_quantity(text: str, who: str, kind: int | None = None) -> tuple[int | None, float]:
+    """``"11cm"`` -> ``(1, 0.11)``, ``"0.3rad"`` -> ``(0, 17.19)``, ``"0.3"`` -> ``(kind, 0.3)`` (degrees or
+    metres); CalibrationError naming ``who`` when it is no number, carries another unit or the wrong kind."""
+    t = str(text).strip()
+    unit = next((u for u in sorted(UNITS, key=len, reverse=True) if t.endswith(u)), None)
+    got, factor = UNITS[unit] if unit else (kind, 1.0)
+    try:
+        v = float(t[:len(t) - len(unit or "")])
+    except ValueError:
+        raise CalibrationError(f"{who}: expected a number with an optional unit ({', '.join(UNITS)}), got "
+                               f"{t!r}") from None
+    if kind is not None and got != kind:
+        raise CalibrationError(f"{who}: {t!r} is {'an angle' if got == 0 else 'a length'}; expected "
+                               f"{'an angle (deg, rad)' if kind == 0 else 'a length (m, cm, mm)'}")
+    return got, v * factor
+
+
+ALIASES = {"height": "z"}
+"""Other names of parameters at the edges (the camera's height above the scan plane is ``z``)."""
+
+
+def parse_text(text: str, who: str = "--fix") -> dict[str, float]:
+    """``"z=11cm,roll=0.3"`` -> ``{"z_m": 0.11, "roll_deg": 0.3}``: names of ``PARAMS``, ``UNIT_NAMES`` or
+    ``ALIASES``, values in degrees and metres or with a unit of ``UNITS``; checked by ``parse_params``.
+    CalibrationError naming ``who`` and the bad item."""
+    out: dict[str, float] = {}
+    for item in filter(None, (p.strip() for p in str(text).split(","))):
+        key, eq, value = (p.strip() for p in item.partition("="))
+        name = ALIASES.get(key, key)
+        name = UNIT_NAMES[PARAMS.index(name)] if name in PARAMS else name
+        if not eq or name not in UNIT_NAMES:
+            raise CalibrationError(f"{who}: bad item {item!r}; expected NAME=VALUE with NAME one of "
+                                   f"{', '.join(PARAMS)} (or {', '.join(UNIT_NAMES)}, height)")
+        if name in out:
+            raise CalibrationError(f"{who}: {key} given twice")
+        out[name] = parse_quantity(value, f"{who}: {key}", 0 if name.endswith("_deg") else 1)[1]
+    parse_params(out, who)
+    return out
+
+
 def parse_params(values: dict, who: str = "fixed") -> tuple[np.ndarray, np.ndarray]:
     """(mask (6,) bool of the parameters given, values (6,) in radians and metres, NaN where not given) of a
-    ``{"z_m": 0.12, "roll_deg": 0.0, ...}`` dict; CalibrationError naming ``who`` and a bad key or value."""
+    ``{"z_m": 0.12, "roll_deg": 0.0, ...}`` dict; CalibrationError naming ``who`` and a bad key or value (not a
+    number, not finite, beyond ``RANGES``)."""
     mask = np.zeros(6, bool)
     out = np.full(6, np.nan)
     for key, value in dict(values).items():
@@ -80,6 +132,10 @@ def parse_params(values: dict, who: str = "fixed") -> tuple[np.ndarray, np.ndarr
         if not np.isfinite(v):
             raise CalibrationError(f"{who}: {key} must be finite, got {value!r}")
         j = UNIT_NAMES.index(key)
+        if abs(v) > RANGES[j]:
+            unit = "deg" if j < 3 else "m"
+            raise CalibrationError(f"{who}: {key} = {v:g} is outside [-{RANGES[j]:g}, {RANGES[j]:g}] {unit}"
+                                   + (" (Z-Y-X angles)" if j < 3 else ""))
         mask[j] = True
         out[j] = np.radians(v) if j < 3 else v
     return mask, out
@@ -97,6 +153,10 @@ def with_units(theta: np.ndarray) -> dict[str, float]:
     """``{"roll_deg": ..., ..., "z_m": ...}`` of ``theta`` (radians, metres)."""
     theta = np.asarray(theta, float)
     return {k: float(np.degrees(v) if j < 3 else v) for j, (k, v) in enumerate(zip(UNIT_NAMES, theta, strict=True))}
+
+
+PRIOR_SIGMA_RANGE = {"sigma_rot_rad": (1e-6, float(np.pi)), "sigma_trans_m": (1e-6, 1e3)}
+"""Bounds of a prior's 1-sigma (radians, metres): its weights stay finite in the normal equations."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,10 +180,11 @@ class MountingPrior:
         T = np.array(self.T_lidar_cam, float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise CalibrationError("prior: T_lidar_cam must be a finite 4x4 matrix")
-        for name in ("sigma_rot_rad", "sigma_trans_m"):
+        for name, (lo, hi) in PRIOR_SIGMA_RANGE.items():
             v = float(getattr(self, name))
-            if not (np.isfinite(v) and v > 0):
-                raise CalibrationError(f"prior: {name} must be finite and > 0, got {v!r}")
+            if not (np.isfinite(v) and lo <= v <= hi):
+                raise CalibrationError(f"prior: {name} must be within [{lo:g}, {hi:g}], got {v!r} (tighter is a fixed "
+                                       "value: fix it; looser says nothing)")
             object.__setattr__(self, name, v)
         T.setflags(write=False)
         object.__setattr__(self, "T_lidar_cam", T)

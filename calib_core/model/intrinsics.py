@@ -19,6 +19,8 @@ import numpy as np
 
 from ..data.camera import CameraModel
 
+EXACT_BELOW = 1e-9
+"""A 1-sigma of an intrinsic below this (pixels, or unitless for distortion) holds it exact."""
 EXACT_INTRINSICS = "taken as exact (the camera has no std_intrinsics)"
 ESTIMATED_INTRINSICS = "estimated with the prior camera.std_intrinsics"
 RANGE_ONLY_INTRINSICS = "not modelled: board poses taken as exact (neither corner noise nor intrinsics error is in " \
@@ -44,10 +46,11 @@ class IntrinsicsPrior:
 
     @classmethod
     def of(cls, camera: CameraModel | None) -> IntrinsicsPrior | None:
-        """The prior of ``camera``'s ``std_intrinsics``; None when it has none or every 1-sigma is 0."""
+        """The prior of ``camera``'s ``std_intrinsics``; None when it has none or every 1-sigma is 0 (a 1-sigma
+        under ``EXACT_BELOW`` is 0: its weight would overflow the normal equations)."""
         if camera is None or camera.std_intrinsics is None:
             return None
-        free = np.flatnonzero(camera.std_intrinsics > 0)
+        free = np.flatnonzero(camera.std_intrinsics > EXACT_BELOW)
         if not len(free):
             return None
         return cls(camera, free, camera.intrinsics[free], camera.std_intrinsics[free])

@@ -10,9 +10,10 @@ import sys
 from calib_core.errors import LidarcamError
 
 from . import bag, demo, importer, plan, rig, simulate
-from .extras import add_optional, missing_extra
+from .argtypes import check_numbers
+from .extras import add_optional, mark_missing, missing_extra
 from .intrinsics_flag import STD_INTRINSICS_HELP, with_std_intrinsics
-from .outputs import writable_file
+from .outputs import not_an_input, writable_file
 from .wording import cli_hint
 
 
@@ -52,17 +53,28 @@ def _print_ros(ros) -> None:
     print("  URDF:  " + ros.urdf_joint().replace("\n", "\n         "))
 
 
+def _sigmas(std) -> str:
+    """``fx 1.2, fy 1.2, cx 2, cy 2 px[, dist 0.01, ...]`` of a std_intrinsics vector."""
+    px = ", ".join(f"{n} {v:.3g}" for n, v in zip(("fx", "fy", "cx", "cy"), std[:4], strict=False)) + " px"
+    return px + (", dist " + ", ".join(f"{v:.3g}" for v in std[4:]) if len(std) > 4 else "")
+
+
 def _cmd_calibrate(args) -> int:
     from calib_core import calibrate, get_method
     from calib_core.data.exports import frame_export
     from calib_core.data.io import load_observations
 
     frames = _frames(args)
-    writable_file(args.out, "--out")
-    writable_file(args.yaml, "--yaml")
+    for flag, path in (("--out", args.out), ("--yaml", args.yaml)):
+        writable_file(path, flag)
+        not_an_input(path, flag, args.observations)
     obs = load_observations(args.observations)
     if args.std_intrinsics:
+        stated = None if obs.camera is None else obs.camera.std_intrinsics
         obs = with_std_intrinsics(obs, args.std_intrinsics)
+        if stated is not None:
+            print(f"intrinsics' 1-sigma: --std-intrinsics {args.std_intrinsics} used "
+                  f"({_sigmas(obs.camera.std_intrinsics)}), not the file's camera.std_intrinsics ({_sigmas(stated)})")
     options = {"fixed": parse_fix(args.fix)} if args.fix else {}
     if args.prior or args.prior_sigma:
         options["prior"] = parse_prior(args.prior, args.prior_sigma)
@@ -84,65 +96,50 @@ def _cmd_calibrate(args) -> int:
     return 0 if res.ok else 1
 
 
-FIX_HELP = ("hold mounting parameters at given values and calibrate the rest, e.g. z=0.12,roll=0,pitch=0 "
+FIX_HELP = ("hold mounting parameters at given values and calibrate the rest, e.g. z=11cm,roll=0,pitch=0 "
             "(the camera's pose in the lidar frame: roll, pitch, yaw in degrees, Z-Y-X, of the camera body "
-            "frame x forward y left z up; x, y, z in metres, the camera centre; keys may carry their unit: "
-            "z_m, roll_deg); for lidarcam and X+ml / X+plane")
+            "frame x forward y left z up; x, y, z (z also 'height') in metres, the camera centre; a value may carry "
+            "its unit: deg, rad, m, cm, mm); for lidarcam and X+ml / X+plane")
 
 
 def parse_fix(text: str, flag: str = "--fix") -> dict:
-    """``"z=0.12,roll=0"`` -> ``{"z_m": 0.12, "roll_deg": 0.0}`` (units: degrees for angles, metres for
-    offsets); CalibrationError naming ``flag`` and a bad item."""
-    from calib_core.errors import CalibrationError
-    from calib_core.geometry.mounting import PARAMS, UNIT_NAMES
+    """``"z=11cm,roll=0"`` -> ``{"z_m": 0.11, "roll_deg": 0.0}`` (``calib_core.geometry.mounting.parse_text``:
+    degrees and metres unless a value carries its unit); CalibrationError naming ``flag`` and a bad item."""
+    from calib_core.geometry.mounting import parse_text
 
-    out = {}
-    for item in filter(None, (p.strip() for p in text.split(","))):
-        key, eq, value = item.partition("=")
-        key = key.strip()
-        name = UNIT_NAMES[PARAMS.index(key)] if key in PARAMS else key
-        if not eq or name not in UNIT_NAMES:
-            raise CalibrationError(f"{flag}: bad item {item!r}; expected NAME=VALUE with NAME one of "
-                                   f"{', '.join(PARAMS)} (or {', '.join(UNIT_NAMES)})")
-        try:
-            out[name] = float(value)
-        except ValueError:
-            raise CalibrationError(f"{flag}: {key} must be a number, got {value.strip()!r}") from None
-    return out
-
-
-SIGMA_UNITS = {"m": ("trans", 1.0), "cm": ("trans", 0.01), "mm": ("trans", 0.001), "deg": ("rot", 1.0),
-               "rad": ("rot", 57.29577951308232)}
-"""Units ``--prior-sigma`` reads, each to (which sigma, factor to metres or degrees)."""
+    return parse_text(text, flag)
 
 
 def parse_prior(pose: str | None, sigma: str | None):
     """``--prior x=0.1,...,yaw=90`` (all six, as ``--fix`` reads them) and ``--prior-sigma 50mm,10deg`` (one
     translation and one rotation sigma, each with its unit: m, cm, mm, deg, rad) -> ``MountingPrior``;
     CalibrationError naming what is missing or bad."""
+    import math
+
     from calib_core.errors import CalibrationError
-    from calib_core.geometry.mounting import MountingPrior
+    from calib_core.geometry.mounting import PRIOR_SIGMA_RANGE, MountingPrior, parse_quantity
 
     if not pose or not sigma:
         raise CalibrationError("--prior and --prior-sigma go together (e.g. --prior x=0.1,y=0,z=0.05,roll=0,"
                                "pitch=0,yaw=90 --prior-sigma 50mm,10deg)")
     sig: dict = {}
     for item in filter(None, (p.strip() for p in sigma.split(","))):
-        unit = next((u for u in sorted(SIGMA_UNITS, key=len, reverse=True) if item.endswith(u)), None)
-        try:
-            value = float(item[:-len(unit)]) if unit else None
-        except ValueError:
-            value = None
-        if unit is None or value is None:
-            raise CalibrationError(f"--prior-sigma: bad item {item!r}; expected a number with its unit "
-                                   f"({', '.join(SIGMA_UNITS)}), e.g. 50mm,10deg")
-        which, factor = SIGMA_UNITS[unit]
+        kind, value = parse_quantity(item, "--prior-sigma")
+        if kind is None:
+            raise CalibrationError(f"--prior-sigma: bad item {item!r}: no unit; expected e.g. 50mm,10deg")
+        which = ("rotation", "translation")[kind]
         if which in sig:
-            raise CalibrationError(f"--prior-sigma: two {'translation' if which == 'trans' else 'rotation'} sigmas")
-        sig[which] = value * factor
-    if set(sig) != {"trans", "rot"}:
+            raise CalibrationError(f"--prior-sigma: two {which} sigmas")
+        lo, hi = PRIOR_SIGMA_RANGE[("sigma_rot_rad", "sigma_trans_m")[kind]]
+        lo, hi, unit = (math.degrees(lo), math.degrees(hi), "deg") if kind == 0 else (lo * 1000, hi * 1000, "mm")
+        shown = value if kind == 0 else value * 1000
+        if not lo <= shown <= hi:
+            raise CalibrationError(f"--prior-sigma: the {which} 1-sigma {shown:g} {unit} is outside [{lo:.3g}, "
+                                   f"{hi:.3g}] {unit} (tighter: --fix the value; looser: leave the prior out)")
+        sig[which] = value
+    if set(sig) != {"translation", "rotation"}:
         raise CalibrationError("--prior-sigma: one translation and one rotation sigma are needed, e.g. 50mm,10deg")
-    return MountingPrior.from_params(parse_fix(pose, "--prior"), sig["rot"], sig["trans"])
+    return MountingPrior.from_params(parse_fix(pose, "--prior"), sig["rotation"], sig["translation"])
 
 
 def _plugin_option(p: argparse.ArgumentParser) -> None:
@@ -202,13 +199,43 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--parent-sensor", choices=("lidar", "camera"), default="lidar",
                     help="which sensor --parent-frame names (default: %(default)s, publishing T_lidar_cam)")
     sp.set_defaults(func=_cmd_calibrate)
-    add_optional(sub, "simulate", simulate.add_parsers)
+    add_optional(sub, "simulate", simulate.add_parsers, simulate.SUMMARY)
     rig.add_parsers(sub)
     importer.add_parsers(sub)
     bag.add_parsers(sub)
     demo.add_parsers(sub)
     plan.add_parsers(sub)
+    mark_missing(sub)
+    check_numbers(p)
     return p
+
+
+def _value_options(parser: argparse.ArgumentParser) -> set[str]:
+    """The option strings of ``parser`` and its verbs that take one value."""
+    out, todo = set(), [parser]
+    while todo:
+        p = todo.pop()
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                todo.extend(a.choices.values())
+            elif a.option_strings and a.nargs is None and isinstance(a, argparse._StoreAction):
+                out.update(a.option_strings)
+    return out
+
+
+def joined_negative_values(argv: list[str], options: set[str]) -> list[str]:
+    """``--prior-sigma -50mm,10deg`` as ``--prior-sigma=-50mm,10deg``: argparse reads a value that starts with
+    '-' and is not a plain number as an option; the value's own check then says what is wrong with it."""
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a in options and i + 1 < len(argv) and re.match(r"-\.?\d", argv[i + 1]):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
 
 
 def main(argv=None) -> int:
@@ -218,7 +245,8 @@ def main(argv=None) -> int:
     except LidarcamError as err:
         print(f"lidarcam: error: {err}", file=sys.stderr)
         return 2
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(joined_negative_values(argv, _value_options(parser)))
     try:
         return args.func(args)
     except LidarcamError as err:

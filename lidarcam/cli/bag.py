@@ -7,6 +7,8 @@ recording -> a dataset folder (docs/dataset.md) of still frames paired with scan
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from lidarcam.rig.extract_options import SCAN_DIRECTIONS
 
 
@@ -18,7 +20,9 @@ def cmd_bag(args) -> int:
     from lidarcam.rig.frombag import bag_to_dataset
     from lidarcam.rig.stills import PickOptions
 
-    from .outputs import writable_folder
+    from .importer import is_dataset_folder
+    from .outputs import replaced_folder
+    from .wording import cli_hint
 
     opts = PickOptions(max_poses=args.max_poses, still_px=args.still_px, quiet_grey=args.quiet_grey,
                        min_run=args.min_run, scan_still_m=args.scan_still, min_angle_deg=args.min_angle,
@@ -32,14 +36,15 @@ def cmd_bag(args) -> int:
                            ("--board", args.board), ("--out", args.out)) if v is None]
     if need:
         raise DatasetError(f"{', '.join(need)} required (or --list-topics to see the bag's topics)", file=args.bag)
-    writable_folder(args.out, "--out")
     from .rig import check_noise_flags
 
     check_noise_flags(args)
     eo = ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma)
-    conv = bag_to_dataset(args.bag, args.out, args.image_topic, args.scan_topic, args.board,
-                          camera_info_topic=args.camera_info_topic, camera_path=args.camera, opts=opts,
-                          extract_opts=eo, scan_direction=args.scan_direction)
+    with replaced_folder(args.out, "--out", is_dataset_folder, "a dataset folder") as scratch:
+        conv = bag_to_dataset(args.bag, scratch, args.image_topic, args.scan_topic, args.board,
+                              camera_info_topic=args.camera_info_topic, camera_path=args.camera, opts=opts,
+                              extract_opts=eo, scan_direction=args.scan_direction)
+    conv.out = Path(args.out)
     print(conv.summary())
     est = conv.sync.get("estimate")
     if est is not None and not est["reliable"]:
@@ -49,7 +54,7 @@ def cmd_bag(args) -> int:
     if not conv.poses:
         print("no still frame passed: see the reasons in picking.json")
         return 1
-    print(f"capture plan: {_capture_verdict(conv.out, eo)}")
+    print(f"capture plan: {cli_hint(_capture_verdict(conv.out, eo))}")
     return 0
 
 
@@ -65,6 +70,8 @@ def _capture_verdict(folder, eo) -> str:
 
 def add_parsers(subparsers) -> None:
     """Register the ``bag`` verb on an argparse subparsers object."""
+    from .argtypes import finite_float
+
     p = subparsers.add_parser(
         "bag", help="a ROS 1 / ROS 2 bag -> a dataset folder of still frames paired with scans",
         description="Read a ROS 1 .bag or a ROS 2 bag (sqlite3 or mcap) without ROS, pick the frames where the "
@@ -82,30 +89,30 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--out", help="dataset folder to write")
     g = p.add_argument_group("picking")
     g.add_argument("--max-poses", type=int, default=20, help="keep at most this many poses (default: %(default)s)")
-    g.add_argument("--still-px", type=float, default=0.5, metavar="PX",
+    g.add_argument("--still-px", type=finite_float, default=0.5, metavar="PX",
                    help="largest RMS corner motion to a neighbouring frame (default: %(default)s px)")
-    g.add_argument("--quiet-grey", type=float, default=0.0, metavar="G",
+    g.add_argument("--quiet-grey", type=finite_float, default=0.0, metavar="G",
                    help="thumbnail change under which a frame is quiet, grey levels (default: automatic)")
     g.add_argument("--min-run", type=int, default=3, help="fewest quiet frames in a still run (default: %(default)s)")
-    g.add_argument("--scan-still", type=float, default=0.0, metavar="M",
+    g.add_argument("--scan-still", type=finite_float, default=0.0, metavar="M",
                    help="largest median shift of the board segment within a still run, metres (default: "
                         "automatic, 4 sigma of the median at --range-sigma)")
-    g.add_argument("--min-angle", type=float, default=5.0, metavar="DEG",
+    g.add_argument("--min-angle", type=finite_float, default=5.0, metavar="DEG",
                    help="poses closer than this in rotation ... (default: %(default)s deg)")
-    g.add_argument("--min-move", type=float, default=0.10, metavar="M",
+    g.add_argument("--min-move", type=finite_float, default=0.10, metavar="M",
                    help="... and this in board-centre position are one pose (default: %(default)s m)")
     g = p.add_argument_group("time sync")
-    g.add_argument("--sync-tol", type=float, default=None, metavar="S",
+    g.add_argument("--sync-tol", type=finite_float, default=None, metavar="S",
                    help="refuse an image whose nearest scan is further than this (default: half the scan period)")
-    g.add_argument("--time-offset", type=float, default=0.0, metavar="S",
+    g.add_argument("--time-offset", type=finite_float, default=0.0, metavar="S",
                    help="scan clock minus image clock, seconds (default: %(default)s)")
     g.add_argument("--estimate-offset", action="store_true",
                    help="estimate a constant clock offset from the moving board (falls back to --time-offset "
                         "when the estimate is unreliable)")
-    g.add_argument("--max-offset-time", type=float, default=0.5, metavar="S",
+    g.add_argument("--max-offset-time", type=finite_float, default=0.5, metavar="S",
                    help="search the offset within +- this (default: %(default)s s)")
     g = p.add_argument_group("scan segment")
-    g.add_argument("--max-offset", type=float, default=0.5, metavar="M",
+    g.add_argument("--max-offset", type=finite_float, default=0.5, metavar="M",
                    help="bound on the lidar-camera separation (default: %(default)s m)")
     g.add_argument("--range-sigma", type=float, default=None, metavar="M",
                    help="lidar range noise, 1 sigma (default: 0.02 m for the picking; the capture plan's extraction "

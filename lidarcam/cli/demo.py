@@ -15,6 +15,8 @@ DEMO_SIM = dict(n_boards=12, cam_width=640, cam_height=480, focal_px=600.0, lida
                 render_supersample=2, dist_min_m=2.0, dist_max_m=4.0, max_tilt_deg=55.0)
 """The demo's rig: 12 board poses at 2-4 m tilted up to 55 deg, a 640x480 camera, a 0.25 deg lidar with 5 mm range
 noise."""
+DEMO_ENTRIES = frozenset({"dataset", "recording", "recording.board.yaml", "truth.json"})
+"""What ``write_demo`` writes into its folder."""
 TOPICS = {"image": "/camera/image_raw", "scan": "/scan", "info": "/camera/camera_info"}
 
 
@@ -29,6 +31,12 @@ def demo_commands(out: Path) -> list[list[str]]:
         ["extract", f"{o}/bag_dataset", "--out", f"{o}/bag_obs.json", "--range-sigma", "0.005"],
         ["calibrate", f"{o}/bag_obs.json", "--out", f"{o}/bag_result.json"],
     ]
+
+
+def is_demo_folder(folder: Path) -> bool:
+    """Whether ``folder`` holds only what ``write_demo`` and the commands it prints write (an earlier demo's)."""
+    made = {Path(c[c.index("--out") + 1]).name for c in demo_commands(folder)}
+    return {e.name for e in folder.iterdir()} <= DEMO_ENTRIES | made
 
 
 def write_demo(out, seed: int = 1) -> dict:
@@ -57,10 +65,11 @@ def write_demo(out, seed: int = 1) -> dict:
 
 def cmd_demo(args) -> int:
     """``lidarcam demo OUT``: write the sample data and print the commands that calibrate it."""
-    from .outputs import writable_folder
+    from .outputs import replaced_folder
 
-    out = writable_folder(args.out, "OUT")
-    write_demo(out, args.seed)
+    out = Path(args.out)
+    with replaced_folder(out, "OUT", is_demo_folder, "an earlier demo's output") as scratch:
+        write_demo(scratch, args.seed)
     print(f"wrote {out}/dataset (a dataset folder: camera.yaml, board.yaml, NNN.png + NNN.csv), {out}/recording "
           f"(a ROS 2 bag) and {out}/truth.json (the simulated extrinsics)")
     print("calibrate the folder:")
@@ -93,6 +102,9 @@ def add_parsers(subparsers) -> None:
         description="Write OUT/dataset (rendered images, scans, board.yaml, camera.yaml), OUT/recording (a short "
                     "ROS 2 bag of the board moving and resting in front of the rig) and OUT/truth.json, then print "
                     "the lidarcam commands that calibrate each.")
-    p.add_argument("out", help="folder to write")
-    p.add_argument("--seed", type=int, default=1, help="simulation seed (default: %(default)s)")
+    p.add_argument("out", help="folder to write (new, empty, or an earlier demo's, which is replaced; written "
+                   "whole or not at all)")
+    from .argtypes import seed_type
+
+    p.add_argument("--seed", type=seed_type, default=1, help="simulation seed (default: %(default)s)")
     p.set_defaults(func=cmd_demo)

@@ -55,6 +55,35 @@ def _numbers(text: str | None, name: str, count: int | None = None) -> list[floa
     return v
 
 
+SQUARE_M = (0.004, 0.5)
+"""Plausible side of a checkerboard square (metres): a square outside is a unit mistake, named as one."""
+UNIT_M = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+"""``--unit`` choices of ``import ranges``, in metres."""
+RANGE_MEDIAN_M = (0.1, 100.0)
+"""Plausible median range of a 2D lidar's returns (metres) on a calibration capture."""
+
+
+def _likely_unit(value: float, plausible: tuple[float, float], units=(("mm", 1e-3), ("cm", 1e-2), ("m", 1.0),
+                                                                         ("km", 1e3))) -> str:
+    """``'; millimetres? ...'``-like hint when ``value`` (read as metres) is plausible in another unit."""
+    lo, hi = plausible
+    for name, f in units:
+        if f != 1.0 and lo <= value * f <= hi:
+            return f" ({value:g} {name} would be {value * f:g} m)"
+    return ""
+
+
+def _square(value: float) -> float:
+    lo, hi = SQUARE_M
+    if not (math.isfinite(value) and value > 0):
+        raise ImportUsageError(f"--square: expected the side of one square in metres (> 0), got {value}")
+    if not lo <= value <= hi:
+        raise ImportUsageError(f"--square {value:g}: a square of {value:g} m is not plausible (a checkerboard's is "
+                               f"{lo * 1000:g} mm to {hi:g} m); the value is in metres"
+                               + _likely_unit(value, SQUARE_M))
+    return value
+
+
 def _grid(args):
     from lidarcam.rig.importing import pattern_board
 
@@ -63,9 +92,46 @@ def _grid(args):
     try:
         cols, rows = (int(t) for t in args.board_grid.lower().split("x"))
     except ValueError:
-        raise ImportUsageError(f"--board-grid: expected COLSxROWS inner corners, e.g. 9x6, got "
-                               f"{args.board_grid!r}") from None
-    return pattern_board(cols, rows, args.square)
+        cols = rows = 0
+    if cols < 2 or rows < 2:
+        raise ImportUsageError(f"--board-grid: expected COLSxROWS inner corners (each at least 2), e.g. 9x6, got "
+                               f"{args.board_grid!r}")
+    return pattern_board(cols, rows, _square(args.square))
+
+
+def _image_name(text: str) -> str:
+    """``--image-name`` once it formats with the line number ``n`` alone."""
+    try:
+        if text.format(n=1) == text.format(n=2):
+            raise KeyError
+    except (KeyError, IndexError, ValueError, AttributeError):
+        raise ImportUsageError(f"--image-name: expected a file name holding {{n}} (the laser line's number, e.g. "
+                               f"RGB{{n}}.png or img{{n:04d}}.jpg), got {text!r}") from None
+    return text
+
+
+def check_range_units(poses, unit: str | None) -> None:
+    """ImportUsageError when the median return over the poses is not a plausible lidar range in metres: a unit
+    mistake. ``unit``: the ``--unit`` that scaled the ranges (the unit that would fit is named), or None when the
+    source states its own unit."""
+    import numpy as np
+
+    r = np.concatenate([p.scan.range for p in poses]) if poses else np.zeros(0)
+    r = r[np.isfinite(r) & (r > 0)]
+    lo, hi = RANGE_MEDIAN_M
+    med = float(np.median(r)) if r.size else lo
+    if lo <= med <= hi:
+        return
+    if unit is None:
+        hint = "; check the unit the source states"
+    else:
+        raw = med / UNIT_M[unit]
+        fits = [n for n in UNIT_M if lo <= raw * UNIT_M[n] <= hi]  # the likeliest: nearest a few metres
+        best = min(fits, key=lambda n: abs(math.log(raw * UNIT_M[n] / math.sqrt(lo * hi))), default=None)
+        hint = f"; the ranges look like {best}: --unit {best}" if best else ""
+        unit = f"--unit {unit}"
+    raise ImportUsageError(f"median range {med:g} m{f' with {unit}' if unit else ''} is not a plausible lidar "
+                           f"range ({lo:g} to {hi:g} m){hint}")
 
 
 def _lines(text: str | None) -> range | None:
@@ -88,12 +154,29 @@ def _source_poses(args):
     from lidarcam.rig import importing
 
     if args.format == "radlocc":
-        return importing.radlocc_poses(args.src, args.images, _lines(args.lines), args.image_name)
+        return importing.radlocc_poses(args.src, args.images, _lines(args.lines), _image_name(args.image_name))
     if args.format == "pcd":
         return importing.pcd_poses(args.src, args.images)
     _need(args, "start_deg", "step_deg")
     return importing.range_log_poses(args.src, args.images, math.radians(args.start_deg),
                                      math.radians(args.step_deg), args.unit, args.suffix)
+
+
+def is_dataset_folder(folder: Path) -> bool:
+    """Whether ``folder`` holds a dataset folder and nothing else (``camera.yaml``, ``board.yaml``, pose images and
+    scans, ``lidar.yaml``, the bag verb's ``picking.json``): an earlier import, which a new import replaces whole."""
+    from lidarcam.rig.dataset import IMAGE_SUFFIXES
+
+    names = {e.name for e in folder.iterdir()}
+    return {"camera.yaml", "board.yaml"} <= names and all(
+        e.is_file() and e.suffix.lower() in (*IMAGE_SUFFIXES, ".csv", ".yaml", ".json") for e in folder.iterdir())
+
+
+def _not_inside(out: Path, **sources) -> None:
+    """ImportUsageError when a source path lies in the folder the import replaces."""
+    for flag, src in sources.items():
+        if src is not None and Path(src).resolve().is_relative_to(out.resolve()):
+            raise ImportUsageError(f"--out {out}: holds the source {flag} {src}; write the dataset elsewhere")
 
 
 def _direction(args) -> tuple[str | None, str]:
@@ -116,23 +199,28 @@ def cmd_import(args) -> int:
     from calib_core.data.io import save_observations
     from lidarcam.rig import importing
 
-    from .outputs import writable_file, writable_folder
+    from .outputs import not_an_input, replaceable_folder, replaced_folder, writable_file
 
     if args.format in DATASET_FORMATS:
         _need(args, "images", "board_grid", "square")
-        writable_folder(args.out, "--out")
+        out = replaceable_folder(args.out, "--out", is_dataset_folder, "a dataset folder")
+        _not_inside(out, SRC=args.src, **{"--images": args.images, "--camera": args.camera})
+        grid = _grid(args)
         poses = _source_poses(args)
+        check_range_units(poses, args.unit if args.format == "ranges" else None)
         size = importing.image_size(poses[0].image)
         camera = importing.source_camera(args.camera, _numbers(args.intrinsics, "--intrinsics", 4),
                                          _numbers(args.dist, "--dist"), size)
         direction, why = _direction(args)
-        out = importing.write_dataset_folder(args.out, poses, camera, _grid(args), direction, why)
+        with replaced_folder(out, "--out", is_dataset_folder, "a dataset folder") as scratch:
+            importing.write_dataset_folder(scratch, poses, camera, grid, direction, why)
         if direction is not None:
             print(f"scan direction {direction} ({why}): written to {out}/lidar.yaml")
         print(f"wrote {out}/ ({len(poses)} poses: {', '.join(p.name for p in poses)}); next: lidarcam extract "
               f"{out} --outline-kind {args.outline_kind} --out obs.json")
         return 0
     writable_file(args.out, "--out", parents=True)
+    not_an_input(args.out, "--out", args.src, args.points, args.poses)
     if args.format == "bouguet":
         _need(args, "points")
         obs = importing.observations_from_bouguet(args.src, args.points, args.outline_kind,
@@ -154,6 +242,8 @@ def cmd_import(args) -> int:
 
 def add_parsers(subparsers) -> None:
     """Register the ``import`` verb on an argparse subparsers object."""
+    from .argtypes import finite_float
+
     p = subparsers.add_parser("import", help="calibration data in other formats -> a dataset folder or observations",
                               description=__doc__.split("\n\n")[0], epilog="formats: " + ", ".join(FORMATS),
                               formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -165,16 +255,16 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--image-name", default="RGB{n}.png", help="radlocc: image file of laser line n "
                    "(default: %(default)s)")
     p.add_argument("--lines", help="radlocc: laser lines FIRST-LAST to read (1-based; default all)")
-    p.add_argument("--start-deg", type=float, help="ranges: bearing of the first beam (deg, counter-clockwise)")
-    p.add_argument("--step-deg", type=float, help="ranges: bearing step between beams (deg)")
-    p.add_argument("--unit", default="mm", choices=("m", "cm", "mm"), help="ranges: range unit (default: %(default)s)")
+    p.add_argument("--start-deg", type=finite_float, help="ranges: bearing of the first beam (deg, counter-clockwise)")
+    p.add_argument("--step-deg", type=finite_float, help="ranges: bearing step between beams (deg)")
+    p.add_argument("--unit", default="mm", choices=tuple(UNIT_M), help="ranges: range unit (default: %(default)s)")
     p.add_argument("--suffix", default=".log", help="ranges: scan file suffix (default: %(default)s)")
     p.add_argument("--camera", help="camera file: ROS / OpenCV YAML or XML, Kalibr, or MATLAB text "
                    "(K = [...]; kc = [...])")
     p.add_argument("--intrinsics", metavar="FX,FY,CX,CY", help="the camera matrix instead of --camera (pixels)")
     p.add_argument("--dist", metavar="K1,K2,P1,P2[,K3]", help="distortion with --intrinsics (OpenCV order)")
     p.add_argument("--board-grid", metavar="COLSxROWS", help="inner corners of the checkerboard, e.g. 9x6")
-    p.add_argument("--square", type=float, metavar="M", help="side of one square (metres)")
+    p.add_argument("--square", type=finite_float, metavar="M", help="side of one square (metres)")
     p.add_argument("--points", help="bouguet: segmented scan points CSV (pose,x_m,y_m; pose = image index)")
     p.add_argument("--poses", help="segmented: board poses CSV (pose, R_cam_board_00..22, t_cam_board_x/y/z_mm)")
     p.add_argument("--no-corners", action="store_true", help="bouguet: leave the detected corners out")

@@ -1,5 +1,6 @@
-"""``lidarcam calibrate --std-intrinsics``: the 1-sigma of the camera's intrinsics when the observation file does not
-state it (``camera.std_intrinsics``, docs/formats.md), so the joint model holds the camera-side error.
+"""``lidarcam calibrate --std-intrinsics``: the 1-sigma of the camera's intrinsics (``camera.std_intrinsics``,
+docs/formats.md), so the joint model holds the camera-side error; on a file that states its own, the flag's are used
+and ``calibrate`` says so in one line.
 
 Two forms: the full list ``fx,fy,cx,cy[,k1,k2,...]`` (pixels for fx fy cx cy, unitless for the distortion
 coefficients, one per coefficient of the file's ``dist``), or the shorthand ``F%,Cpx`` (focal lengths' 1-sigma as a
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-STD_INTRINSICS_HELP = ("1-sigma of the camera intrinsics when the file states none (camera.std_intrinsics): "
+STD_INTRINSICS_HELP = ("1-sigma of the camera intrinsics (replaces, saying so, the file's camera.std_intrinsics): "
                        "fx,fy,cx,cy[,k1,k2,p1,p2,k3] in px and unitless (OpenCV's stdDeviationsIntrinsics order), "
                        "or the shorthand F%%,Cpx, e.g. 0.3%%,2px (focal lengths' 1-sigma in percent, principal "
                        "point's in pixels, distortion exact); the joint model then estimates the intrinsics with "

@@ -2,13 +2,18 @@
 exit 2 (``OutputError``, a LidarcamError that ``lidarcam.cli.main`` prints), never a traceback after the work.
 
 ``writable_file(path, flag)`` for a file (its folder must exist, unless ``parents``), ``writable_folder(path,
-flag)`` for a folder the verb creates or fills (its nearest existing ancestor must be a writable folder).
+flag)`` for a folder the verb creates or fills (its nearest existing ancestor must be a writable folder),
+``replaced_folder`` for a folder written whole or not at all (a scratch folder renamed into place at the end).
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import sys
 import tempfile
+from collections.abc import Callable
+from contextlib import contextmanager
 from pathlib import Path
 
 from calib_core.errors import LidarcamError
@@ -70,3 +75,60 @@ def writable_folder(path, flag: str = "--out") -> Path | None:
         raise OutputError(f"{flag} {path}: is a file, not a folder")
     _probe(_existing_ancestor(p, flag, path), flag, path)
     return p
+
+
+def not_an_input(path, flag: str, *inputs) -> None:
+    """OutputError when the output ``path`` is one of the files the verb reads (``inputs``: paths or None)."""
+    if path is None:
+        return
+    for src in inputs:
+        try:
+            same = src is not None and os.path.samefile(path, src)
+        except OSError:
+            same = False
+        if same:
+            raise OutputError(f"{flag} {path}: is the input file {src} this run reads; give another name")
+
+
+def _listing(p: Path, n: int = 4) -> str:
+    names = sorted(e.name for e in p.iterdir())
+    return ", ".join(names[:n]) + (f" and {len(names) - n} more" if len(names) > n else "")
+
+
+def replaceable_folder(path, flag: str, own: Callable[[Path], bool], what: str) -> Path:
+    """``path`` as a Path once ``replaced_folder`` can write it (checked before any work); OutputError otherwise."""
+    p = Path(path)
+    writable_folder(p, flag)
+    _probe(_existing_ancestor(p.absolute().parent, flag, path), flag, path)  # the scratch folder goes beside it
+    if p.is_dir() and any(p.iterdir()) and not own(p):
+        raise OutputError(f"{flag} {path}: holds {_listing(p)}, which is not {what}; give a new or empty folder")
+    return p
+
+
+@contextmanager
+def replaced_folder(path, flag: str, own: Callable[[Path], bool], what: str):
+    """Write a folder whole or not at all: yields a scratch folder beside ``path``; when the block ends it takes
+    ``path``'s place (an earlier ``path`` that ``own`` recognises as this verb's output is replaced), and when the
+    block raises or is interrupted the scratch folder is removed and ``path`` is left as it was.
+
+    A ``path`` holding anything else (``own`` false: another rig's poses, the user's files) is an OutputError
+    before any work, naming what it holds; ``what`` names the verb's output for the messages."""
+    p = replaceable_folder(path, flag, own, what)
+    scratch = p.parent / f".{p.name}.partial-{os.getpid()}"
+    if scratch.exists():
+        shutil.rmtree(scratch)
+    scratch.mkdir(parents=True)
+    try:
+        yield scratch
+    except BaseException:
+        shutil.rmtree(scratch, ignore_errors=True)
+        if not isinstance(sys.exc_info()[1], Exception):  # Ctrl-C: say what is on disk
+            print(f"{path}: " + ("left as it was" if p.exists() else "not written") + " (the partial copy removed)",
+                  file=sys.stderr)
+        raise
+    old = p.parent / f".{p.name}.old-{os.getpid()}"
+    if p.exists():
+        p.rename(old)
+    scratch.rename(p)
+    if old.exists():
+        shutil.rmtree(old)

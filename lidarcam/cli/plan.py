@@ -61,8 +61,9 @@ def _current(args, k: int, target, criterion):
 
 
 def cmd_plan(args) -> int:
-    """``lidarcam plan``: prints the plan; ``--json`` and ``--figure`` write it."""
+    """``lidarcam plan``: prints the plan; ``--json`` and ``--figure`` write it (``--template``: the rig template)."""
     import json
+    import sys
     from pathlib import Path
 
     from calib_core.errors import CalibrationError
@@ -70,8 +71,15 @@ def cmd_plan(args) -> int:
 
     from .outputs import writable_file
 
-    if args.next < 1:
-        raise CalibrationError(f"--next must be at least 1, got {args.next}")
+    if args.template:
+        from lidarcam.rig.plan_rig import template_text
+
+        sys.stdout.write(template_text())
+        return 0
+    from calib_core.data.observations import MAX_BOARDS
+
+    if not 1 <= args.next <= MAX_BOARDS:
+        raise CalibrationError(f"--next must be 1 to {MAX_BOARDS} (the boards a file holds), got {args.next}")
     writable_file(args.json, "--json")
     writable_file(args.figure, "--figure")
     criterion = "z" if args.criterion == "height" else args.criterion
@@ -95,7 +103,10 @@ def add_parsers(subparsers) -> None:
                               description="Predict the 1-sigma of each mounting axis from the joint Cramer-Rao "
                               "bound, name what is undetermined, and propose the next board poses. Rig description: "
                               "docs/planning.md.")
-    p.add_argument("rig", nargs="?", help="rig description YAML (camera, lidar, mounting, board, workspace)")
+    p.add_argument("rig", nargs="?", help="rig description YAML (camera, lidar, mounting, board, workspace; "
+                   "--template prints one to edit)")
+    p.add_argument("--template", action="store_true", help="print the rig description template (the simulator's "
+                   "default rig, every key commented) and exit: lidarcam plan --template > rig.yaml")
     p.add_argument("--from", dest="from_obs", metavar="OBS.json",
                    help="observations captured so far (from extract or bag); their calibration gives the mounting")
     p.add_argument("--next", type=int, default=6, metavar="K", help="board poses to propose (default: %(default)s)")

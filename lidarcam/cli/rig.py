@@ -76,14 +76,16 @@ def _add_extract_options(p: argparse.ArgumentParser) -> None:
 def cmd_extract(args) -> int:
     """``lidarcam extract``: dataset -> observation JSON; prints per-pose diagnostics and skip reasons."""
     import json
+    import sys
     from pathlib import Path
 
     from calib_core.data.io import save_observations
-    from lidarcam.rig.dataset import DatasetError
     from lidarcam.rig.extract import direction_line, extract, format_diagnostics, noise_line
     from lidarcam.rig.report import capture_verdict
 
+    from .hints import square_hint
     from .outputs import writable_file
+    from .wording import cli_hint
 
     writable_file(args.out, "--out")
     writable_file(args.diagnostics, "--diagnostics")
@@ -95,11 +97,16 @@ def cmd_extract(args) -> int:
     if args.diagnostics:
         Path(args.diagnostics).write_text(json.dumps([d.to_dict() for d in diags], indent=1) + "\n")
         print(f"wrote {args.diagnostics}")
-    if obs.n_boards == 0:
-        raise DatasetError("no usable pose (see the skip reasons above)", file=args.dataset)
+    hint = square_hint(ds, diags)
+    if hint:
+        print(hint)
+    if obs.n_boards == 0:  # no answer, as calibrate's: exit 1 (README, lidarcam --help)
+        print(f"lidarcam extract: {args.dataset}: no usable pose (see the skip reasons above); nothing written",
+              file=sys.stderr)
+        return 1
     save_observations(obs, args.out)
     print(f"wrote {args.out} ({obs.n_boards} boards)")
-    print(f"capture plan: {capture_verdict(obs)}")
+    print(f"capture plan: {cli_hint(capture_verdict(obs))}")
     return 0
 
 

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from dataclasses import MISSING, fields
 
+SUMMARY = "write one simulated lidar-camera calibration problem (observations JSON)"
 # Short spellings kept next to the generated one-flag-per-field names.
 ALIASES = {"n_boards": ["--boards"]}
 
@@ -21,11 +23,13 @@ def add_parsers(subparsers) -> argparse.ArgumentParser:
     from simulate.options import SimOptions
 
     p = subparsers.add_parser(
-        "simulate", help="write one simulated lidar-camera calibration problem (observations JSON)",
+        "simulate", help=SUMMARY,
         description="Simulate boards seen by a 2D lidar and a camera (docs/METHOD.md) and write them "
                     "with their ground truth as a lidarcam.observations/1 file.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--seed", type=int, default=0, help="base seed")
+    from .argtypes import finite_float, seed_type
+
+    p.add_argument("--seed", type=seed_type, default=0, help="base seed (an integer >= 0)")
     p.add_argument("--trial", type=int, default=0, help="trial index (each trial has its own random stream)")
     p.add_argument("--out", required=True, help="output JSON path")
     p.add_argument("--lens", choices=sorted(LENSES), default=None,
@@ -39,7 +43,7 @@ def add_parsers(subparsers) -> argparse.ArgumentParser:
         if f.type == "bool":
             g.add_argument(*names, dest=f.name, action=argparse.BooleanOptionalAction, default=default)
         else:
-            kind = {"int": int, "float": float, "str": str}[f.type]
+            kind = {"int": int, "float": finite_float, "str": str}[f.type]
             g.add_argument(*names, dest=f.name, type=kind, default=default, metavar=f.type.upper())
     p.set_defaults(func=run)
     return p
@@ -63,8 +67,9 @@ def run(args: argparse.Namespace) -> int:
             given.update({k: v for k, v in LENSES[args.lens].items() if given[k] == SimOptions().to_dict()[k]})
         options = SimOptions(**given)
         obs = generate(options, seed=args.seed, trial=args.trial)
-    except (ValueError, SceneError) as exc:
-        print(f"lidarcam simulate: {exc}", file=sys.stderr)
+    except (ValueError, SceneError) as exc:  # SimOptions names its field: name the option instead
+        msg = re.sub(r"^SimOptions: (\w+)", lambda m: _flag(m.group(1)), str(exc))
+        print(f"lidarcam simulate: error: {msg}", file=sys.stderr)
         return 2
     save_observations(obs, args.out)
     print(f"wrote {args.out}: {obs.n_boards} boards, {sum(len(b.scan) for b in obs.boards)} scan points")

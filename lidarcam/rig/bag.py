@@ -106,7 +106,15 @@ class BagSource:
 
     def messages(self, conns: list, start: int | None = None, stop: int | None = None) -> Iterator:
         """(connection, bag_ns, deserialised message), in bag-time order, for ``start <= bag_ns < stop``."""
-        for conn, bag_ns, raw in self._reader.messages(connections=conns, start=start, stop=stop):
+        stream = iter(self._reader.messages(connections=conns, start=start, stop=stop))
+        while True:
+            try:
+                conn, bag_ns, raw = next(stream)
+            except StopIteration:
+                return
+            except Exception as exc:  # noqa: BLE001 -- the storage's own errors (a corrupt sqlite3 page, a cut mcap)
+                raise BagError(f"cannot read its messages ({type(exc).__name__}: {_first_line(exc)})",
+                               file=self.path) from None
             try:
                 msg = self._reader.deserialize(raw, conn.msgtype)
             except Exception as exc:  # noqa: BLE001

@@ -27,10 +27,15 @@ from calib_core.planning.views import POSE_FIELDS, PlanRig, Workspace
 
 from .dataset import DatasetError, board_from_dict, camera_from_dict, read_yaml
 
+TEMPLATE = "plan_template.yaml"
+"""The rig description template, a file of this package (``lidarcam plan --template``)."""
 SECTIONS = ("camera", "lidar", "mounting", "board", "workspace")
 LIDAR_KEYS = {"fov_deg": 180.0, "resolution_deg": 0.25, "max_range_m": 30.0, "range_sigma_mm": 20.0}
 WORKSPACE_LIMITS = {"image_margin_px": 20.0, "min_points": 10, "min_depth_m": 0.5}
 SYMMETRIC = ("bearing_deg", "turn_deg", "lean_deg", "roll_deg")
+MAX_POSE_BEAMS = 20_000_000
+"""Most candidate poses (the product of ``workspace.steps``) times lidar beams (``fov_deg / resolution_deg``) the
+planner evaluates: its (poses, beams) arrays stay under about 0.2 GB each (160 MB of float64)."""
 
 
 def _section(data: dict, name: str, path: Path, required: bool = True) -> dict:
@@ -84,6 +89,19 @@ def _workspace(sec: dict, path: Path) -> tuple[Workspace, dict]:
     return Workspace(**ranges, steps=tuple(steps)), limits
 
 
+def _check_size(workspace: Workspace, lid: dict, path: Path) -> None:
+    """DatasetError, before any array is made, when the plan would evaluate more than ``MAX_POSE_BEAMS``."""
+    if lid["fov_deg"] > 360.0:
+        raise DatasetError(f"'lidar.fov_deg' must be at most 360, got {lid['fov_deg']:g}", file=path)
+    poses = math.prod(workspace.steps)
+    beams = lid["fov_deg"] / lid["resolution_deg"] + 1
+    if poses * beams > MAX_POSE_BEAMS:
+        raise DatasetError(f"'workspace.steps' ({poses:,} poses) x 'lidar' fov_deg / resolution_deg ({beams:,.0f} "
+                           f"beams) is {poses * beams:.3g} pose-beams, above {MAX_POSE_BEAMS:.0e} (about "
+                           f"{poses * beams * 8 / 2**30:.3g} GiB per array): fewer steps or a coarser resolution",
+                           file=path)
+
+
 def rig_from_dict(data: dict, path: Path) -> PlanRig:
     """A PlanRig from the parsed YAML ``data``; DatasetError naming ``path`` and the section and key."""
     unknown = sorted(set(data) - set(SECTIONS))
@@ -111,9 +129,15 @@ def rig_from_dict(data: dict, path: Path) -> PlanRig:
     theta[:3] = np.radians(theta[:3])
     board = board_from_dict(_section(data, "board", path), path)
     workspace, limits = _workspace(_section(data, "workspace", path, required=False), path)
+    _check_size(workspace, lid, path)
     return PlanRig(camera, T_from_params(theta), np.array(board.outline), board.corners, lid["fov_deg"],
                    lid["resolution_deg"], lid["max_range_m"], lid["range_sigma_mm"] / 1000.0, corner_sigma,
                    limits["image_margin_px"], limits["min_depth_m"], int(limits["min_points"]), workspace)
+
+
+def template_text() -> str:
+    """The rig description template shipped with the package (the simulator's default rig, every key)."""
+    return Path(__file__).with_name(TEMPLATE).read_text()
 
 
 def load_plan_rig(path) -> PlanRig:

@@ -194,6 +194,8 @@ def find_board_segment(scan: Scan, T_cam_board: np.ndarray, board: BoardSpec, op
     agrees with the camera's view of the board. ``static``: mask of points that stay put across poses (dropped)."""
     opts = opts or ExtractOptions()
     diag = diag if diag is not None else PoseDiagnostics("")
+    if len(scan) == 0:
+        raise ExtractionError(f"no returns in the scan (all {scan.n_dropped} beams NaN, inf or <= 0)")
     keep = np.ones(len(scan), bool)
     if background is not None:
         bg = background_mask(scan, background, opts.background_tol_m)

@@ -36,7 +36,8 @@ class FieldCamera(CameraModel):
         full = np.zeros(max(self.dist_lengths))
         full[:len(dist)] = dist
         if self.std_intrinsics is not None:
-            object.__setattr__(self, "std_intrinsics", _checked_std(self.std_intrinsics, len(dist), self.n_core))
+            object.__setattr__(self, "std_intrinsics", _checked_std(self.std_intrinsics, len(dist), self.n_core,
+                                                                    max(self.width, self.height)))
         K.setflags(write=False)
         full.setflags(write=False)
         object.__setattr__(self, "K", K)

@@ -33,6 +33,8 @@ def read_yaml(path: Path) -> dict:
         text = path.read_text()
     except OSError as exc:
         raise DatasetError(f"cannot read ({exc.strerror})", file=path) from None
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"not a text file (byte {exc.start} is not UTF-8)", file=path) from None
     # OpenCV writes "%YAML:1.0" (not valid YAML) or "%YAML 1.2" (PyYAML reads 1.1): drop the directive
     text = re.sub(r"^\s*%YAML[: ]?[0-9.]*[^\n]*\n", "", text, count=1)
     try:

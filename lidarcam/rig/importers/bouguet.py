@@ -55,6 +55,20 @@ def _get(mat: dict, key: str, path: Path, size: int | None = None, required: boo
     return a
 
 
+def _count(mat: dict, key: str, path: Path, low: int, high: int) -> int:
+    """The integer field ``key`` within [low, high]; DatasetError naming it otherwise (NaN, inf, 2.5, -1)."""
+    v = float(_get(mat, key, path, 1)[0])
+    if not (np.isfinite(v) and v == int(v) and low <= v <= high):
+        raise DatasetError(f"field {key}: expected an integer from {low} to {high}, got {v:g}", file=path)
+    return int(v)
+
+
+def _finite(a: np.ndarray | None, key: str, path: Path) -> np.ndarray | None:
+    if a is not None and not np.all(np.isfinite(a)):
+        raise DatasetError(f"field {key}: not finite ({a.tolist()})", file=path)
+    return a
+
+
 def _view(mat: dict, k: int, path: Path) -> BouguetView | None:
     R = _get(mat, f"Rc_{k}", path, 9)
     T = _get(mat, f"Tc_{k}", path, 3)
@@ -82,15 +96,15 @@ def read_bouguet(path) -> BouguetCalibration:
         mat = loadmat(str(path))
     except (OSError, ValueError, TypeError, NotImplementedError, MatReadError) as exc:
         raise DatasetError(f"not a readable MATLAB file ({exc})", file=path) from None
-    fc, cc = _get(mat, "fc", path, 2), _get(mat, "cc", path, 2)
-    alpha = _get(mat, "alpha_c", path, 1, required=False)
-    kc = _get(mat, "kc", path)
+    fc, cc = (_finite(_get(mat, k, path, 2), k, path) for k in ("fc", "cc"))
+    alpha = _finite(_get(mat, "alpha_c", path, 1, required=False), "alpha_c", path)
+    kc = _finite(_get(mat, "kc", path), "kc", path)
     if kc.size not in (4, 5):
         raise DatasetError(f"field kc: expected 4 or 5 coefficients, got {kc.size}", file=path)
-    w, h = int(_get(mat, "nx", path, 1)[0]), int(_get(mat, "ny", path, 1)[0])
+    w, h = _count(mat, "nx", path, 1, 100_000), _count(mat, "ny", path, 1, 100_000)
     a = 0.0 if alpha is None else float(alpha[0])
     K = np.array([[fc[0], a * fc[0], cc[0]], [0.0, fc[1], cc[1]], [0.0, 0.0, 1.0]])
-    n = int(_get(mat, "n_ima", path, 1)[0])
+    n = _count(mat, "n_ima", path, 1, 100_000)
     active = _get(mat, "active_images", path, required=False)
     views = []
     for k in range(1, n + 1):
@@ -99,8 +113,13 @@ def read_bouguet(path) -> BouguetCalibration:
         v = _view(mat, k, path)
         if v is not None:
             views.append(v)
+    if not views:
+        raise DatasetError(f"no active image with a board pose (n_ima {n}; active_images and Rc_k leave none)",
+                           file=path)
     sigma = {key: _get(mat, f"{key}_error", path, required=False) for key in ("fc", "cc", "kc", "alpha_c")}
     dX = _get(mat, "dX", path, 1, required=False)
+    if dX is not None and not (np.isfinite(dX[0]) and dX[0] > 0):
+        raise DatasetError(f"field dX: expected the square's side in mm (> 0), got {dX[0]:g}", file=path)
     return BouguetCalibration(CameraModel(w, h, K, kc.copy(), bouguet_std(sigma, kc.size, path)), tuple(views),
                               None if dX is None else float(dX[0]) / 1000.0,
                               {k: v for k, v in sigma.items() if v is not None},

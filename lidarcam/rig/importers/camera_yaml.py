@@ -49,27 +49,39 @@ def _kalibr(cam: dict, path: Path, name: str) -> CameraModel:
 def _opencv_xml(path: Path) -> CameraModel:
     import cv2
 
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    if not fs.isOpened():
-        raise DatasetError("not a readable OpenCV FileStorage file", file=path)
-    try:
-        def node(*names):
-            for n in names:
-                nd = fs.getNode(n)
-                if not nd.empty():
-                    return nd
-            raise DatasetError(f"field {names[0]}: missing", file=path)
+    field = None
 
-        K = node("camera_matrix", "Camera_Matrix").mat()
-        dist = node("distortion_coefficients", "Distortion_Coefficients").mat()
-        w = int(node("image_width", "image_Width").real())
-        h = int(node("image_height", "image_Height").real())
-    finally:
-        fs.release()
+    def node(*names):
+        nonlocal field
+        field = names[0]
+        for n in names:
+            nd = fs.getNode(n)
+            if not nd.empty():
+                return nd
+        raise DatasetError(f"field {names[0]}: missing", file=path)
+
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        if not fs.isOpened():
+            raise DatasetError("not a readable OpenCV FileStorage file", file=path)
+        try:
+            K = node("camera_matrix", "Camera_Matrix").mat()
+            dist = node("distortion_coefficients", "Distortion_Coefficients").mat()
+            w = node("image_width", "image_Width").real()
+            h = node("image_height", "image_Height").real()
+        finally:
+            fs.release()
+    except (cv2.error, SystemError) as exc:  # OpenCV's parser on a malformed file or node
+        why = getattr(exc, "err", None) or "malformed"
+        where = "not an OpenCV FileStorage file" if field is None else f"field {field}: not readable by OpenCV"
+        raise DatasetError(f"{where} ({why})", file=path) from None
     if K is None or K.shape != (3, 3):
         raise DatasetError("field camera_matrix: expected a 3x3 matrix", file=path)
-    dist = np.zeros(0) if dist is None else np.asarray(dist, float).ravel()
-    return CameraModel(w, h, np.asarray(K, float), dist)
+    dist = [] if dist is None else np.asarray(dist, float).ravel().tolist()
+    if not (np.isfinite(w) and np.isfinite(h) and w == int(w) and h == int(h)):
+        raise DatasetError(f"field image_width / image_height: {w} x {h} is not an image size", file=path)
+    return camera_from_dict({"image_width": int(w), "image_height": int(h), "camera_matrix": K.tolist(),
+                             "distortion_coefficients": dist}, path)  # the checks of camera.yaml
 
 
 def _matlab_text(path: Path, size: tuple[int, int] | None) -> CameraModel:

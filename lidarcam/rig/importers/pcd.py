@@ -52,7 +52,13 @@ def read_pcd_points(path) -> dict[str, np.ndarray]:
         if not head.get(key):
             raise DatasetError(f"PCD header: missing {key}", file=path)
     fields = head["FIELDS"]
-    counts = [int(c) for c in head.get("COUNT", ["1"] * len(fields))]
+    try:
+        counts = [int(c) for c in head.get("COUNT", ["1"] * len(fields))]
+    except ValueError:
+        counts = []
+    if not counts or min(counts) < 1:
+        raise DatasetError(f"PCD header: COUNT {' '.join(head.get('COUNT', []))!r} is not a list of positive "
+                           "integers", file=path)
     try:
         n = int(head["POINTS"][0]) if "POINTS" in head else int(head["WIDTH"][0]) * int(head.get("HEIGHT", ["1"])[0])
     except (KeyError, ValueError, IndexError):

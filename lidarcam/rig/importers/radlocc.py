@@ -59,6 +59,10 @@ def parse_radlocc_line(text: str, path, line: int) -> RadloccScan:
     stamp, start, inc, end, unit, n = head
     if unit not in UNIT_TO_M:
         raise DatasetError(f"field RangeUnitType: {tok[4]!r} is not 1 (mm), 2 (cm) or 3 (m)", file=path, line=line)
+    if not all(map(math.isfinite, (start, end, n))):
+        bad = next(k for k, v in zip(("StartAngleRad", "EndAngleRad", "N"), (start, end, n), strict=True)
+                   if not math.isfinite(v))
+        raise DatasetError(f"field {bad}: {tok[names.index(bad)]!r} is not a finite number", file=path, line=line)
     if n != int(n) or n < 1:
         raise DatasetError(f"field N: {tok[5]!r} is not a positive integer", file=path, line=line)
     n = int(n)

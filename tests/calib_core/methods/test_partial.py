@@ -142,5 +142,5 @@ def test_cli_fix(tmp_path, capsys):
     d = json.loads(out.read_text())
     assert d["ok"] and d["fixed"]["z_m"] == pytest.approx(theta[5], abs=1e-6)
     assert abs(d["mounting"]["yaw_deg"] - np.degrees(theta[2])) < 5 * d["mounting_sigma"]["yaw_deg"]
-    assert main(["calibrate", str(path), "--fix", "height=0.1"]) == 2
+    assert main(["calibrate", str(path), "--fix", "heigth=0.1"]) == 2
     assert "--fix" in capsys.readouterr().err

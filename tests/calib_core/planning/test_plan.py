@@ -29,7 +29,7 @@ from lidarcam.rig.plan_rig import load_plan_rig
 from simulate import SimOptions, generate, observe_poses
 
 ROOT = Path(__file__).resolve().parents[3]
-RIG_YAML = ROOT / "conf" / "plan" / "rig.yaml"
+RIG_YAML = ROOT / "lidarcam" / "rig" / "plan_template.yaml"
 SMALL = Workspace(steps=(2, 5, 1, 3, 3, 1))
 
 
@@ -267,7 +267,7 @@ def test_the_verdict_adds_as_many_boards_as_the_plan_needs(k, given, target):
     the poses named are the plan's first ones."""
     from calib_core.planning.capture import boards_to_add, describe_pose
 
-    rig = load_plan_rig(Path(__file__).resolve().parents[3] / "conf" / "plan" / "rig.yaml")
+    rig = load_plan_rig(RIG_YAML)
     from calib_core.planning.capture import set_informations
 
     current = generate(SimOptions(n_boards=given), seed=2) if given else None
@@ -295,7 +295,7 @@ def test_plan_figure_labels_do_not_overlap():
     """Boards proposed at one place with different tilts share one label; every board is numbered once."""
     from lidarcam.rig.plan_figure import LABEL_MERGE_M, _board_xy, label_groups
 
-    rig = load_plan_rig(Path(__file__).resolve().parents[3] / "conf" / "plan" / "rig.yaml")
+    rig = load_plan_rig(RIG_YAML)
     plan = plan_capture(rig, 25)  # more boards than distinct places in the workspace: some share one
     centres = _board_xy(plan.T_lidar_board, rig.outline)[:, :-1].mean(axis=1)
     d = np.linalg.norm(centres[:, None] - centres[None], axis=-1)[np.triu_indices(len(centres), 1)]
@@ -335,7 +335,7 @@ def test_one_noise_rule_for_the_cli_plan_and_the_capture_verdict(tmp_path, capsy
 def test_summary_lines_have_a_row_per_proposed_pose_and_the_verdict():
     from calib_core.planning.capture import describe_pose
 
-    rig = load_plan_rig(Path(__file__).resolve().parents[3] / "conf" / "plan" / "rig.yaml")
+    rig = load_plan_rig(RIG_YAML)
     plan = plan_capture(rig, 3)
     lines = plan.summary_lines(rig)
     rows = [ln for ln in lines if re.match(r"^\s*\d+\s+[\d.]+\s+-?[\d.]+", ln)]
