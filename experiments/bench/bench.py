@@ -15,7 +15,6 @@ Single process, run it with ``OMP_NUM_THREADS=1`` (the Makefile exports it) for 
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 
@@ -27,6 +26,7 @@ from calib_core.geometry.metrics import is_valid, pose_errors
 from simulate import SimOptions, generate
 
 from ..engine.catalog import method_order
+from ..engine.cli import int_at_least, int_list, positive_int, study_parser
 
 
 def problems(n_boards: int, count: int, seed: int = 12345) -> list:
@@ -175,26 +175,28 @@ def time_joint(n_boards: int, count: int, repeats: int, seed: int = 12345) -> di
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
-    ap.add_argument("--boards", type=int, default=8)
-    ap.add_argument("--problems", type=int, default=10)
-    ap.add_argument("--repeats", type=int, default=20)
-    ap.add_argument("--triples", type=int, default=10_000)
-    ap.add_argument("--scaling", default="8,20,40,100", help="board counts of the default method's scaling table")
-    ap.add_argument("--scaling-problems", type=int, default=3)
-    ap.add_argument("--joint-boards", type=int, nargs="*", default=[8, 40])
-    ap.add_argument("--ratio-boards", default="3,4,5,6,7,8", help="board counts of the lidarcam / peng2022 table")
-    ap.add_argument("--ratio-problems", type=int, default=10)
-    ap.add_argument("--ratio-repeats", type=int, default=3)
+    ap = study_parser(__doc__)
+    ap.add_argument("--boards", type=int_at_least(3), default=8)
+    ap.add_argument("--problems", type=positive_int, default=10)
+    ap.add_argument("--repeats", type=positive_int, default=20)
+    ap.add_argument("--triples", type=positive_int, default=10_000)
+    ap.add_argument("--scaling", type=int_list(3, empty=True), default="8,20,40,100",
+                    help="board counts of the default method's scaling table ('': none)")
+    ap.add_argument("--scaling-problems", type=positive_int, default=3)
+    ap.add_argument("--joint-boards", type=int_at_least(3), nargs="*", default=[8, 40])
+    ap.add_argument("--ratio-boards", type=int_list(3, empty=True), default="3,4,5,6,7,8",
+                    help="board counts of the lidarcam / peng2022 table ('': none)")
+    ap.add_argument("--ratio-problems", type=positive_int, default=10)
+    ap.add_argument("--ratio-repeats", type=positive_int, default=3)
     args = ap.parse_args(argv)
-    ratio_counts = [int(c) for c in args.ratio_boards.split(",") if c.strip()]
+    ratio_counts = args.ratio_boards
     if ratio_counts:
         print(f"lidarcam vs peng2022 per call, exact board poses, {args.ratio_problems} problems x "
               f"{args.ratio_repeats} repetitions each, timed alternately:")
         print(f"  {'boards':>6}{'lidarcam ms':>13}{'peng2022 ms':>13}{'ratio':>8}")
         for r in time_ratio(ratio_counts, args.ratio_problems, args.ratio_repeats):
             print(f"  {r['boards']:>6}{r['method_ms']:>13.2f}{r['reference_ms']:>13.2f}{r['ratio']:>8.1f}")
-    counts = [int(c) for c in args.scaling.split(",") if c.strip()]
+    counts = args.scaling
     if counts:
         print(f"default method (lidarcam) vs board count, {args.scaling_problems} problems each, one process:")
         print(f"  {'boards':>6}{'median s':>10}{'max s':>9}{'x 1st':>8}  valid")

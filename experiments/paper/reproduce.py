@@ -10,12 +10,13 @@ finished trials are read back, not recomputed.
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..config.overrides import refuse_flag_overrides
 from ..config.sweeps import experiment_cells
+from ..engine.cli import n_jobs, positive_int, study_parser
 from ..engine.runner import run_cells
 from ..engine.store import load_cell
 from ..summary.aggregate import write_tables
@@ -46,12 +47,13 @@ def reproduce(trials: int = 100, results_dir: str = "results", n_jobs: int = -1,
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to both sweeps")
-    ap.add_argument("--trials", type=int, default=100, help="trials per setting (paper: 100)")
+    ap.add_argument("--trials", type=positive_int, default=100, help="trials per setting (paper: 100)")
     ap.add_argument("--results", default="results", help="results folder (default: results)")
-    ap.add_argument("--n-jobs", type=int, default=-1, help="worker processes (-1: all cores)")
+    ap.add_argument("--n-jobs", type=n_jobs, default=-1, help="worker processes (-1: all cores)")
     args = ap.parse_args(argv)
+    refuse_flag_overrides(args.overrides, {"results_dir": "--results", "n_trials": "--trials"})
     r = reproduce(args.trials, args.results, args.n_jobs, args.overrides)
     print(f"{r['cells']} settings x {r['trials'] // r['cells']} trials, methods {', '.join(r['methods'])}: "
           f"simulated and solved in {r['run_s']:.1f} s, {r['total_s']:.1f} s with tables, figures and report.")

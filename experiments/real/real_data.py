@@ -16,7 +16,6 @@ one holding none of the sets, is an error (one line, exit 2) and nothing is writ
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from dataclasses import replace
@@ -36,6 +35,7 @@ from rig.intrinsics import format_intrinsics, refit_camera
 from rig.markdown import md_table
 from rig.report import capture_verdict, save_overlay
 
+from ..engine.cli import nonnegative_int, positive_int, study_parser
 from ..engine.fingerprint import write_stamped
 from ..engine.paths import repo_relative
 from . import real_subsets as sub
@@ -314,11 +314,12 @@ def present_sets(data: Path) -> list[str]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "real-data"), help="folder of the data sets")
     ap.add_argument("--out", default=str(ROOT / "results" / "real"), help="output folder")
-    ap.add_argument("--subsets", type=int, default=sub.N_SUBSETS, help="random subsets per board count (0: none)")
-    ap.add_argument("--jobs", type=int, default=2, help="parallel workers (one data set each at a time)")
+    ap.add_argument("--subsets", type=nonnegative_int, default=sub.N_SUBSETS,
+                    help="random subsets per board count (0: none)")
+    ap.add_argument("--jobs", type=positive_int, default=2, help="parallel workers (one data set each at a time)")
     args = ap.parse_args(argv)
     data, out = Path(args.data), Path(args.out)
     present = present_sets(data)
