@@ -174,6 +174,14 @@ def time_joint(n_boards: int, count: int, repeats: int, seed: int = 12345) -> di
     return {k: (float(np.median(v)) if v else float("nan")) if isinstance(v, list) else v for k, v in out.items()}
 
 
+def method_lines(rows: list[dict]) -> list[str]:
+    """The per-method table of ``time_methods`` rows, its first column as wide as the longest method name."""
+    w = max([22, *(len(r["method"]) + 2 for r in rows)])
+    return [f"  {'method':<{w}}{'median ms':>11}{'p90 ms':>10}{'runs':>7}  valid",
+            *(f"  {r['method']:<{w}}{r['median_ms']:>11.2f}{r['p90_ms']:>10.2f}{r['runs']:>7}  {r['valid']}"
+              for r in rows)]
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     ap = study_parser(__doc__)
     ap.add_argument("--boards", type=int_at_least(3), default=8)
@@ -205,9 +213,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     obs_list = problems(args.boards, args.problems)
     rows = time_methods(obs_list, args.repeats)
     print(f"calibrate() on {args.boards} boards, {args.problems} problems x {args.repeats} repetitions:")
-    print(f"  {'method':<22}{'median ms':>11}{'p90 ms':>10}{'runs':>7}  valid")
-    for r in rows:
-        print(f"  {r['method']:<22}{r['median_ms']:>11.2f}{r['p90_ms']:>10.2f}{r['runs']:>7}  {r['valid']}")
+    print("\n".join(method_lines(rows)))
     mt = time_minimal(obs_list, args.triples)
     print(f"minimal solver (solve_triples, one call, one core): {mt['triples']} triples in {mt['seconds']:.3f} s = "
           f"{mt['triples_per_s']:,.0f} triples/s ({mt['solutions']} real solutions)")
