@@ -28,10 +28,10 @@ test: $(STAMP) ## Run the fast test suite (~2 min; SHUFFLE=seed: random order)
 test-slow: $(STAMP) ## Run only the slow, opt-in tests (not measured as a whole; 100-board peng2022 ~2 min)
 	$(PY) -m pytest -m slow
 
-test-slurm: $(STAMP) ## Sweeps through a real SLURM scheduler: a one-node cluster (dev/slurm/cluster.sh; apt-get as root if missing), tests/test_slurm.py, cluster stopped unless it was up or KEEP=1 (~1.5 min)
+test-slurm: $(STAMP) ## Sweeps through a real SLURM scheduler: a one-node cluster (dev/slurm/cluster.sh; apt-get as root if missing), tests/experiments/test_slurm.py, cluster stopped unless it was up or KEEP=1 (~1.5 min)
 	@up=0; dev/slurm/cluster.sh status >/dev/null 2>&1 && up=1; \
 	dev/slurm/cluster.sh start && eval "$$(dev/slurm/cluster.sh env)" && \
-	LIDARCAM_REQUIRE_SLURM=1 $(PY) -m pytest -m slurm -rA tests/test_slurm.py; rc=$$?; \
+	LIDARCAM_REQUIRE_SLURM=1 $(PY) -m pytest -m slurm -rA tests/experiments/test_slurm.py; rc=$$?; \
 	if [ $$up = 0 ] && [ -z "$(KEEP)" ]; then dev/slurm/cluster.sh stop; fi; exit $$rc
 
 lint: $(STAMP) ## ruff check (~5 s)

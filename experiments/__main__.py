@@ -18,7 +18,7 @@ STUDIES = {
     "matched": ("paper.matched", "the paper's claims under a preset (make reproduce-paper PRESET=...)"),
     "matched-report": ("paper.matched_report", "rewrite the preset report from stored rows"),
     "report": ("paper.report", "rewrite results/paper/REPORT.md from stored rows"),
-    "search": ("paper.search", "search the paper's unstated settings (make search-paper)"),
+    "search": ("paper.settings_search", "search the paper's unstated settings (make search-paper)"),
     "explain": ("paper.explain", "ablations of peng2022 and unstated-setting sweeps (make explain-paper)"),
     "francisco": ("paper.francisco", "claim 1 under both readings of Francisco"),
     "rig-like": ("paper.rig_like", "every method at 3-8 boards under rig conditions (make rig-like)"),

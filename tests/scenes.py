@@ -5,7 +5,7 @@ beam, exact camera-side board poses."""
 import numpy as np
 
 from calib_core.data.observations import BoardObservation, Observations
-from calib_core.geometry.transforms import invert_T, make_T, rotvec_to_matrix
+from calib_core.geometry.transforms import invert_T, make_T, matrix_to_rotvec, rotvec_to_matrix
 
 # camera z -> lidar x, camera x -> lidar -y, camera y -> lidar -z
 R_NOMINAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -64,3 +64,22 @@ def make_observations(rng, n_boards=6, range_sigma_m=0.02, T_lidar_cam=None, pos
         P = (r + rng.normal(scale=range_sigma_m, size=len(r)))[:, None] * u
         boards.append(BoardObservation(T_cam_board, OUTLINE, P[:, :2]))
     return Observations(tuple(boards), T)
+
+
+def vertical_board_poses(n):
+    """Boards whose normals all lie in the scan plane: nothing fixes the extrinsic's height (degenerate)."""
+    poses = []
+    for k in range(n):
+        bearing = np.radians(-25 + 50 * k / max(n - 1, 1))
+        c = 4.0 * np.array([np.cos(bearing), np.sin(bearing), 0.0])
+        yaw = bearing + np.radians(30 * (-1) ** k)
+        z = -np.array([np.cos(yaw), np.sin(yaw), 0.0])
+        x = np.cross([0.0, 0.0, 1.0], z)
+        R = np.column_stack([x, np.cross(z, x), z])
+        poses.append(make_T(R, c - R @ np.array([0.5, 0.5, 0.0])))
+    return poses
+
+
+def error_vector(T, T_true):
+    """(rotation-vector error in the lidar frame, translation error): the parameters of calib_core.model.residuals."""
+    return np.r_[matrix_to_rotvec(T[:3, :3] @ T_true[:3, :3].T), T[:3, 3] - T_true[:3, 3]]

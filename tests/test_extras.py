@@ -42,7 +42,7 @@ BLOCKED = textwrap.dedent("""
             if name.split(".")[0] in BLOCK:
                 raise ModuleNotFoundError(f"No module named {name!r}", name=name)
     sys.meta_path.insert(0, Blocker())
-    from lidarcam_cli import main
+    from lidarcam.cli import main
     sys.exit(main(sys.argv[1:]))
 """)
 
@@ -54,7 +54,7 @@ def _lidarcam_without_extras(*argv: str, cwd: Path):
 
 @pytest.fixture(scope="module")
 def obs_file(tmp_path_factory):
-    from lidarcam_cli import main
+    from lidarcam.cli import main
 
     path = tmp_path_factory.mktemp("extras") / "obs.json"
     assert main(["simulate", "--boards", "6", "--seed", "1", "--out", str(path)]) == 0

@@ -23,7 +23,7 @@ def blocks():
 def _local(script: str) -> str:
     """The guide's commands with ``lidarcam`` / ``python`` pointing at this interpreter and checkout."""
     py = sys.executable
-    script = re.sub(r"(?m)^lidarcam ", f"{py} -m lidarcam_cli ", script)
+    script = re.sub(r"(?m)^lidarcam ", f"{py} -m lidarcam.cli ", script)
     return re.sub(r"(?m)^python ", f"{py} ", script)
 
 

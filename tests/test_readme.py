@@ -55,7 +55,7 @@ PLACEHOLDERS = ("DATASET", "SRC", "REC", "OUT", "/tmp/demo", "|")
 def test_the_use_lines_on_the_readmes_own_obs_json_run_as_written(tmp_path, monkeypatch, capsys):
     import shlex
 
-    from lidarcam_cli import main
+    from lidarcam.cli import main
 
     lines = [ln for ln in _use_lines() if not any(p in ln for p in PLACEHOLDERS)]
     assert lines[0].startswith("lidarcam simulate") and any("--fix" in ln for ln in lines)

@@ -6,7 +6,7 @@ Axes: a small rigid motion of the camera about the lidar's origin, in lidar axes
 [exp(w) | dt] T_lidar_cam``, ``w = (roll, pitch, yaw)`` rotations about the lidar's x, y, z axes (radians) and
 ``dt = (x, y, z)`` translations along them (metres). Equivalently the lidar turns about its own axes and shifts
 along them relative to the camera. In these axes a vertical-board rig is degenerate along exactly roll, pitch
-and z. (``calib_core.data.residuals`` turns the rotation about the camera's centre instead; ``origin_jacobian``
+and z. (``calib_core.model.residuals`` turns the rotation about the camera's centre instead; ``origin_jacobian``
 converts.) Translations are scaled by the typical range ``L`` so that radians and metres compare: a unit scaled
 direction moves scan points by about the same distance whatever it mixes.
 
@@ -36,9 +36,9 @@ import numpy as np
 
 from ..data.lines import residual_sigma
 from ..data.observations import Observations
-from ..data.residuals import range_linearised
 from ..errors import SolveFailure
 from ..geometry.transforms import skew
+from ..model.residuals import range_linearised
 from ..refine.partial import vertical_start
 from ..refine.uncertainty import conditioning, normal_spread_deg, typical_range
 from .profile import profile_sigma
@@ -104,7 +104,7 @@ AXIS_WORDS = {"roll": "roll (rotation about the lidar x axis)", "pitch": "pitch 
 
 
 def origin_jacobian(J: np.ndarray, T_lidar_cam: np.ndarray) -> np.ndarray:
-    """A (K,6) residual Jacobian in the parameters of ``calib_core.data.residuals`` (rotation about the camera centre)
+    """A (K,6) residual Jacobian in the parameters of ``calib_core.model.residuals`` (rotation about the camera centre)
     turned into the lidar-origin axes of this module: ``d_t(residuals) = w x t + dt``."""
     J = np.asarray(J, float)
     t = np.asarray(T_lidar_cam, float)[:3, 3]

@@ -20,8 +20,8 @@ from scipy.optimize import linear_sum_assignment, minimize_scalar
 
 from ..data.lines import scan_lines, triple_inputs
 from ..data.observations import MIN_RANGE_M, BoardObservation, Observations
-from ..data.residuals import range_residuals
 from ..errors import SolveFailure
+from ..model.residuals import range_residuals
 from ..refine.refine import refine
 from .verdict import (
     CLIP_Z,

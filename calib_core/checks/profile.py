@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..data.observations import ScanData
-from ..data.residuals import range_residuals
 from ..geometry.transforms import rotvec_to_matrix, skew
+from ..model.residuals import range_residuals
 
 PROFILE_ONE_SIGMA = 0.5
 """A profile rise of this (negative log-likelihood, i.e. half a chi-square with one degree of freedom) marks the

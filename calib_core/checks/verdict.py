@@ -35,7 +35,7 @@ from scipy.stats import norm
 
 from ..data.lines import MIN_SPREAD_M, range_sigma
 from ..data.observations import MIN_RANGE_M, Observations, ScanData
-from ..data.residuals import outside_outline, points_in_boards, range_residuals
+from ..model.residuals import outside_outline, points_in_boards, range_residuals
 from ..refine.camera_side import pose_explained
 
 CLIP_Z = 3.0

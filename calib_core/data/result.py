@@ -21,7 +21,7 @@ directions a board set does not determine (``calib_core.checks.degeneracy``), an
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
 answers a refused tie could not decide between (``alternatives``: each ``{"T_lidar_cam": 4x4, "cost": the negative
 log-likelihood, "mounting": its parameters}``, best first), the mounting prior given (``prior``), how the joint
-model treated the camera's intrinsics (``calib_core.refine.joint_intrinsics``), and the boards' dispersion test
+model treated the camera's intrinsics (``calib_core.model.intrinsics``), and the boards' dispersion test
 (``board_dispersion``, ``calib_core.refine.dispersion``: whether the covariance was widened to the boards' spread), and
 the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.refine.bend``)."""
 BEND_REPORTED = 0.5

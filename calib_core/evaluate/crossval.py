@@ -23,9 +23,9 @@ import numpy as np
 
 from ..data.lines import range_sigma
 from ..data.observations import Observations
-from ..data.residuals import plane_residuals
 from ..entry import calibrate
 from ..errors import JointError, UncertaintyError
+from ..model.residuals import plane_residuals
 from ..refine.camera_side import corner_noise_px
 from .held_out import HeldOutSpread, held_out_joint, held_out_spread, spread_summary
 

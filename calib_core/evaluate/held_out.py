@@ -20,7 +20,7 @@ import numpy as np
 from scipy.optimize import brentq, least_squares
 
 from ..data.observations import Observations
-from ..data.residuals import range_residuals
+from ..model.residuals import range_residuals
 from ..refine.camera_side import board_pose_covariances
 from ..refine.joint import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 

@@ -50,7 +50,7 @@ def T_from_params(theta: np.ndarray) -> np.ndarray:
 
 
 def params_jacobian(theta: np.ndarray) -> np.ndarray:
-    """(6,6) ``d(w, dt) / d theta``: how the parameters of ``calib_core.data.residuals`` (left rotation perturbation
+    """(6,6) ``d(w, dt) / d theta``: how the parameters of ``calib_core.model.residuals`` (left rotation perturbation
     ``w`` in the lidar frame, translation ``dt``) move with ``theta``; a residual Jacobian in ``theta`` is the
     residual Jacobian in ``(w, dt)`` times this matrix.
 
@@ -149,7 +149,7 @@ class MountingPrior:
         return r[0] if T.ndim == 2 else r
 
     def jacobian(self, T: np.ndarray) -> np.ndarray:
-        """(6,6) d residuals / d (w, dt) at one (4,4) ``T`` (``calib_core.data.residuals``' left perturbation
+        """(6,6) d residuals / d (w, dt) at one (4,4) ``T`` (``calib_core.model.residuals``' left perturbation
         ``R = exp([w]x) R``): ``log(R_0^T exp(w) R) = log(exp(R_0^T w) R_0^T R)``, whose derivative is
         ``J_l(phi)^-1 R_0^T`` with ``phi = log(R_0^T R)`` and ``J_l`` the left Jacobian of SO(3)."""
         R0 = self.T_lidar_cam[:3, :3]

@@ -18,16 +18,16 @@ from ..checks.degeneracy import Degeneracy, degeneracy_warnings, explain_failure
 from ..data.observations import Observations
 from ..errors import CalibrationError, SolveFailure
 from ..geometry.mounting import params_from_T, with_units
+from ..model.intrinsics import RANGE_ONLY_INTRINSICS
+from ..model.score import evidence_cost
 from ..refine.joint import RANGE_ONLY_MODEL
-from ..refine.joint_intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.uncertainty import conditioning
 from ..registry import Method
 from ..robust.choose import TIE_LOG_LIKELIHOOD, WEAK_LOG_LIKELIHOOD, Choice, choose_and_refine
 from ..robust.final import FinalTests, final_tests
 from ..robust.inliers import trim
-from ..robust.scorers import lidarcam as lidarcam_score
 from ..robust.search import Search, consensus_search
-from .finish import (
+from .last_steps import (
     NO_CORNERS,
     fixed_calibration,
     fold_covariance,
@@ -53,7 +53,7 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
        subsets, scored on every board by a per-board chi-square test of the noise model; local optimisation of the
        best few on their consensus sets. Boards that fail are left out (``info["boards_rejected"]``).
     3. Choose and refine (``robust.choose``) on the consensus boards: every hypothesis computed from them is scored
-       with ``scorers.lidarcam`` (range residuals in units of the noise std, estimated from the scan lines unless
+       with ``score.evidence_cost`` (range residuals in units of the noise std, estimated from the scan lines unless
        ``range_sigma_m``; endpoint and outline terms; boards behind the camera); the ``refine.n_refine`` best
        distinct ones are refined by maximum likelihood on the range residuals, polished on the whole cost when the
        outlines disagree; the best is kept.
@@ -116,7 +116,7 @@ def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
         raise SolveFailure("lidarcam: every refined answer puts some board in an implausible place (behind a sensor, "
                            "or the sensors on opposite sides of its plane)", search.all_candidates)
     start = best.cost if np.array_equal(best.start, best.T) else \
-        float(lidarcam_score(search.obs_used, best.start[None], range_sigma_m=sigma, **score.kwargs())[0])
+        float(evidence_cost(search.obs_used, best.start[None], range_sigma_m=sigma, **score.kwargs())[0])
     tests = final_tests(search, best.T, reject=opts.consensus.reject_boards)
     first = best
     if tests.changed:  # boards or points left out (or taken back) at the refined pose: refine on what is left

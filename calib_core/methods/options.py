@@ -13,10 +13,10 @@ from dataclasses import dataclass, field, replace
 
 from ..checks.degeneracy import DegeneracyOptions
 from ..errors import CalibrationError
+from ..model.score import ScoreOptions
 from ..refine.joint import JointOptions
 from ..robust.choose import RefineOptions
 from ..robust.inliers import TrimOptions
-from ..robust.scorers import ScoreOptions
 from ..robust.search import ConsensusOptions
 from ..solvers.vasconcelos import solve_triples
 

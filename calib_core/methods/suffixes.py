@@ -10,12 +10,12 @@ from ..checks.degeneracy import explain_failure
 from ..data.lines import range_sigma
 from ..data.observations import Observations
 from ..errors import CalibrationError, SolveFailure
+from ..model.intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.joint import RANGE_ONLY_MODEL, JointOptions
-from ..refine.joint_intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.refine import F_SCALE_SIGMAS, refine
 from ..refine.uncertainty import conditioning
 from ..registry import Method, derived
-from .finish import fixed_calibration, fold_covariance, range_covariance, refuse_undetermined, try_joint
+from .last_steps import fixed_calibration, fold_covariance, range_covariance, refuse_undetermined, try_joint
 from .options import RENAMED
 
 REFINE_OPTIONS = ("loss", "f_scale_m", "range_sigma_m", "max_nfev", "fixed")

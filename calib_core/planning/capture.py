@@ -1,7 +1,7 @@
 """Capture planning: what a board set will give before (or while) it is captured, and which board poses to take
 next, from the Fisher information of the joint model over corners and ranges (``joint.board_informations``).
 
-Parameters and units of a prediction: the extrinsic's ``(w, dt)`` of ``calib_core.data.residuals``: ``w`` a small
+Parameters and units of a prediction: the extrinsic's ``(w, dt)`` of ``calib_core.model.residuals``: ``w`` a small
 rotation applied on the lidar side, ``R_lidar_cam <- exp([w]x) R_lidar_cam`` (so roll, pitch, yaw are rotations
 about the lidar's x, y, z axes), ``dt`` the change of ``t_lidar_cam`` (x, y, z along the lidar's axes). The
 1-sigma of each is shown in degrees and millimetres. The information of a set of boards is the sum of its boards'

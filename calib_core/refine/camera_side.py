@@ -24,8 +24,8 @@ import numpy as np
 from ..data.lines import residual_sigma
 from ..data.observations import Observations
 from ..errors import JointError, UncertaintyError
-from .joint_intrinsics import IntrinsicsPrior
-from .joint_residuals import board_poses, corner_residuals, joint_range_residuals
+from ..model.corners import board_poses, corner_residuals, joint_range_residuals
+from ..model.intrinsics import IntrinsicsPrior
 from .uncertainty import inverse_information
 
 POSE_RCOND = 1e-12

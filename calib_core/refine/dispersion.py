@@ -7,7 +7,7 @@ the surface and the incidence, residual lens distortion. They move each board's 
 in how the boards pull on the extrinsic, not in the scatter within a board.
 
 Each board's pull is its score ``g_i`` (6,): the gradient of its own normalised cost with respect to the extrinsic
-(rotation rad, translation m; ``calib_core.data.residuals``' left perturbation) at the answer, its own pose
+(rotation rad, translation m; ``calib_core.model.residuals``' left perturbation) at the answer, its own pose
 profiled out. Under the model ``g_i`` has covariance ``S_i``, the board's profiled Fisher information
 (``refine.joint.board_informations``), and the scores sum to zero at the optimum. So
 

@@ -3,17 +3,17 @@ and the lidar ranges together, with the extrinsic's covariance with the board po
 Cramer-Rao bound of that model.
 
 Unknowns: ``T_lidar_cam = (exp([w]x) R0, t0 + dt)`` (left rotation perturbation in the lidar frame, as in
-``calib_core.data.residuals``) and per board ``T_cam_board_i = (exp([phi_i]x) Phi0_i, Delta0_i + d_i)`` (left
+``calib_core.model.residuals``) and per board ``T_cam_board_i = (exp([phi_i]x) Phi0_i, Delta0_i + d_i)`` (left
 perturbation in the camera frame); the parameter vector is ``(w, dt, phi_0, d_0, phi_1, d_1, ...)``.
 Residuals: every corner's reprojection through the OpenCV model (``calib_core.data.camera.project``) minus its
 detection, divided by the corner noise std ``corner_sigma_px`` (pixels, per coordinate), and every scan point's
-range residual (``calib_core.data.residuals.range_residuals`` against its board's current plane) divided by the range
+range residual (``calib_core.model.residuals.range_residuals`` against its board's current plane) divided by the range
 noise std ``range_sigma_m``. Each board's residuals touch only its own pose and the extrinsic, so the Jacobian is
 block sparse: the Levenberg-Marquardt steps and the covariance both eliminate the board poses by the Schur
 complement, so the cost of an iteration is linear in the number of boards. When the camera states
 ``std_intrinsics``, its free intrinsics join the extrinsic in the shared block with that Gaussian prior
-(``calib_core.refine.joint_intrinsics``); otherwise they are taken as exact. The residuals and their Jacobians are
-in ``calib_core.refine.joint_residuals``.
+(``calib_core.model.intrinsics``); otherwise they are taken as exact. The residuals and their Jacobians are
+in ``calib_core.model.corners``.
 """
 
 from __future__ import annotations
@@ -25,16 +25,16 @@ import numpy as np
 from ..data.camera import Camera
 from ..data.lines import range_sigma, residual_sigma
 from ..data.observations import Observations
-from ..data.residuals import perturb, range_residuals
 from ..errors import JointError, ObservationError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.mounting import MountingPrior
 from ..geometry.transforms import rotvec_to_matrix
+from ..model.corners import board_poses, corner_residuals, joint_range_residuals, scan_data_at
+from ..model.intrinsics import IntrinsicsPrior, augmented_blocks
+from ..model.joint_outline import has_outline_rows, outline_cost, with_outline
+from ..model.prior import mounting_cost, with_mounting
+from ..model.residuals import perturb, range_residuals
 from .bend import HeldDirection
-from .joint_intrinsics import IntrinsicsPrior, augmented_blocks
-from .joint_mounting import mounting_cost, with_mounting
-from .joint_outline import has_outline_rows, outline_cost, with_outline
-from .joint_residuals import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 from .refine import F_SCALE_SIGMAS, robust_cost
 from .uncertainty import Crlb, inverse_information
 

@@ -8,14 +8,14 @@ import numpy as np
 
 from ..data.lines import range_sigma
 from ..data.observations import Observations
-from ..data.residuals import perturb
 from ..errors import JointError, UncertaintyError
 from ..geometry.mounting import MountingPrior
+from ..model.corners import board_poses
+from ..model.intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS
+from ..model.residuals import perturb
 from .bend import HOLD_STD_FRACTION, REFIT_COST_RTOL, HeldDirection, bend_summary, bent_covariance, weakest_direction
 from .dispersion import widened_covariance
 from .joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL, MAX_ITER, board_scores, estimate_sigmas, joint_refine
-from .joint_intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS
-from .joint_residuals import board_poses
 from .refine import F_SCALE_SIGMAS
 
 

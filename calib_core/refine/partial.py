@@ -17,10 +17,10 @@ from scipy.spatial.transform import Rotation
 
 from ..data.lines import tls_line
 from ..data.observations import Observations
-from ..data.residuals import RESIDUALS
 from ..errors import SolveFailure, UncertaintyError
 from ..geometry.mounting import PARAMS, UNIT_NAMES, T_from_params, params_from_T, params_jacobian, with_units
 from ..geometry.transforms import make_T
+from ..model.residuals import RESIDUALS
 from .refine import loss_name
 from .uncertainty import refinement_covariance
 
@@ -127,7 +127,7 @@ def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.
     """Refine the free mounting parameters from each start (its fixed parameters replaced by the given values)
     and keep the least cost; returns ``T_lidar_cam`` and ``info``.
 
-    ``info``: ``covariance`` (6x6 in the parameters of ``calib_core.data.residuals``, of rank = the number of free
+    ``info``: ``covariance`` (6x6 in the parameters of ``calib_core.model.residuals``, of rank = the number of free
     parameters), ``covariance_mounting`` (6x6 over ``mounting.PARAMS`` in radians and metres, zero rows and
     columns for the fixed ones), ``mounting`` (all six values, labelled units), ``mounting_sigma`` (1-sigma of
     the free ones, labelled units), ``fixed`` (the given values, labelled units), ``free`` (their names),

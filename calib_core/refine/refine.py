@@ -10,10 +10,10 @@ import numpy as np
 from scipy.optimize import least_squares, leastsq
 
 from ..data.observations import ScanData
-from ..data.residuals import RESIDUALS, perturb
 from ..errors import CalibrationError
 from ..geometry.mounting import MountingPrior
 from ..geometry.transforms import so3_left_jacobian
+from ..model.residuals import RESIDUALS, perturb
 
 
 class Loss(StrEnum):
@@ -45,7 +45,7 @@ class RefineResult:
     Attributes:
         T_lidar_cam: refined 4x4 extrinsic. cost: final ``0.5 * sum(rho(e^2))``; initial_cost likewise at
         the start. residuals: (K,) final residuals (metres). jacobian: (K,6) at the optimum, parameters
-        (w, dt) as in ``calib_core.data.residuals``. success, message, nfev: from scipy.
+        (w, dt) as in ``calib_core.model.residuals``. success, message, nfev: from scipy.
     """
 
     T_lidar_cam: np.ndarray

@@ -2,7 +2,7 @@
 a scale-free conditioning measure and the spread of the board normals (the warnings built on them are in
 ``calib_core.checks.degeneracy``).
 
-Parameters are those of ``calib_core.data.residuals``: ``x = (w, dt)``, ``w`` a left rotation perturbation in the
+Parameters are those of ``calib_core.model.residuals``: ``x = (w, dt)``, ``w`` a left rotation perturbation in the
 lidar frame (radians), ``dt`` the translation (metres). A 6x6 covariance is ordered rotation then translation.
 Noise model: every scan point is its beam times the true range plus zero-mean Gaussian noise of std ``sigma``
 along the beam (the simulator's and the paper's model); camera-side board poses are taken as exact.
@@ -16,9 +16,9 @@ import numpy as np
 
 from ..data.lines import residual_sigma
 from ..data.observations import Observations, ScanData
-from ..data.residuals import range_linearised, range_residuals
 from ..errors import UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
+from ..model.residuals import range_linearised, range_residuals
 
 
 def inverse_information(A: np.ndarray, rcond: float) -> np.ndarray:
@@ -39,7 +39,7 @@ def covariance(jacobian: np.ndarray, residuals: np.ndarray, range_sigma_m: float
     """Gauss-Newton covariance ``sigma^2 (J^T J)^-1`` (6x6, rotation then translation) of a least-squares optimum.
 
     Args:
-        jacobian: (K,6) residual Jacobian at the optimum (parameters as in ``calib_core.data.residuals``).
+        jacobian: (K,6) residual Jacobian at the optimum (parameters as in ``calib_core.model.residuals``).
         residuals: (K,) residuals at the optimum (metres).
         range_sigma_m: the residuals' noise std (metres); ``None`` estimates it as ``sqrt(|e|^2 / (K - 6))``.
     Raises:
@@ -158,7 +158,7 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
     ``A^-1 J^T diag(sigma^2 w^2) J A^-1`` with ``A = J^T J`` of the plane residuals. ``range_sigma_m=None``: estimated
     from the range residuals at ``T_lidar_cam`` (``K - 6`` degrees of freedom). ``basis``: (6,k), the covariance of
     k parameters that move ``(w, dt)`` by ``basis`` (e.g. the free mounting parameters, ``calib_core.refine.partial``;
-    then ``K - k`` degrees of freedom); default the six of ``calib_core.data.residuals``.
+    then ``K - k`` degrees of freedom); default the six of ``calib_core.model.residuals``.
     """
     T = np.asarray(T_lidar_cam, float)
     e_r, J_r = range_linearised(T, data)
@@ -168,7 +168,7 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
         return covariance(J_r, e_r, range_sigma_m)
     if residual != "plane":
         raise UncertaintyError(f"unknown residual {residual!r}; 'range' or 'plane'")
-    from ..data.residuals import plane_residuals
+    from ..model.residuals import plane_residuals
 
     sigma2 = _noise_variance(e_r, B.shape[1], range_sigma_m)
     _, J_p = plane_residuals(T, data, jacobian=True)

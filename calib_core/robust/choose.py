@@ -1,4 +1,4 @@
-"""Choose and refine: the candidates scored on all the evidence (``scorers.lidarcam``), the best few distinct ones
+"""Choose and refine: the candidates scored on all the evidence (``score.evidence_cost``), the best few distinct ones
 refined by maximum likelihood on the range residuals and, where the refined pose disagrees with the board outlines,
 polished on the whole cost; the best is kept. Lidar frame, metres, radians.
 """
@@ -11,13 +11,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..data.observations import Observations
-from ..data.residuals import perturb
 from ..errors import SolveFailure
+from ..model.linearised import lidarcam_linearised_many
+from ..model.residuals import perturb
+from ..model.score import ScoreOptions, evidence_cost, outline_term
 from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine, so3_left_jacobian
 from ..refine.trust_region import least_squares_many
-from .linearised import lidarcam_linearised_many
-from .scorers import ScoreOptions, outline_term
-from .scorers import lidarcam as lidarcam_score
 from .starts import DISTINCT_ROT_DEG, DISTINCT_TRANS_M, distinct_order, gauss_newton_steps, near_any
 
 POLISH_THRESHOLD = 10.0
@@ -113,13 +112,13 @@ PRUNE_FIRST = 4
 
 def best_starts(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, n: int,
                 rot_deg: float = DISTINCT_ROT_DEG, trans_m: float = DISTINCT_TRANS_M) -> list[int]:
-    """``distinct_order(C, scorers.lidarcam(obs, C), n, ...)``, with the outline term (the dearest) scored only
+    """``distinct_order(C, score.evidence_cost(obs, C), n, ...)``, with the outline term (the dearest) scored only
     where it can matter: the cost without it is a lower bound, so once the ``n`` starts chosen among the candidates
     scored in full all cost less than the bound of every candidate not scored, those are the starts the full
     scoring would choose (ties broken by index as there). The full cost is the bound plus the outline term
-    (``scorers.outline_term``)."""
+    (``score.outline_term``)."""
     kw = {"range_sigma_m": sigma_m, **score.kwargs()}
-    bound = lidarcam_score(obs, C, **kw, with_outline=False)
+    bound = evidence_cost(obs, C, **kw, with_outline=False)
     bound = np.where(np.isnan(bound), np.inf, bound)
     order = np.argsort(bound, kind="stable")
     k = min(len(C), max(PRUNE_FIRST, n + 1))
@@ -159,7 +158,7 @@ def refine_start(obs: Observations, T0: np.ndarray, sigma_m: float, score: Score
         refine(obs.scan_data, T0, residual="range", loss=opts.loss, f_scale_m=opts.scale_m(sigma_m),
                max_nfev=opts.max_nfev, prior=score.prior, prior_scale_m=sigma_m)
     T1 = r.T_lidar_cam
-    final, parts = lidarcam_score(obs, T1[None], range_sigma_m=sigma_m, **score.kwargs(), return_details=True)
+    final, parts = evidence_cost(obs, T1[None], range_sigma_m=sigma_m, **score.kwargs(), return_details=True)
     off = parts["edge"][0] + parts["outline"][0] + parts["lower_bound"][0]
     return Choice(float(final[0]), r, T1, False, T0), bool(off > opts.polish_threshold)
 
@@ -168,7 +167,7 @@ def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOpti
                   give_up_above: float = np.inf) -> Choice:
     """``c`` polished on the whole evidence (``polish``) when that lowers its cost, else ``c``."""
     T2 = polish(obs, c.T, opts.max_nfev, score, sigma_m, give_up_above)
-    f2 = float(lidarcam_score(obs, T2[None], range_sigma_m=sigma_m, **score.kwargs())[0])
+    f2 = float(evidence_cost(obs, T2[None], range_sigma_m=sigma_m, **score.kwargs())[0])
     return Choice(f2, c.refined, T2, True, c.start) if f2 < c.cost else c
 
 
@@ -190,7 +189,7 @@ def with_ties(out: list[Choice], opts: RefineOptions, tie: float = TIE_LOG_LIKEL
 
 def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
                       n_refine: int | None = None, refined: tuple = ()) -> Choice:
-    """Score candidates ``C`` with ``scorers.lidarcam`` on ``obs`` at range noise ``sigma_m``, refine the
+    """Score candidates ``C`` with ``score.evidence_cost`` on ``obs`` at range noise ``sigma_m``, refine the
     ``n_refine`` (default ``opts.n_refine``) best distinct ones on the range likelihood (``refine_start``; a start
     in the basin of one already refined is not refined again, nor a start that is the optimum of one of
     ``refined``, plain least-squares refinements already run on ``obs``), polish those whose pose disagrees with
@@ -226,7 +225,7 @@ def polish_choices(obs: Observations, refined: list[tuple[Choice, bool]], sigma_
 
     def done(i, T2):
         c = refined[todo[i]][0]
-        f2 = float(lidarcam_score(obs, T2[None], range_sigma_m=sigma_m, **score.kwargs())[0])
+        f2 = float(evidence_cost(obs, T2[None], range_sigma_m=sigma_m, **score.kwargs())[0])
         out[todo[i]] = Choice(f2, c.refined, T2, True, c.start) if f2 < c.cost else c
 
     polish_many(obs, np.array([refined[k][0].T for k in todo]), opts.max_nfev, score, sigma_m, halt, done)

@@ -32,12 +32,12 @@ import functools
 import numpy as np
 from scipy.stats import chi2
 
-from ..data.chords import lower_bound_boards
 from ..data.lines import ScanLines, scan_lines
 from ..data.observations import Observations
-from ..data.residuals import board_frames, outline_groups, outside_outline
-from ..refine.lower_bound import chord_residuals, margin_residuals
-from .plausible import plausible_boards
+from ..model.chords import lower_bound_boards
+from ..model.lower_bound import chord_residuals, margin_residuals
+from ..model.plausible import plausible_boards
+from ..model.residuals import board_frames, outline_groups, outside_outline
 
 SCORE_TAU = 400.0
 """MSAC truncation of the per-board statistic while scoring hypotheses (minimal hypotheses are noisy: a good board

@@ -9,11 +9,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..data.observations import Observations
-from ..data.residuals import range_residuals
 from ..errors import SolveFailure
+from ..model.plausible import implausible_reason
+from ..model.residuals import range_residuals
 from .consensus import TEST_CHI2, board_statistics, inflation
 from .inliers import TRIM_SIGMAS
-from .plausible import implausible_reason
 from .search import MIN_TESTABLE, Search, board_reason, rejection
 
 FINAL_MIN_POINTS = 3

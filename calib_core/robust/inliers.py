@@ -18,7 +18,7 @@ import numpy as np
 
 from ..data.lines import MAD_TO_SIGMA, MIN_LINE_POINTS, mad_sigma, tls_line
 from ..data.observations import Observations
-from ..data.residuals import MIN_BEAM_INCIDENCE
+from ..model.residuals import MIN_BEAM_INCIDENCE
 
 TRIM_SIGMAS = 4.0
 """A scan point whose range residual against its board's robust line exceeds this many pooled noise stds is

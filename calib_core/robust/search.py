@@ -17,11 +17,11 @@ from ..data.lines import range_sigma, scan_lines
 from ..data.observations import Observations
 from ..errors import SolveFailure
 from ..geometry.mounting import MountingPrior
+from ..model.plausible import implausible_reason
 from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine
 from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
 from .inliers import TrimReport
-from .plausible import implausible_reason
 from .starts import distinct_order, gauss_newton_steps, near_any
 
 POOL_MAX = 64

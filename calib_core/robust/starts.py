@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..data.residuals import perturb, range_residuals
+from ..model.residuals import perturb, range_residuals
 
 DISTINCT_ROT_DEG = 1.0
 """Two extrinsics are distinct starts when they differ by at least this rotation (degrees) ..."""

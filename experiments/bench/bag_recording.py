@@ -48,10 +48,10 @@ def _recording(args, work: Path):
 def measure(args) -> dict:
     from calib_core import calibrate
     from calib_core.geometry.metrics import pose_errors
-    from rig.dataset import load_dataset
-    from rig.extract import ExtractOptions, extract
-    from rig.frombag import bag_to_dataset
-    from rig.stills import PickOptions
+    from lidarcam.rig.dataset import load_dataset
+    from lidarcam.rig.extract import ExtractOptions, extract
+    from lidarcam.rig.frombag import bag_to_dataset
+    from lidarcam.rig.stills import PickOptions
 
     work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="lidarcam-bag-"))
     work.mkdir(parents=True, exist_ok=True)

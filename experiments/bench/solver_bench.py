@@ -21,7 +21,7 @@ from calib_core.data.lines import triple_inputs
 from calib_core.geometry.metrics import rotation_error_deg, translation_error_m
 from calib_core.solvers._common import board_triples
 from calib_core.solvers.candidates import MINIMAL_SOLVERS
-from rig.markdown import md_table
+from lidarcam.rig.markdown import md_table
 from simulate import SimOptions, generate
 
 from ..engine.cli import nonnegative_float, positive_int, study_parser

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from calib_core.methods.ablations import ABLATIONS, INVARIANT, SCALE_ONLY  # noqa: E402
-from rig.markdown import md_table  # noqa: E402
+from lidarcam.rig.markdown import md_table  # noqa: E402
 
 from ..config.overrides import refuse_flag_overrides
 from ..config.sweeps import experiment_cells  # noqa: E402

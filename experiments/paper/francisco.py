@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from rig.markdown import md_table
+from lidarcam.rig.markdown import md_table
 
 from ..config.sweeps import experiment_cells
 from ..engine.catalog import method_label

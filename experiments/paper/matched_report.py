@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from rig.markdown import md_table
+from lidarcam.rig.markdown import md_table
 
 from ..engine.catalog import method_label
 from ..engine.cell import RunnerError
@@ -38,7 +38,7 @@ from .claims import (
     reading_fit,
 )
 from .objective import load_search_conf, objective_lines, score
-from .search import SPACE_KEYS, sensitivity_ranges
+from .settings_search import SPACE_KEYS, sensitivity_ranges
 
 N_BOOT = 2000
 LABELS = {"max_tilt_deg": "tilt (deg)", "board_size_m": "board (m)", "bearing_spread_deg": "spread (deg)",

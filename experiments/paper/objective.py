@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
-from rig.markdown import md_table
+from lidarcam.rig.markdown import md_table
 
 from ..summary.figures import PAPER_SWEEPS
 from .claim_stats import claim_values, sweep_arrays, term_name

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from calib_core.geometry.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
-from rig.markdown import md_table
+from lidarcam.rig.markdown import md_table
 
 from ..engine.catalog import method_label, method_order
 from ..engine.cell import RunnerError

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from rig.markdown import md_table, num
+from lidarcam.rig.markdown import md_table, num
 
 from ..config.sweeps import experiment_cells
 from ..engine.catalog import method_colour, method_label, method_order

@@ -1,8 +1,9 @@
 """``make real-data``: the five public rigs in ``../shared/real-data/`` end to end -> ``results/real/``.
 
-Per data set: import (rig.public_sets, the same functions and options as docs/real-rigs.md's commands), camera
-intrinsics from the images where the given ones are rough (rig.intrinsics), extraction with near-duplicates merged
-and the background learnt from the poses (rig.extract), a leaderboard of the methods with leave-one-pose-out
+Per data set: import (lidarcam.rig.public_sets, the same functions and options as docs/real-rigs.md's commands), camera
+intrinsics from the images where the given ones are rough (lidarcam.rig.intrinsics), extraction with near-duplicates
+merged
+and the background learnt from the poses (lidarcam.rig.extract), a leaderboard of the methods with leave-one-pose-out
 residuals and spreads (experiments.real.real_eval), the degeneracy verdict, the scan drawn on the image, and on the sets
 with at least 8 usable boards the paper's real experiment (experiments.real.real_subsets: Fig. 8, Fig. 9, valid rates).
 Writes ``REPORT.md``, ``summary.json``, figures, and the observations under ``obs/`` (the leaderboard's real
@@ -30,12 +31,12 @@ from calib_core.data.io import save_observations
 from calib_core.data.lines import range_sigma
 from calib_core.geometry.transforms import invert_T
 from calib_core.refine.joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL
-from rig import public_sets as ps
-from rig.dataset import DatasetError
-from rig.extract import extract, format_diagnostics
-from rig.intrinsics import format_intrinsics, refit_camera
-from rig.markdown import md_table
-from rig.report import capture_verdict, save_overlay
+from lidarcam.rig import public_sets as ps
+from lidarcam.rig.dataset import DatasetError
+from lidarcam.rig.extract import extract, format_diagnostics
+from lidarcam.rig.intrinsics import format_intrinsics, refit_camera
+from lidarcam.rig.markdown import md_table
+from lidarcam.rig.report import capture_verdict, save_overlay
 
 from ..engine.cli import nonnegative_int, positive_int, study_parser
 from ..engine.fingerprint import write_stamped

@@ -16,8 +16,8 @@ from calib_core.evaluate.crossval import leave_one_out
 from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.mounting import UNIT_NAMES
 from calib_core.geometry.transforms import invert_T
-from rig.markdown import md_table, num
-from rig.report import board_plane_distances as plane_distances
+from lidarcam.rig.markdown import md_table, num
+from lidarcam.rig.report import board_plane_distances as plane_distances
 
 
 def held_out(obs: Observations, method: str, sigma_m: float, **options) -> dict:

@@ -24,7 +24,7 @@ from calib_core.data.observations import Observations
 from calib_core.geometry.metrics import is_valid, pose_errors
 from calib_core.geometry.mounting import MountingPrior
 from calib_core.geometry.transforms import rotvec_to_matrix
-from rig.markdown import md_table
+from lidarcam.rig.markdown import md_table
 
 from ..summary.intervals import wilson_interval
 
@@ -200,7 +200,7 @@ def fig8(gray: np.ndarray, camera, board, answers: dict[str, np.ndarray], path: 
     from matplotlib.figure import Figure
 
     from calib_core.geometry.transforms import invert_T
-    from rig.report import project_scan
+    from lidarcam.rig.report import project_scan
 
     h, w = gray.shape[:2]
     line_px = TITLE_PT * 100 / 72  # one text line at 100 dpi

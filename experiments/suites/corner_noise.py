@@ -25,7 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from rig.markdown import md_table, num  # noqa: E402
+from lidarcam.rig.markdown import md_table, num  # noqa: E402
 
 from ..config.overrides import refuse_flag_overrides
 from ..config.sweeps import experiment_cells  # noqa: E402

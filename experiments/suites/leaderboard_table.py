@@ -23,7 +23,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from rig.markdown import md_table, num, pct  # noqa: E402
+from lidarcam.rig.markdown import md_table, num, pct  # noqa: E402
 
 from ..engine.catalog import method_colour  # noqa: E402
 from ..summary.aggregate import rms, summarise  # noqa: E402

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rig.markdown import md_table
+from lidarcam.rig.markdown import md_table
 
 from ..engine.fingerprint import write_stamped
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from rig.markdown import md_table
+from lidarcam.rig.markdown import md_table
 
 from ..engine.catalog import method_label, method_order
 

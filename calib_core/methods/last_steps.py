@@ -1,0 +1,154 @@
+"""The last steps every method of ours shares (``lidarcam`` and the suffix methods ``X+ml``, ``X+plane``,
+``X+joint``), each written once: the refusal of directions the board geometry does not determine, the joint step
+over image corners and ranges (or why it does not apply), the range model's covariance, and the calibration with
+fixed mounting parameters."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, fixed_key, undetermined_directions
+from ..data.lines import range_sigma
+from ..data.observations import Observations
+from ..errors import JointError, SolveFailure, UncertaintyError
+from ..geometry.mounting import MountingPrior, params_from_T, parse_fixed, with_units
+from ..geometry.transforms import skew
+from ..model.residuals import range_linearised
+from ..refine.dispersion import widened_covariance
+from ..refine.joint import JointOptions
+from ..refine.joint_step import joint_step
+from ..refine.partial import calibrate_fixed, fixed_starts
+from ..refine.refine import F_SCALE_SIGMAS
+from ..refine.uncertainty import inverse_information, range_board_scores, refinement_covariance
+
+
+def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str,
+                        range_sigma_m: float | None, options: DegeneracyOptions | None = None,
+                        refuse: bool = True) -> Degeneracy:
+    """The degeneracy analysis at ``T`` (``checks.degeneracy.undetermined_directions``); a SolveFailure naming
+    the directions the board geometry leaves free, with the analysis and the board-set warnings in its info
+    (``refuse=False``: the analysis alone, for a caller whose prior determines those directions)."""
+    options = options or DegeneracyOptions()
+    deg = undetermined_directions(obs, T, range_sigma_m, max_scaled_sigma=options.max_scaled_sigma,
+                                  null_conditioning=options.null_conditioning)
+    if refuse and not deg.determined:
+        raise undetermined_failure(obs, deg, candidates, who)
+    return deg
+
+
+def undetermined_failure(obs: Observations, deg: Degeneracy, candidates: np.ndarray, who: str) -> SolveFailure:
+    """The refusal naming the directions ``deg`` finds free, with the analysis and the board-set warnings."""
+    return SolveFailure(f"{who}: {deg.message()}", candidates,
+                        {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
+
+
+def fold_covariance(obs: Observations, T: np.ndarray, deg: Degeneracy) -> np.ndarray:
+    """The range model's covariance at ``T`` (6x6 in the parameters of ``data.residuals``) where the degeneracy
+    analysis found folds (``Degeneracy.profile``): the first-order information with, along each fold direction
+    (an eigen-direction of it), the information of its profile 1-sigma in place of the linear one (``1 / sigma^2``
+    in the scaled lidar-origin axes), since the linearisation holds none or next to none there. Noise std:
+    ``deg.range_sigma_m``."""
+    T = np.asarray(T, float)
+    e, J = range_linearised(T, obs.scan_data)
+    L = deg.scale_m
+    A = np.eye(6)                                   # scaled lidar-origin axes -> the parameters of data.residuals
+    A[3:, :3] = -skew(T[:3, 3])
+    A[:, 3:] *= L
+    Fs = (J @ A).T @ (J @ A) / deg.range_sigma_m**2
+    for v, s in zip(deg.directions[deg.profile], deg.sigmas[deg.profile], strict=True):
+        Fs = Fs + (1.0 / s**2 - v @ Fs @ v) * np.outer(v, v)
+    return A @ inverse_information(Fs, 1e-12) @ A.T
+
+
+NO_CORNERS = "no image corners"
+"""``try_joint``'s reason when a board carries no image corners."""
+
+
+def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, loss: str,
+              options: JointOptions | None = None, names=None,
+              mounting: MountingPrior | None = None) -> tuple[tuple | None, str | None]:
+    """The joint step (``refine.joint_step.joint_step``) from ``T``: ((T, covariance, info), None) when it applies and
+    succeeds; (None, why) otherwise (``why`` None when the corners are switched off). ``names``: the boards' names
+    in its warnings (default their index in ``obs``); ``mounting``: a mounting prior in its cost (the covariance
+    stays the data's: ``with_prior`` adds the prior's information)."""
+    options = options or JointOptions()
+    if not options.use_corners:
+        return None, None
+    if not obs.has_corners:
+        return None, NO_CORNERS
+    try:
+        return joint_step(obs, T, corner_sigma_px=options.corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
+                          f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter, widen=options.widen,
+                          names=names, outline=options.outline, mounting=mounting, bend=options.bend), None
+    except (JointError, UncertaintyError) as err:
+        return None, f"joint refinement failed ({err})"
+
+
+def range_covariance(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str, residual: str = "range",
+                     range_sigma_m: float | None = None) -> np.ndarray:
+    """The range model's covariance at ``T`` (``refine.uncertainty.refinement_covariance``; board poses taken as
+    exact); a SolveFailure with the reason when it cannot be computed."""
+    try:
+        return refinement_covariance(obs.scan_data, T, residual, range_sigma_m)
+    except UncertaintyError as err:
+        raise SolveFailure(f"{who}: {err}", candidates) from None
+
+
+def widened_range_covariance(obs: Observations, T: np.ndarray, cov: np.ndarray, range_sigma_m: float | None,
+                             names=None) -> tuple[np.ndarray, dict]:
+    """The range model's covariance ``cov`` at ``T`` through the boards' dispersion test (``refine.dispersion``,
+    ranges in units of the scan lines' scatter): (covariance, info with ``board_dispersion`` and, where it was
+    widened, the warning). Three boards or fewer leave nothing to test: ``cov`` and no entry."""
+    if obs.n_boards <= 3:
+        return cov, {}
+    try:
+        cov, disp = widened_covariance(cov, *range_board_scores(obs, T, range_sigma(obs, range_sigma_m)))
+    except np.linalg.LinAlgError:
+        return cov, {}
+    return cov, {"board_dispersion": disp.to_dict(names), "warnings": [disp.warning(names)] if disp.widened else []}
+
+
+def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray], *,
+                      residual: str = "range", loss: str = "linear", f_scale_m: float | None = None,
+                      f_scale_sigmas: float = F_SCALE_SIGMAS, range_sigma_m: float | None = None,
+                      max_nfev: int = 100,
+                      fixed_sigma: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Calibrate the free mounting parameters with ``fixed`` ones held (``refine.partial``): from the closed-form
+    planar start when roll, pitch and z are given, else from ``full_start()`` (a full calibration's answer);
+    refined on ``residual`` (robust scale ``f_scale_m``, default ``f_scale_sigmas`` noise stds); ``fixed_sigma``
+    (6,): the given values' 1-sigma (radians, metres) where they are uncertain. Returns (T_lidar_cam, starts,
+    info)."""
+    mask, values = parse_fixed(fixed)
+    sigma = range_sigma(obs, range_sigma_m)
+    starts = fixed_starts(obs, mask, values, full_start)
+    T, info = calibrate_fixed(obs, mask, values, starts, residual=residual, loss=loss,
+                              f_scale_m=f_scale_m if f_scale_m is not None else f_scale_sigmas * sigma,
+                              range_sigma_m=range_sigma_m, max_nfev=max_nfev, fixed_sigma=fixed_sigma)
+    return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "refine_residual": residual,
+                                   "refine_loss": str(loss), "warnings": board_set_warnings(obs)}
+
+
+def with_prior(T: np.ndarray, cov: np.ndarray, prior: MountingPrior) -> np.ndarray:
+    """The posterior covariance of the answer ``T`` (the posterior's mode) whose data alone give ``cov`` (6x6 in
+    ``(w, dt)``, ``data.residuals``' left perturbation): the mounting ``prior``'s information ``J^T J`` added
+    (``J = prior.jacobian(T)``)."""
+    J = prior.jacobian(T)
+    post = np.linalg.inv(np.linalg.inv(cov) + J.T @ J)
+    return 0.5 * (post + post.T)
+
+
+def prior_fixed(prior: MountingPrior, deg: Degeneracy) -> tuple[dict, np.ndarray]:
+    """The mounting ``prior``'s values of the axes the boards leave free (``deg.axes``; ``fixed`` keys, degrees
+    and metres) and their 1-sigma (6,) in ``geometry.mounting.PARAMS`` order (radians, metres): the prior's
+    rotation sigma for the angles (its rotation error is isotropic), its translation sigma for x, y, z."""
+    units = with_units(params_from_T(prior.T_lidar_cam))
+    fixed = {fixed_key(a): units[fixed_key(a)] for a in deg.axes}
+    return fixed, np.r_[[prior.sigma_rot_rad] * 3, [prior.sigma_trans_m] * 3]
+
+
+def prior_info(prior: MountingPrior) -> dict:
+    """The mounting prior as the result reports it: its pose (``with_units``) and sigmas (degrees, metres)."""
+    return {"mounting": with_units(params_from_T(prior.T_lidar_cam)),
+            "sigma_rot_deg": float(np.degrees(prior.sigma_rot_rad)), "sigma_trans_m": prior.sigma_trans_m}

@@ -1,0 +1,139 @@
+"""CLI verbs for real rigs: ``lidarcam import FORMAT SRC ... --out DATASET_OR_OBS``, ``lidarcam extract DATASET --out
+obs.json`` and ``lidarcam report DATASET_OR_OBS RESULT``.
+
+``add_parsers(subparsers)`` registers the verbs; each handler returns the exit code. Bad input raises a
+LidarcamError, which ``lidarcam.cli.main`` prints as one line and exits 2. The assembling is
+``lidarcam.rig.importing``'s
+(``make real-data`` uses the same functions).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from calib_core.data.observations import OUTLINE_KINDS
+from lidarcam.rig.extract_options import CURVATURE_CHI2
+
+
+def _options(args):
+    from lidarcam.rig.extract import ExtractOptions
+
+    return ExtractOptions(max_offset_m=args.max_offset, range_sigma_m=args.range_sigma,
+                          max_reproj_px=args.max_reproj, outline_kind=args.outline_kind,
+                          max_curvature_chi2=args.max_curvature_chi2, max_board_m=args.max_board)
+
+
+def _dataset(args):
+    """The dataset folder, its camera refitted from its images with ``--refit-intrinsics`` (the fit printed)."""
+    from lidarcam.rig.dataset import load_dataset
+    from lidarcam.rig.intrinsics import format_intrinsics, refit_camera
+
+    ds = load_dataset(args.dataset)
+    if args.refit_intrinsics:
+        ds, fit = refit_camera(ds)
+        print("intrinsics refitted from the images: " + format_intrinsics(fit)[0])
+    return ds
+
+
+def _add_extract_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--max-offset", type=float, default=0.5, metavar="M",
+                   help="bound on the lidar-camera separation in metres (default: %(default)s)")
+    p.add_argument("--range-sigma", type=float, default=0.02, metavar="M",
+                   help="lidar range noise, 1 sigma, metres (default: %(default)s)")
+    p.add_argument("--max-reproj", type=float, default=2.0, metavar="PX",
+                   help="reject a board whose corner reprojection RMS exceeds this (default: %(default)s px)")
+    p.add_argument("--outline-kind", choices=OUTLINE_KINDS, default="exact",
+                   help="what board.yaml's outline is: the board's edge (exact, default), a lower bound (the "
+                   "printed pattern on a larger board: the scan may run past it) or none (not known)")
+    p.add_argument("--refit-intrinsics", action="store_true",
+                   help="fit the camera from the dataset's own images instead of camera.yaml (rough intrinsics)")
+    p.add_argument("--max-curvature-chi2", type=float, default=CURVATURE_CHI2, metavar="X",
+                   help="refuse a segment as an arc above this curvature statistic (chi-square(1) units of the "
+                   "range noise; raise it for a lidar whose range depends on the surface colour; default %(default)s)")
+    p.add_argument("--max-board", type=float, default=2.0, metavar="M",
+                   help="longest accepted board segment when the outline is not exact (default: %(default)s m)")
+
+
+def cmd_extract(args) -> int:
+    """``lidarcam extract``: dataset -> observation JSON; prints per-pose diagnostics and skip reasons."""
+    import json
+    from pathlib import Path
+
+    from calib_core.data.io import save_observations
+    from lidarcam.rig.dataset import DatasetError
+    from lidarcam.rig.extract import extract, format_diagnostics
+    from lidarcam.rig.report import capture_verdict
+
+    from .outputs import writable_file
+
+    writable_file(args.out, "--out")
+    writable_file(args.diagnostics, "--diagnostics")
+    ds = _dataset(args)
+    obs, diags = extract(ds, _options(args))
+    print(format_diagnostics(diags))
+    if args.diagnostics:
+        Path(args.diagnostics).write_text(json.dumps([d.to_dict() for d in diags], indent=1) + "\n")
+        print(f"wrote {args.diagnostics}")
+    if obs.n_boards == 0:
+        raise DatasetError("no usable pose (see the skip reasons above)", file=args.dataset)
+    save_observations(obs, args.out)
+    print(f"wrote {args.out} ({obs.n_boards} boards)")
+    print(f"capture plan: {capture_verdict(obs)}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    """``lidarcam report``: overlays, residual plots and report.md for a result on a dataset."""
+    from pathlib import Path
+
+    from calib_core.data.io import load_observations
+    from calib_core.data.result import load_result
+    from lidarcam.rig.extract import extract
+    from lidarcam.rig.report import write_report
+
+    from .outputs import writable_folder
+
+    writable_folder(args.out, "--out")
+    res = load_result(args.result)
+    if Path(args.dataset).is_file():  # observations without images (imported board poses and points)
+        ds, obs = None, load_observations(args.dataset)
+    else:
+        ds = _dataset(args)
+        obs = load_observations(args.obs) if args.obs else extract(ds, _options(args))[0]
+        if obs.camera is not None:  # the camera the observations were extracted with (e.g. refitted)
+            from dataclasses import replace
+
+            from lidarcam.rig.dataset import CameraModel
+
+            c = obs.camera
+            ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist))
+    summary = write_report(ds, obs, res, args.out)
+    from .wording import cli_hint
+
+    for w in summary.warnings:
+        print(f"warning: {cli_hint(w)}")
+    print(f"wrote {summary.markdown} ({len(summary.overlays)} overlays, {len(summary.residual_plots)} residual plots)")
+    return 0 if res.get("ok") else 1
+
+
+def add_parsers(subparsers) -> None:
+    """Register the ``extract`` and ``report`` verbs on an argparse subparsers object."""
+    p = subparsers.add_parser("extract", help="board poses and board scan points from a dataset folder",
+                              description="Detect the board in each image, find its points in each scan, write "
+                                          "lidarcam.observations/1 JSON. Layout: docs/dataset.md.")
+    p.add_argument("dataset", help="dataset folder (camera.yaml, board.yaml, NNN.png + NNN.csv, ...)")
+    p.add_argument("--out", required=True, help="observation JSON to write")
+    p.add_argument("--diagnostics", help="also write the per-pose diagnostics as JSON here")
+    _add_extract_options(p)
+    p.set_defaults(func=cmd_extract)
+
+    p = subparsers.add_parser("report", help="overlays, residual plots and report.md of a calibration result",
+                              description="Project the scans into the images through the result's extrinsic, "
+                                          "plot residuals per board and write report.md.")
+    p.add_argument("dataset", help="dataset folder, or an observation JSON (no overlays then)")
+    p.add_argument("result", help="lidarcam.result/1 JSON (from lidarcam calibrate --out)")
+    p.add_argument("--out", required=True, help="folder to write the report into")
+    p.add_argument("--obs", help="observation JSON from lidarcam extract (default: extract again)")
+    _add_extract_options(p)
+    p.set_defaults(func=cmd_report)
+

@@ -1,7 +1,0 @@
-"""``python -m lidarcam_cli``: the same as the ``lidarcam`` command."""
-
-import sys
-
-from . import main
-
-sys.exit(main())

@@ -1,0 +1,173 @@
+"""The directions a board set cannot fix, named in lidar axes, and the one home of the board-set warnings
+(calib_core.checks.degeneracy)."""
+
+import numpy as np
+import pytest
+from rigs import VERTICAL_OPTIONS, facing_board, general_rig, rig_from_boards, vertical_rig
+
+from calib_core import calibrate
+from calib_core.checks.degeneracy import (
+    AXES,
+    MIN_BOARDS,
+    MIN_NORMAL_SPREAD_DEG,
+    board_set_warnings,
+    degeneracy_warnings,
+    origin_jacobian,
+    undetermined_directions,
+)
+from calib_core.geometry.transforms import make_T, rotvec_to_matrix
+from calib_core.model.residuals import range_residuals
+from calib_core.refine.uncertainty import normal_spread_deg
+from lidarcam.rig.report import report_warnings
+
+SEEDS = range(5)
+
+
+def _projector(U):
+    return U.T @ U
+
+
+def _axes_projector(names):
+    idx = [AXES.index(a) for a in names]
+    P = np.zeros((6, 6))
+    P[idx, idx] = 1.0
+    return P
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_vertical_boards_leave_exactly_roll_pitch_and_height_free(seed):
+    obs = vertical_rig(seed)
+    d = undetermined_directions(obs, obs.T_lidar_cam_true, 0.005)
+    assert d.axes == ("roll", "pitch", "z") and d.aligned and d.geometric and not d.determined
+    # the undetermined subspace is exactly span(roll, pitch, z), not just near it
+    np.testing.assert_allclose(_projector(d.directions), _axes_projector(d.axes), atol=1e-6)
+    assert np.all(np.isinf(d.sigmas))
+    msg = d.message()
+    assert "every board stands vertical" in msg and "'roll_deg'" in msg and "'z_m'" in msg and "not determined" in msg
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_named_directions_leave_the_residuals_unchanged_to_first_order(seed):
+    """Independent of the information matrix: moving the camera about the lidar's origin along a named axis
+    changes the scan residuals by O(delta^2), along yaw by O(delta)."""
+    obs = vertical_rig(seed)
+    T = obs.T_lidar_cam_true
+    e0 = range_residuals(T, obs.scan_data)
+    delta = 1e-4
+
+    def change(k):
+        x = np.zeros(6)
+        x[k] = delta
+        return np.linalg.norm(range_residuals(make_T(rotvec_to_matrix(x[:3]), x[3:]) @ T, obs.scan_data) - e0)
+
+    moved = change(AXES.index("yaw"))
+    assert moved > 1e-5
+    for a in ("roll", "pitch", "z"):
+        assert change(AXES.index(a)) < 1e-3 * moved
+
+
+def test_origin_jacobian_matches_finite_differences():
+    obs = general_rig(3)
+    T = obs.T_lidar_cam_true
+    _, J = range_residuals(T, obs.scan_data, jacobian=True)
+    Jo = origin_jacobian(J, T)
+    h = 1e-7
+    for k in range(6):
+        x = np.zeros(6)
+        x[k] = h
+        Tp = make_T(rotvec_to_matrix(x[:3]), x[3:]) @ T
+        Tm = make_T(rotvec_to_matrix(-x[:3]), -x[3:]) @ T
+        fd = (range_residuals(Tp, obs.scan_data) - range_residuals(Tm, obs.scan_data)) / (2 * h)
+        np.testing.assert_allclose(Jo[:, k], fd, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_general_rigs_are_not_flagged(seed):
+    obs = general_rig(seed)
+    d = undetermined_directions(obs, obs.T_lidar_cam_true, 0.02)
+    assert d.determined and len(d.directions) == 0 and d.axes == ()
+    r = calibrate(obs, "lidarcam")
+    assert r.ok and "degeneracy" not in r.info
+    assert not any("determined" in w for w in r.info["warnings"])
+
+
+def test_vertical_rig_calibration_refuses_and_names_the_directions():
+    obs = vertical_rig(11)
+    for method in ("lidarcam", "vasconcelos+ml", "zhang_pless_linear+ml"):
+        r = calibrate(obs, method)
+        assert not r.ok and r.T_lidar_cam is None, method
+        assert "roll" in r.reason and "pitch" in r.reason and "z (height" in r.reason and "fixed=" in r.reason
+        assert r.info["degeneracy"]["axes"] == ["roll", "pitch", "z"]
+        assert r.to_dict()["degeneracy"]["cause"].startswith("every board stands vertical")
+
+
+def test_boards_leaning_a_little_still_leave_roll_pitch_and_height_undetermined():
+    """Boards leaning back by up to 1 or 10 deg (normals within 5 deg of one plane): the lean is all that fixes
+    roll, pitch and z, no more than board-pose errors; they are named, with their range-model sigma."""
+    for lean in (1.0, 10.0):
+        for seed in range(3):
+            obs = vertical_rig(seed, lean_deg=lean)
+            assert normal_spread_deg(obs) < MIN_NORMAL_SPREAD_DEG
+            d = undetermined_directions(obs, obs.T_lidar_cam_true, 0.005)
+            assert d.axes == ("roll", "pitch", "z") and d.aligned and d.geometric and not d.determined
+            assert np.all(np.isfinite(d.sigmas)) and "leaving out board-pose errors" in d.message()
+    # boards leaning by up to 30 deg spread their normals beyond 5 deg: then everything is determined
+    spread = 0
+    for seed in range(6):
+        obs = vertical_rig(seed, lean_deg=30.0)
+        if normal_spread_deg(obs) >= MIN_NORMAL_SPREAD_DEG:
+            spread += 1
+            assert undetermined_directions(obs, obs.T_lidar_cam_true, 0.005).determined
+    assert spread >= 3
+
+
+def test_normals_perpendicular_to_a_tilted_axis_free_the_translation_along_it():
+    """Every board normal perpendicular to a = (0, sin 40, cos 40): the translation along a is free (a
+    combination of y and z, not an axis)."""
+    a = np.array([0.0, np.sin(np.radians(40)), np.cos(np.radians(40))])
+    u1, u2 = np.array([1.0, 0.0, 0.0]), np.cross(a, [1.0, 0.0, 0.0])
+    rng = np.random.default_rng(5)
+    boards = []
+    for phi in np.radians([-35, -20, -5, 10, 25, 40]):
+        c = rng.uniform(1.5, 2.5) * np.array([1.0, rng.uniform(-0.3, 0.3), 0.0])
+        boards.append(facing_board(c, np.cos(phi) * u1 + np.sin(phi) * u2, VERTICAL_OPTIONS.board_size_m))
+    T = make_T(rotvec_to_matrix([0.01, -0.02, 0.03]) @ vertical_rig(0).T_lidar_cam_true[:3, :3], [0.1, 0.05, 0.1])
+    obs = rig_from_boards(T, boards, VERTICAL_OPTIONS, rng)
+    assert obs.n_boards >= 5
+    d = undetermined_directions(obs, T, 0.005)
+    v = np.r_[0.0, 0.0, 0.0, a]
+    assert not d.determined and d.geometric
+    assert np.linalg.norm(d.directions @ v) == pytest.approx(1.0, abs=1e-6)
+    assert len(d.directions) == 1 and not d.aligned and d.axes == ("y", "z") and "a combination" in d.message()
+
+
+def test_weak_for_lack_of_data_is_a_warning_not_a_refusal():
+    obs = general_rig(0, n_boards=3)
+    d = undetermined_directions(obs, obs.T_lidar_cam_true, 0.2)
+    assert len(d.directions) and not d.geometric and d.determined
+    assert "poorly determined" in d.message() and "1-sigma" in d.message()
+
+
+def test_board_set_warnings_have_one_home():
+    obs = general_rig(2, n_boards=6)
+    assert board_set_warnings(obs) == []
+    few = obs.subset(range(MIN_BOARDS - 1))
+    assert any(f"fewer than {MIN_BOARDS}" in w for w in board_set_warnings(few))
+    vert = vertical_rig(1)
+    assert any("nearly in one plane" in w for w in board_set_warnings(vert))
+    par = obs.subset([0, 0, 0, 0])
+    assert any("near-parallel" in w for w in board_set_warnings(par))
+    # the rig report uses the same warnings, thresholds included, then adds its residual outliers
+    for o in (obs, few, vert, par):
+        T = o.T_lidar_cam_true
+        assert report_warnings(o, [1.0] * o.n_boards, T) == degeneracy_warnings(o, T)
+    assert any("board 1" in w for w in report_warnings(obs, [1.0, 9.0, 1.0, 1.0, 1.0, 1.0]))
+
+
+def test_vertical_boards_are_recognised_at_a_tilted_estimate():
+    """An extrinsic estimated from near-vertical boards may itself be tilted by 15 deg; the boards still read
+    as vertical (their normals turn onto the scan lines' normals), and roll, pitch and z are named."""
+    obs = vertical_rig(8, lean_deg=1.0)
+    tilted = make_T(rotvec_to_matrix([np.radians(15), np.radians(-10), 0.0]), np.zeros(3)) @ obs.T_lidar_cam_true
+    d = undetermined_directions(obs, tilted, 0.005)
+    assert d.axes == ("roll", "pitch", "z") and not d.determined and "stands vertical" in d.cause
