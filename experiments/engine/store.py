@@ -74,7 +74,33 @@ def methods_tag(methods: Sequence[str]) -> str:
 _CHUNK_NAME = re.compile(r"^chunk-(\d{5,})-(\d{5,})-([0-9a-f]{6})\.csv$")
 
 
+_PARSED: dict[Path, tuple[str, pd.DataFrame]] = {}
+"""Chunk files parsed and checked in this process, keyed by path, with the SHA-1 of the bytes they had: a sweep
+parses each chunk once although pruning, scheduling and loading each look at it; a file whose bytes changed in
+any way is parsed and checked again."""
+_PARSED_MAX = 4096
+
+
 def _read_chunk(path: Path) -> pd.DataFrame:
+    """``_parse_chunk`` of ``path``, from this process's cache when the file holds the bytes parsed before."""
+    if not _CHUNK_NAME.match(path.name) or not path.is_file():
+        return _parse_chunk(path, b"")
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DamagedChunk(f"{path}: damaged chunk file (unreadable: {exc.strerror})") from None
+    digest = hashlib.sha1(raw).hexdigest()
+    hit = _PARSED.get(path)
+    if hit is not None and hit[0] == digest:
+        return hit[1].copy()
+    df = _parse_chunk(path, raw)
+    if len(_PARSED) >= _PARSED_MAX:
+        _PARSED.clear()
+    _PARSED[path] = (digest, df)
+    return df.copy()
+
+
+def _parse_chunk(path: Path, raw: bytes) -> pd.DataFrame:
     """The rows of one chunk file, checked in full: the header has the result columns; every (trial, method) of
     the name's trial range and of the methods whose hash the name carries appears exactly once; trial, method,
     ok and valid are well-formed in every row. DamagedChunk otherwise."""
@@ -87,7 +113,7 @@ def _read_chunk(path: Path) -> pd.DataFrame:
     if not path.is_file():
         raise damaged("not a file")
     try:
-        df = read_table(path)
+        df = read_table(io.BytesIO(raw))
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError, OSError) as exc:
         raise damaged(f"does not parse: {str(exc).splitlines()[0][:120]}") from None
     missing = [c for c in RESULT_COLUMNS if c not in df.columns and c != CODE_COLUMN]

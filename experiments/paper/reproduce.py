@@ -18,10 +18,7 @@ from ..config.overrides import refuse_flag_overrides
 from ..config.sweeps import experiment_cells
 from ..engine.cli import n_jobs, positive_int, study_parser
 from ..engine.runner import run_cells
-from ..engine.store import load_cell
-from ..summary.aggregate import write_tables
-from ..summary.figures import draw_sweep
-from .report import write_paper_report
+from ..summary.unchanged import inputs_digest, record, unchanged
 
 PAPER_EXPERIMENTS = ("boards", "noise")
 
@@ -33,17 +30,26 @@ def reproduce(trials: int = 100, results_dir: str = "results", n_jobs: int = -1,
     extra = [f"n_trials={trials}", f"results_dir={results_dir}", *overrides]
     cells = {e: experiment_cells(e, extra) for e in experiments}
     all_cells = [c for cs in cells.values() for c in cs]
-    run_cells(all_cells, n_jobs=n_jobs, progress=progress, label="reproduce-paper")
+    rows = run_cells(all_cells, n_jobs=n_jobs, progress=progress, label="reproduce-paper")
     t_run = time.perf_counter() - t0
     out = Path(results_dir) / "paper"
-    import pandas as pd
+    report = out / "REPORT.md"
+    digest = inputs_digest(rows, experiments=list(cells))
+    redrawn = not unchanged(out, digest)
+    if redrawn:  # the tables, figures and report of these very rows and code are there already otherwise
+        from ..summary.aggregate import write_tables
+        from ..summary.figures import draw_sweep
+        from .report import write_paper_report
 
-    for sweep, cs in cells.items():
-        write_tables(pd.concat([load_cell(c) for c in cs], ignore_index=True), sweep, out)
-        draw_sweep(out, sweep)
-    report = write_paper_report(out)
+        for sweep, cs in cells.items():
+            keys = [c.key for c in cs]
+            write_tables(rows[rows["setting_key"].isin(keys)].reset_index(drop=True), sweep, out)
+            draw_sweep(out, sweep)
+        report = write_paper_report(out)
+        record(out, digest)
     return {"out": out, "report": report, "cells": len(all_cells), "trials": sum(c.n_trials for c in all_cells),
-            "methods": all_cells[0].methods, "run_s": t_run, "total_s": time.perf_counter() - t0}
+            "methods": all_cells[0].methods, "run_s": t_run, "total_s": time.perf_counter() - t0,
+            "redrawn": redrawn}
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -56,7 +62,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     refuse_flag_overrides(args.overrides, {"results_dir": "--results", "n_trials": "--trials"})
     r = reproduce(args.trials, args.results, args.n_jobs, args.overrides)
     print(f"{r['cells']} settings x {r['trials'] // r['cells']} trials, methods {', '.join(r['methods'])}: "
-          f"simulated and solved in {r['run_s']:.1f} s, {r['total_s']:.1f} s with tables, figures and report.")
+          f"simulated and solved in {r['run_s']:.1f} s, {r['total_s']:.1f} s with tables, figures and report"
+          + ("." if r["redrawn"] else " (unchanged: the same rows and code drew them; not redrawn)."))
     print(f"Tables:  {r['out']}/summary_*.csv, {r['out']}/trials_*.csv")
     print(f"Figures: {r['out']}/figures/ (fig3a-fig7, PNG and PDF)")
     print(f"Report:  {r['report']}")
