@@ -13,13 +13,8 @@ from .data.observations import Observations
 from .data.result import CalibrationResult
 from .errors import CalibrationError, SolveFailure, UncertaintyError
 from .geometry.mounting import MountingPrior
-from .registry import get_method
-
-
-def is_seed_method(name: str) -> bool:
-    """True for the paper's methods and their ablations (``peng2022/equal``), not for ``X+suffix`` variants: the
-    registry's ``Method.paper``."""
-    return get_method(name).paper
+from .model.residuals import range_residuals
+from .registry import METHODS, check_options, get_method
 
 
 def _failure(obs: Observations, method: str, reason: str, candidates, t0: float, verdict: bool,
@@ -40,9 +35,19 @@ def _failure(obs: Observations, method: str, reason: str, candidates, t0: float,
                              seconds=time.perf_counter() - t0, info=info)
 
 
-PRIOR_METHODS = ("lidarcam",)
-"""The methods that take a mounting prior (``calibrate(..., prior=...)``); the paper's methods have none in their
-model, and a prior given to any other method is refused (``CalibrationError``) rather than ignored."""
+def residual_rms(obs: Observations, T: np.ndarray, info: dict) -> dict:
+    """The range residuals' RMS (metres) over every scan point of the boards the answer rests on, at the answer
+    and at the start the method refined from (``info["start_T_lidar_cam"]`` or an ``X+s`` method's base answer;
+    None where the method has no start): the before and after of a refinement, as the summary prints them."""
+    used = info.get("boards_used")
+    data = (obs if used is None else obs.subset(list(used))).scan_data
+
+    def rms(T_):
+        e = range_residuals(np.asarray(T_, float), data)
+        return float(np.sqrt(np.mean(e**2))) if e.size and np.all(np.isfinite(e)) else None
+
+    start = info.pop("start_T_lidar_cam", info.get("base_T_lidar_cam"))
+    return {"start_m": None if start is None else rms(start), "answer_m": rms(T)}
 
 
 def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: bool = True,
@@ -57,13 +62,17 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
     raise ``CalibrationError``.
 
     ``prior``: a mounting prior (``geometry.mounting.MountingPrior``: a rough guess of the pose with its sigmas),
-    for the methods of ``PRIOR_METHODS``: it enters the selection, the refinement and the covariance, and decides
-    between answers the data leave tied (without it such a tie is ``ok=False`` naming the alternatives).
+    for the methods that take one (``Method.takes_prior``; the paper's have none in their model, and a prior given
+    to any other method is refused rather than ignored): it enters the selection, the refinement and the
+    covariance, and decides between answers the data leave tied (without it such a tie is ``ok=False`` naming the
+    alternatives).
     """
     m = get_method(method)
+    check_options(m, options)
     if prior is not None:
-        if method not in PRIOR_METHODS:
-            raise CalibrationError(f"{method}: takes no mounting prior (only {', '.join(PRIOR_METHODS)} does)")
+        if not m.takes_prior:
+            takers = ", ".join(n for n, k in METHODS.items() if k.takes_prior)
+            raise CalibrationError(f"{method}: takes no mounting prior (only {takers} does)")
         if not isinstance(prior, MountingPrior):
             raise CalibrationError(f"prior must be a MountingPrior, got {type(prior).__name__}")
         options["prior"] = prior
@@ -77,15 +86,12 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
         return _failure(observations, method, fail.reason, fail.candidates, t0, verdict, fail.info)
     except UncertaintyError as err:
         return _failure(observations, method, f"{method}: {err}", None, t0, verdict)
-    except TypeError as exc:
-        if "unexpected keyword" in str(exc):
-            raise CalibrationError(f"{method}: {exc}") from None
-        raise
     T = np.asarray(T, float)
     cands = np.asarray(cands, float)
     if not np.all(np.isfinite(T)):
         return CalibrationResult(method, False, reason=f"{method}: the solution is not finite", candidates=cands,
                                  seconds=time.perf_counter() - t0)
+    info["residual_rms"] = residual_rms(observations, T, info)
     cov = info.pop("covariance", None)
     cov = None if cov is None else np.asarray(cov, float)
     if verdict:

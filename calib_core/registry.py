@@ -8,6 +8,7 @@ The table is filled explicitly: ``calib_core.methods.register_builtins`` adds th
 from __future__ import annotations
 
 import difflib
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -25,6 +26,10 @@ class Method:
     ``paper``: one of the paper's methods (or an ablation of one): its answer stands as its paper computes it, the
     verdict is reported beside it and never turns it into ``ok=False``; every other method (ours, a derived
     ``X+ml``, a plugin) is held to the verdict.
+    ``options``: the keyword options ``calibrate(obs, name, **options)`` accepts, declared once here (None: the
+    named keyword parameters of ``func``, as for a plugin that declares none); ``calibrate``, the experiments'
+    config validation and ``lidarcam methods`` all read ``accepted_options``. ``takes_prior``: the method takes a
+    mounting prior (``calibrate(..., prior=...)``).
     """
 
     name: str
@@ -35,6 +40,38 @@ class Method:
     origin: str = "lidarcam"
     cost: str = ""
     paper: bool = False
+    options: frozenset[str] | None = None
+    takes_prior: bool = False
+
+
+RENAMED_OPTIONS = {"f_scale": "f_scale_m (metres) or f_scale_sigmas (range-noise stds)",
+                   "min_conditioning": "null_conditioning (the refusal threshold; the warning's MIN_CONDITIONING is "
+                                       "fixed)"}
+"""Option names that meant two things, and the names that replaced them (a call with the old one is refused
+with this hint rather than read one way)."""
+
+
+def accepted_options(method: Method) -> frozenset[str] | None:
+    """The keyword options ``method`` accepts: its declared ``options``, else the named keyword parameters of its
+    function after the observations; None when it declares none and takes ``**keywords`` (any name)."""
+    if method.options is not None:
+        return method.options
+    params = list(inspect.signature(method.func).parameters.values())[1:]
+    if any(q.kind is q.VAR_KEYWORD for q in params):
+        return None
+    return frozenset(q.name for q in params if q.kind in (q.KEYWORD_ONLY, q.POSITIONAL_OR_KEYWORD))
+
+
+def check_options(method: Method, names) -> None:
+    """CalibrationError naming the first option of ``names`` that ``method`` does not accept, with the accepted
+    ones listed (a renamed option: its new name)."""
+    accepted = accepted_options(method)
+    for key in names:
+        if key in RENAMED_OPTIONS:
+            raise CalibrationError(f"{method.name}: option {key!r} is now {RENAMED_OPTIONS[key]}")
+        if accepted is not None and key not in accepted:
+            raise CalibrationError(f"{method.name}: unknown option {key!r}; it takes "
+                                   f"{', '.join(sorted(accepted)) or 'no options'}")
 
 
 METHODS: dict[str, Method] = {}
@@ -76,7 +113,11 @@ def get_method(name: str) -> Method:
                            f"and X+{'/X+'.join(SUFFIXES)} for any X")
 
 
-def derived(base: Method, suffix: str, func: Callable, summary: str) -> Method:
+def derived(base: Method, suffix: str, func: Callable, summary: str, own_options) -> Method:
     """A method derived from ``base`` under ``base.name + "+" + suffix`` (same minimum boards and citation; ours,
-    so not ``paper``)."""
-    return replace(base, name=f"{base.name}+{suffix}", func=func, summary=summary, paper=False)
+    so not ``paper``): it takes ``own_options`` and passes every other option on to ``base`` (whose schema it
+    extends; a base that accepts any name keeps that). It takes no prior."""
+    base_options = accepted_options(base)
+    options = None if base_options is None else frozenset(own_options) | base_options
+    return replace(base, name=f"{base.name}+{suffix}", func=func, summary=summary, paper=False, options=options,
+                   takes_prior=False)

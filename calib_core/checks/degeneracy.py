@@ -41,9 +41,10 @@ from ..geometry.transforms import skew
 from ..model.residuals import range_linearised
 from ..refine.partial import vertical_start
 from ..refine.uncertainty import conditioning, normal_spread_deg, typical_range
+from ..solvers._common import MIN_BOARDS
 from .profile import profile_sigma
 
-MIN_BOARDS = 4
+WARN_BELOW_BOARDS = 4
 """Fewer boards than this is warned about: with 3 the minimal solver's candidates all fit the scan lines exactly
 and cannot be told apart by the scan residuals."""
 
@@ -214,7 +215,7 @@ def board_set_cause(obs: Observations, T_lidar_cam: np.ndarray) -> str:
     if tilt < VERTICAL_TOL_DEG:
         return (f"every board normal lies within {tilt:.1f} deg of the plane perpendicular to "
                 f"({a[0]:+.2f}, {a[1]:+.2f}, {a[2]:+.2f}) in the lidar frame")
-    if obs.n_boards < 3:
+    if obs.n_boards < MIN_BOARDS:
         return f"only {obs.n_boards} boards"
     return f"too little data for the range noise ({obs.n_boards} boards)"
 
@@ -230,7 +231,7 @@ def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> float | None:
     horizontal: its perpendicular within ``VERTICAL_TOL_DEG`` of the lidar z axis at ``T_lidar_cam``, or, since an
     extrinsic estimated from such boards may itself be tilted, one rotation turns every normal onto its scan
     line's normal in the scan plane within ``VERTICAL_MISFIT_DEG`` (``partial.vertical_start``, no extrinsic;
-    from ``MIN_BOARDS`` boards on: three normals turn onto three scan lines too easily to tell).
+    from ``WARN_BELOW_BOARDS`` boards on: three normals turn onto three scan lines too easily to tell).
     """
     if obs.n_boards < 2 or normal_spread_deg(obs) >= MIN_NORMAL_SPREAD_DEG:
         return None
@@ -242,7 +243,7 @@ def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> float | None:
     a = np.linalg.eigh(m.T @ m)[1][:, 0]
     if np.degrees(np.arccos(min(abs(a[2]), 1.0))) < VERTICAL_TOL_DEG:
         return float(min(misfit, np.degrees(np.arcsin(np.sqrt(np.mean(m[:, 2] ** 2))))))
-    return float(misfit) if misfit < VERTICAL_MISFIT_DEG and obs.n_boards >= MIN_BOARDS else None
+    return float(misfit) if misfit < VERTICAL_MISFIT_DEG and obs.n_boards >= WARN_BELOW_BOARDS else None
 
 
 def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float | None = None, *,
@@ -322,12 +323,12 @@ def pair_angle_deg(obs: Observations) -> float:
 
 def board_set_warnings(obs: Observations) -> list[str]:
     """Warnings about the board set alone (no extrinsic), with this module's thresholds: fewer than
-    ``MIN_BOARDS`` boards; near-parallel boards (``MIN_PAIR_ANGLE_DEG``) or else normals nearly in one plane
+    ``WARN_BELOW_BOARDS`` boards; near-parallel boards (``MIN_PAIR_ANGLE_DEG``) or else normals nearly in one plane
     (``MIN_NORMAL_SPREAD_DEG``)."""
     out = []
     N = obs.n_boards
-    if N < MIN_BOARDS:
-        out.append(f"only {N} boards (fewer than {MIN_BOARDS}): the solution may be ambiguous; add board poses "
+    if N < WARN_BELOW_BOARDS:
+        out.append(f"only {N} boards (fewer than {WARN_BELOW_BOARDS}): the solution may be ambiguous; add board poses "
                    "with varied orientations")
     if N >= 2 and (ang := pair_angle_deg(obs)) < MIN_PAIR_ANGLE_DEG:
         out.append(f"board normals are near-parallel (largest angle between two boards {ang:.1f} deg < "

@@ -11,11 +11,12 @@ import numpy as np
 
 from ..geometry.metrics import pose_errors, sigma_rot_deg, sigma_trans_m
 from ..geometry.transforms import invert_T
+from .outcome import Outcome
 
 RESULT_SCHEMA = "lidarcam.result/1"
 
 JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior",
-             "intrinsics", "board_dispersion", "covariance_bend")
+             "intrinsics", "board_dispersion", "covariance_bend", "residual_rms")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
@@ -23,7 +24,10 @@ answers a refused tie could not decide between (``alternatives``: each ``{"T_lid
 log-likelihood, "mounting": its parameters}``, best first), the mounting prior given (``prior``), how the joint
 model treated the camera's intrinsics (``calib_core.model.intrinsics``), and the boards' dispersion test
 (``board_dispersion``, ``calib_core.refine.dispersion``: whether the covariance was widened to the boards' spread), and
-the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.refine.bend``)."""
+the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.refine.bend``), and the range
+residuals' RMS over the boards used at the method's start and at its answer (``residual_rms``: ``start_m``,
+``answer_m``, metres). The file's ``noise`` field names each range-noise figure by its source (``data.outcome.Noise``,
+metres)."""
 BEND_REPORTED = 0.5
 """The summary names the covariance's bend (``covariance_bend``) when a re-fit departed from the Gaussian by this
 many sigmas or more."""
@@ -81,6 +85,12 @@ class CalibrationResult:
         return 1000.0 * sigma_trans_m(self.covariance)
 
     @property
+    def outcome(self) -> Outcome:
+        """The result's parts as types (``data.outcome``): noise estimates by source, consensus, selection,
+        covariance model, verdict, warnings, residual RMS."""
+        return Outcome.from_info(self.info)
+
+    @property
     def warnings(self) -> list[str]:
         """Plain-language warnings of the method (``info["warnings"]``; empty when none)."""
         return [str(w) for w in self.info.get("warnings", [])]
@@ -123,6 +133,8 @@ class CalibrationResult:
         for k in JSON_INFO:
             if k not in d and self.info.get(k) is not None:
                 d[k] = self.info[k]
+        if (noise := self.outcome.noise.to_dict()) is not None:
+            d["noise"] = noise
         return d
 
     def save(self, path) -> None:
@@ -150,7 +162,7 @@ class CalibrationResult:
         """The result of a ``lidarcam.result/1`` dict (``to_dict``'s, or ``load_result``'s); candidate matrices are
         not stored, their count is (``n_candidates``)."""
         info = {k: d[k] for k in (*JSON_INFO, "covariance_model", "verdict", "conditioning", "boards_used",
-                                  "boards_rejected", "n_candidates") if d.get(k) is not None}
+                                  "boards_rejected", "n_candidates", "noise") if d.get(k) is not None}
         T, cov = d.get("T_lidar_cam"), d.get("covariance")
         return cls(method=str(d.get("method", "?")), ok=bool(d.get("ok")), reason=d.get("reason"),
                    T_lidar_cam=None if T is None else np.asarray(T, float), seconds=float(d.get("seconds") or 0.0),
@@ -187,6 +199,10 @@ class CalibrationResult:
                 out.append(f"the likelihood bends along its weakest direction ({b['departure_sigmas']:.1f} sigma off "
                            f"the Gaussian 1.7 sigmas along it): the 1-sigma holds it (Gaussian alone: rotation "
                            f"{b['sigma_rot_deg_laplace']:.3f} deg, translation {b['sigma_trans_mm_laplace']:.1f} mm)")
+        if (rms := self.info.get("residual_rms")) is not None:
+            start = "" if rms.get("start_m") is None else f"{1000 * rms['start_m']:.1f} mm at the start, "
+            out.append(f"range residual RMS (all scan points of the boards used): {start}"
+                       f"{1000 * rms['answer_m']:.1f} mm at the answer")
         if "mounting" in self.info:
             out.append("mounting (camera pose in the lidar frame; degrees and metres):")
             held = self.info.get("fixed", {})

@@ -27,6 +27,7 @@ from ..entry import calibrate
 from ..errors import JointError, UncertaintyError
 from ..model.residuals import plane_residuals
 from ..refine.camera_side import corner_noise_px
+from ..solvers._common import MIN_BOARDS
 from .held_out import HeldOutSpread, held_out_joint, held_out_spread, spread_summary
 
 
@@ -206,7 +207,7 @@ def jackknife_covariance(T_full: np.ndarray, folds: np.ndarray) -> np.ndarray | 
 
     good = folds[np.all(np.isfinite(folds), axis=(1, 2))]
     n = len(good)
-    if n < 3:
+    if n < MIN_BOARDS:
         return None
     R0, t0 = T_full[:3, :3], T_full[:3, 3]
     x = np.array([np.concatenate([matrix_to_rotvec(T[:3, :3] @ R0.T), T[:3, 3] - t0]) for T in good])

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from functools import partial, update_wrapper
 
-from ..registry import Method
+from ..registry import Method, accepted_options
 
 ABLATIONS: dict[str, dict] = {
     "peng2022/equal": {"weighting": "equal"},
@@ -55,5 +55,5 @@ def ablations(base: Method) -> list[Method]:
         func = update_wrapper(partial(base.func, **fixed), base.func)
         opts = ", ".join(f"{k}={v!r}" for k, v in fixed.items())
         out.append(Method(name, func, base.min_boards, base.citation, f"ablation: {base.name} with {opts}",
-                          cost=base.cost, paper=base.paper))
+                          cost=base.cost, paper=base.paper, options=accepted_options(base)))
     return out

@@ -10,7 +10,8 @@ from ..errors import SolveFailure
 from ..refine.refine import refine
 from ..registry import Method
 from ..robust.scorers import PENG2022_OPTIONS, SCORERS, peng2022_outline_warnings
-from ..solvers.candidates import minimal_candidates
+from ..solvers._common import MIN_BOARDS
+from ..solvers.candidates import minimal_candidates, solver_keywords
 from ..solvers.zhang_pless import MIN_BOARDS as ZP_MIN_BOARDS
 from ..solvers.zhang_pless import zhang_pless_linear as _zp_linear
 
@@ -67,10 +68,10 @@ BASELINES = (
     Method("zhang_pless", zhang_pless, ZP_MIN_BOARDS, ZHANG_CITE,
            "the linear solution refined on point-to-plane distances (least squares, analytic Jacobian)",
            cost="O(N)", paper=True),
-    Method("vasconcelos", vasconcelos, 3, VASC_CITE,
+    Method("vasconcelos", vasconcelos, MIN_BOARDS, VASC_CITE,
            "minimal P3P solver on all board triples; least point-to-plane error of all scan points", cost=EXHAUSTIVE,
-           paper=True),
-    Method("peng2022", peng2022, 3, PENG_CITE,
+           paper=True, options=solver_keywords("vasconcelos")),
+    Method("peng2022", peng2022, MIN_BOARDS, PENG_CITE,
            "Vasconcelos candidates; uncertainty-weighted joint likelihood of the point-line error", cost=EXHAUSTIVE,
-           paper=True),
+           paper=True, options=solver_keywords("vasconcelos") | set(PENG2022_OPTIONS)),
 )

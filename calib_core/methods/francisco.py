@@ -15,9 +15,10 @@ import numpy as np
 from ..data.lines import scan_lines
 from ..data.observations import Observations
 from ..errors import SolveFailure
-from ..refine.refine import refine
+from ..refine.refine import MAX_NFEV, refine
 from ..registry import Method
-from ..solvers.candidates import minimal_candidates
+from ..solvers._common import MIN_BOARDS
+from ..solvers.candidates import minimal_candidates, solver_keywords
 from .baselines import EXHAUSTIVE, VASC_CITE, select_candidate
 
 ZHOU_CITE = "L. Zhou, IEEE Sensors Journal 14(2) 2014"
@@ -115,7 +116,7 @@ def vasconcelos_msac(obs: Observations, *, threshold: float = MSAC_THRESHOLD_PER
 
 
 def vasconcelos_msac_refined(obs: Observations, *, threshold: float = MSAC_THRESHOLD_PER_MM,
-                             max_nfev: int = 100, **solver_options):
+                             max_nfev: int = MAX_NFEV, **solver_options):
     """The authors' code's default output: the MSAC solution refined on the MSAC inlier boards only.
 
     Their refinement (``optimizeLaserCamCalib`` with ``Tp(:,:,inl), Pl(inl)``) minimises, by least squares, the
@@ -144,13 +145,14 @@ def zhou2014(obs: Observations, **solver_options):
 
 
 FRANCISCO_METHODS = (
-    Method("vasconcelos_msac", vasconcelos_msac, 3, VASC_CITE + " (the authors' MATLAB)",
+    Method("vasconcelos_msac", vasconcelos_msac, MIN_BOARDS, VASC_CITE + " (the authors' MATLAB)",
            "the authors' code: minimal solutions of all triples in its dual formulation (real parts of complex roots "
-           "kept), MSAC on the dual-space plane-line error (threshold 1e-5 per mm)", cost=EXHAUSTIVE, paper=True),
-    Method("vasconcelos_msac_refined", vasconcelos_msac_refined, 3, VASC_CITE + " (the authors' MATLAB)",
+           "kept), MSAC on the dual-space plane-line error (threshold 1e-5 per mm)", cost=EXHAUSTIVE, paper=True,
+           options=solver_keywords("vasconcelos_dual") | {"threshold"}),
+    Method("vasconcelos_msac_refined", vasconcelos_msac_refined, MIN_BOARDS, VASC_CITE + " (the authors' MATLAB)",
            "the authors' code's default output: vasconcelos_msac refined on range residuals of its inlier boards",
-           cost=EXHAUSTIVE, paper=True),
-    Method("zhou2014", zhou2014, 3, ZHOU_CITE,
+           cost=EXHAUSTIVE, paper=True, options=solver_keywords("vasconcelos_dual") | {"threshold", "max_nfev"}),
+    Method("zhou2014", zhou2014, MIN_BOARDS, ZHOU_CITE,
            "Zhou's minimal solver (n_i^T [r1 r2] u_i = 0, orthonormality: up to 8 solutions) on all triples; "
-           "least point-to-plane error", cost=EXHAUSTIVE, paper=True),
+           "least point-to-plane error", cost=EXHAUSTIVE, paper=True, options=solver_keywords("zhou2014")),
 )

@@ -19,8 +19,8 @@ from ..model.residuals import range_linearised
 from ..refine.dispersion import widened_covariance
 from ..refine.joint import JointOptions
 from ..refine.joint_step import joint_step
-from ..refine.partial import calibrate_fixed, fixed_starts
-from ..refine.refine import F_SCALE_SIGMAS
+from ..refine.partial import fixed_starts, refine_free
+from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV
 from ..refine.uncertainty import inverse_information, range_board_scores, refinement_covariance
 
 
@@ -113,7 +113,7 @@ def widened_range_covariance(obs: Observations, T: np.ndarray, cov: np.ndarray, 
 def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray], *,
                       residual: str = "range", loss: str = "linear", f_scale_m: float | None = None,
                       f_scale_sigmas: float = F_SCALE_SIGMAS, range_sigma_m: float | None = None,
-                      max_nfev: int = 100,
+                      max_nfev: int = MAX_NFEV,
                       fixed_sigma: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Calibrate the free mounting parameters with ``fixed`` ones held (``refine.partial``): from the closed-form
     planar start when roll, pitch and z are given, else from ``full_start()`` (a full calibration's answer);
@@ -123,7 +123,7 @@ def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], n
     mask, values = parse_fixed(fixed)
     sigma = range_sigma(obs, range_sigma_m)
     starts = fixed_starts(obs, mask, values, full_start)
-    T, info = calibrate_fixed(obs, mask, values, starts, residual=residual, loss=loss,
+    T, info = refine_free(obs, mask, values, starts, residual=residual, loss=loss,
                               f_scale_m=f_scale_m if f_scale_m is not None else f_scale_sigmas * sigma,
                               range_sigma_m=range_sigma_m, max_nfev=max_nfev, fixed_sigma=fixed_sigma)
     return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "refine_residual": residual,

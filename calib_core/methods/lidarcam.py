@@ -1,15 +1,15 @@
 """Our method, ``lidarcam``, as one forward pipeline over ``LidarcamOptions`` (``methods.options``):
 
-    trim -> hypotheses -> consensus -> choose -> refine -> final tests -> degeneracy -> joint step -> result
+    1. trim -> 2. consensus -> 3. choose and refine -> 4. final tests -> 5. degeneracy -> 6. joint step -> result
 
-Each step is one call into the stage that owns it (``robust.inliers``, ``robust.search``, ``robust.choose``,
-``methods.finish``), read top to bottom in ``search_and_refine`` and ``finish``; no stage calls back into the
-method.
+(the same six steps as ``lidarcam``'s docstring and docs/lidarcam.md). Each step is one call into the stage that
+owns it (``robust.inliers``, ``robust.search``, ``robust.choose``, ``robust.final``, ``methods.last_steps``), read top
+to bottom in ``search_and_refine`` (steps 1-4) and ``finish`` (steps 5-6); the terms every step scores with live in
+``model/``; no stage calls back into the method.
 """
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +27,7 @@ from ..robust.choose import TIE_LOG_LIKELIHOOD, WEAK_LOG_LIKELIHOOD, Choice, cho
 from ..robust.final import FinalTests, final_tests
 from ..robust.inliers import trim
 from ..robust.search import Search, consensus_search
+from ..solvers._common import MIN_BOARDS
 from .last_steps import (
     NO_CORNERS,
     fixed_calibration,
@@ -40,7 +41,7 @@ from .last_steps import (
     widened_range_covariance,
     with_prior,
 )
-from .options import FLAT_KEYWORDS, LidarcamOptions
+from .options import FLAT_KEYWORDS, SOLVER_KEYWORDS, LidarcamOptions
 
 
 def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **keywords):
@@ -54,23 +55,23 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
        best few on their consensus sets. Boards that fail are left out (``info["boards_rejected"]``).
     3. Choose and refine (``robust.choose``) on the consensus boards: every hypothesis computed from them is scored
        with ``score.evidence_cost`` (range residuals in units of the noise std, estimated from the scan lines unless
-       ``range_sigma_m``; endpoint and outline terms; boards behind the camera); the ``refine.n_refine`` best
+       ``range_sigma_m``; endpoint and outline terms; boards behind the camera); the ``choose.n_refine`` best
        distinct ones are refined by maximum likelihood on the range residuals, polished on the whole cost when the
        outlines disagree; the best is kept.
     4. Final tests (``robust.final.final_tests``): a per-board test at the refined pose and a point test (range
        residuals beyond ``inliers.TRIM_SIGMAS`` stds of their board's median one); when they change the boards or
        points, step 3 again from the answer on what is left.
-    5. Degeneracy (``methods.finish.refuse_undetermined``): directions the board geometry leaves free (e.g. roll,
+    5. Degeneracy (``methods.last_steps.refuse_undetermined``): directions the board geometry leaves free (e.g. roll,
        pitch and height z when every board is vertical) are not presented as estimated: ``ok=False``, the reason
        names them and how to calibrate the rest. Directions weak only for lack of data are warned about; so is a
        fold (three boards' solutions meeting at the answer: no first-order information along one direction, its
        sigma from the profile likelihood, ``checks.profile``); where the joint step fails there (its linearisation
-       is singular too), the covariance is ``finish.fold_covariance``.
+       is singular too), the covariance is ``last_steps.fold_covariance``.
     6. On the boards used: with image corners on every board (``joint.use_corners``), the joint maximum likelihood
        over corners and ranges, covariance with the board poses marginalised (``info["covariance_model"]``
        "joint"); otherwise the range model's covariance (it ignores camera noise).
 
-    ``fixed``: calibrate only the other mounting parameters (``methods.finish.fixed_calibration``), from a
+    ``fixed``: calibrate only the other mounting parameters (``methods.last_steps.fixed_calibration``), from a
     closed-form start when roll, pitch and z are given (else from the full method's answer).
     """
     opts = LidarcamOptions.from_keywords(options, **keywords)
@@ -78,9 +79,9 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
         raise CalibrationError("lidarcam: a mounting prior and fixed parameters do not go together (fix what "
                                "is known, or give it as the prior)")
     if opts.fixed is not None:
-        return fixed_calibration(obs, opts.fixed, lambda: search_and_refine(obs, opts).best.T, loss=opts.refine.loss,
-                                 f_scale_m=opts.refine.f_scale_m, f_scale_sigmas=opts.refine.f_scale_sigmas,
-                                 range_sigma_m=opts.range_sigma_m, max_nfev=opts.refine.max_nfev)
+        return fixed_calibration(obs, opts.fixed, lambda: search_and_refine(obs, opts).best.T, loss=opts.choose.loss,
+                                 f_scale_m=opts.choose.f_scale_m, f_scale_sigmas=opts.choose.f_scale_sigmas,
+                                 range_sigma_m=opts.range_sigma_m, max_nfev=opts.choose.max_nfev)
     try:
         found = search_and_refine(obs, opts)                                                     # 1-4
     except SolveFailure as fail:
@@ -102,25 +103,25 @@ class Found:
 
 
 def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
-    """Trim -> hypotheses -> consensus -> choose -> refine -> final tests (steps 1-4 of ``lidarcam``)."""
+    """Steps 1-4 of ``lidarcam``: trim -> consensus -> choose and refine -> final tests."""
     score = opts.score
     obs_t, trim_report = trim(obs, opts.trim)
     search = consensus_search(obs_t, trim_report, range_sigma_m=opts.range_sigma_m,
                               outline_sigma_m=score.outline_sigma_m, options=opts.consensus,
                               prior=score.prior)
     sigma = search.sigma_m
-    best = choose_and_refine(search.obs_used, search.pool, sigma, score, opts.refine, refined=search.refined)
+    best = choose_and_refine(search.obs_used, search.pool, sigma, score, opts.choose, refined=search.refined)
     if best.ties:
-        raise tie_failure(best, search.all_candidates, score.prior is not None, opts.refine.tie_log_likelihood)
+        raise tie_failure(best, search.hypotheses_T, score.prior is not None, opts.choose.tie_log_likelihood)
     if not np.isfinite(best.cost):
         raise SolveFailure("lidarcam: every refined answer puts some board in an implausible place (behind a sensor, "
-                           "or the sensors on opposite sides of its plane)", search.all_candidates)
+                           "or the sensors on opposite sides of its plane)", search.hypotheses_T)
     start = best.cost if np.array_equal(best.start, best.T) else \
         float(evidence_cost(search.obs_used, best.start[None], range_sigma_m=sigma, **score.kwargs())[0])
     tests = final_tests(search, best.T, reject=opts.consensus.reject_boards)
     first = best
     if tests.changed:  # boards or points left out (or taken back) at the refined pose: refine on what is left
-        best = choose_and_refine(tests.obs_used, best.T, sigma, score, opts.refine, n_refine=1)
+        best = choose_and_refine(tests.obs_used, best.T, sigma, score, opts.choose, n_refine=1)
     return Found(search, best, tests, start, first)
 
 
@@ -162,14 +163,14 @@ def tie_failure(best: Choice, candidates: np.ndarray, with_prior: bool,
 def finish(found: Found, opts: LidarcamOptions):
     """Degeneracy -> joint step or the range covariance -> result (steps 5-6 of ``lidarcam``): (T_lidar_cam,
     candidates, info)."""
-    best, tests, C, sigma_given = found.best, found.tests, found.search.all_candidates, opts.range_sigma_m
+    best, tests, C, sigma_given = found.best, found.tests, found.search.hypotheses_T, opts.range_sigma_m
     obs_u = tests.obs_used
     prior = opts.score.prior
     deg = refuse_undetermined(obs_u, best.T, np.concatenate([best.T[None], C]), "lidarcam", sigma_given,
                               opts.degeneracy, refuse=prior is None)
     if not deg.determined:              # a mounting prior given: it decides the axes the boards leave free
         return prior_decides(found, opts, deg)
-    joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.refine.loss, options=opts.joint,
+    joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.choose.loss, options=opts.joint,
                            names=tests.info.get("boards_used"), mounting=prior)
     if joint is not None:
         T, cov, jinfo = joint
@@ -190,7 +191,8 @@ def finish(found: Found, opts: LidarcamOptions):
     warnings = tests.warnings + jinfo.pop("warnings", []) + degeneracy_warnings(obs_u, T) + \
         ([deg.message()] if len(deg.directions) else []) + weak
     return T, C, {"cost": best.cost, "polished": best.polished, "score_start": found.score_start,
-                  "n_refined": opts.refine.n_refine, **({"prior": prior_info(prior)} if prior is not None else {}),
+                  "n_refined": opts.choose.n_refine,
+                  "start_T_lidar_cam": best.start, **({"prior": prior_info(prior)} if prior is not None else {}),
                   "sigma_m_selection": found.search.sigma_m,
                   "refine_cost": best.refined.cost, "refine_nfev": best.refined.nfev, **tests.info, "covariance": cov,
                   "conditioning": conditioning(obs_u, T), "warnings": warnings, **jinfo, **alts}
@@ -201,11 +203,11 @@ def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy):
     values with its 1-sigma, the others calibrated on the scans (``methods.finish.fixed_calibration``, the range
     model), the prior's uncertainty carried into the covariance. Axes free only in combination (``deg.aligned``
     false) cannot be held one by one: refused as without a prior. (T_lidar_cam, candidates, info)."""
-    best, tests, C, prior = found.best, found.tests, found.search.all_candidates, opts.score.prior
+    best, tests, C, prior = found.best, found.tests, found.search.hypotheses_T, opts.score.prior
     if not deg.aligned:
         raise undetermined_failure(tests.obs_used, deg, np.concatenate([best.T[None], C]), "lidarcam")
     fixed, sigma = prior_fixed(prior, deg)
-    r = opts.refine
+    r = opts.choose
     T, _, info = fixed_calibration(tests.obs_used, fixed, lambda: best.T, loss=r.loss, f_scale_m=r.f_scale_m,
                                    f_scale_sigmas=r.f_scale_sigmas, range_sigma_m=opts.range_sigma_m,
                                    max_nfev=r.max_nfev, fixed_sigma=sigma)
@@ -214,21 +216,11 @@ def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy):
                   "intrinsics": RANGE_ONLY_INTRINSICS, "degeneracy": deg.to_dict(), "warnings": warnings}
 
 
-def _signature() -> inspect.Signature:
-    """``lidarcam``'s signature as callers see it: the observations, ``options`` and every flat keyword by name
-    (``**solver`` for the minimal solver's), so that ``inspect.signature`` lists the options it takes."""
-    P = inspect.Parameter
-    return inspect.Signature([P("obs", P.POSITIONAL_OR_KEYWORD), P("options", P.KEYWORD_ONLY, default=None),
-                              *(P(k, P.KEYWORD_ONLY, default=None) for k in FLAT_KEYWORDS),
-                              P("solver_options", P.VAR_KEYWORD)])
-
-
-lidarcam.__signature__ = _signature()
-
-LIDARCAM = Method("lidarcam", lidarcam, 3, "this project (lidarcam)",
+LIDARCAM = Method("lidarcam", lidarcam, MIN_BOARDS, "this project (lidarcam)",
                   "point trimming; consensus over boards (minimal-solver triples + Zhang & Pless subsets, "
                   "per-board chi-square tests; inconsistent boards rejected and named); all-evidence likelihood "
                   "selection; ML refinement of the best few; covariance and degeneracy warnings",
                   cost="about linear in N: all C(N,3) triples up to 12 boards, then an "
-                  "adaptively sampled, bounded set; per-board tests O(hypotheses x N)")
+                  "adaptively sampled, bounded set; per-board tests O(hypotheses x N)",
+                  options=frozenset({"options", *FLAT_KEYWORDS, *SOLVER_KEYWORDS}) - {"prior"}, takes_prior=True)
 

@@ -1,24 +1,24 @@
 """``LidarcamOptions``: every option of the default method in one frozen value, in parts owned by the stages that
-read them (trim, consensus, score, refine, degeneracy, joint), passed whole through the pipeline.
+read them (trim, consensus, score, choose, degeneracy, joint), passed whole through the pipeline.
 
 ``calibrate(obs, "lidarcam", **kw)`` takes the flat keywords of ``FLAT_KEYWORDS`` (and the minimal solver's
 options), mapped here onto the parts; ``options=LidarcamOptions(...)`` gives the whole value. ``f_scale`` (the
-name of the option before the scales carried their unit) is ``refine.f_scale_m``, in metres.
+name of the option before the scales carried their unit) is ``choose.f_scale_m``, in metres.
 """
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass, field, replace
 
 from ..checks.degeneracy import DegeneracyOptions
 from ..errors import CalibrationError
 from ..model.score import ScoreOptions
 from ..refine.joint import JointOptions
-from ..robust.choose import RefineOptions
+from ..registry import RENAMED_OPTIONS as RENAMED
+from ..robust.choose import ChooseOptions
 from ..robust.inliers import TrimOptions
 from ..robust.search import ConsensusOptions
-from ..solvers.vasconcelos import solve_triples
+from ..solvers.candidates import solver_keywords
 
 
 @dataclass(frozen=True)
@@ -29,7 +29,7 @@ class LidarcamOptions:
         range_sigma_m: the range-noise std (metres); None: estimated from the scan lines (``data.lines``).
         fixed: mounting parameters held at given values (``geometry.mounting`` names, e.g. ``{"z_m": 0.12}``):
             calibrate only the others.
-        trim, consensus, score, refine, degeneracy, joint: the stages' options.
+        trim, consensus, score, choose, degeneracy, joint: the stages' options.
     """
 
     range_sigma_m: float | None = None
@@ -37,7 +37,7 @@ class LidarcamOptions:
     trim: TrimOptions = field(default_factory=TrimOptions)
     consensus: ConsensusOptions = field(default_factory=ConsensusOptions)
     score: ScoreOptions = field(default_factory=ScoreOptions)
-    refine: RefineOptions = field(default_factory=RefineOptions)
+    choose: ChooseOptions = field(default_factory=ChooseOptions)
     degeneracy: DegeneracyOptions = field(default_factory=DegeneracyOptions)
     joint: JointOptions = field(default_factory=JointOptions)
 
@@ -74,22 +74,17 @@ FLAT_KEYWORDS: dict[str, tuple[str | None, str]] = {
     "edge_sigma_m": ("score", "edge_sigma_m"), "outline_sigma_m": ("score", "outline_sigma_m"),
     "behind_penalty": ("score", "behind_penalty"), "prior": ("score", "prior"),
     "chord_sigma_m": ("score", "chord_sigma_m"), "chord_cap": ("score", "chord_cap"),
-    "margin_sigma_m": ("score", "margin_sigma_m"), "tie_log_likelihood": ("refine", "tie_log_likelihood"),
-    "n_refine": ("refine", "n_refine"), "loss": ("refine", "loss"), "f_scale_m": ("refine", "f_scale_m"),
-    "f_scale_sigmas": ("refine", "f_scale_sigmas"),
-    "max_nfev": ("refine", "max_nfev"), "polish": ("refine", "polish"),
-    "polish_threshold": ("refine", "polish_threshold"),
-    "distinct_rot_deg": ("refine", "distinct_rot_deg"), "distinct_trans_m": ("refine", "distinct_trans_m"),
+    "margin_sigma_m": ("score", "margin_sigma_m"), "tie_log_likelihood": ("choose", "tie_log_likelihood"),
+    "n_refine": ("choose", "n_refine"), "loss": ("choose", "loss"), "f_scale_m": ("choose", "f_scale_m"),
+    "f_scale_sigmas": ("choose", "f_scale_sigmas"),
+    "max_nfev": ("choose", "max_nfev"), "polish": ("choose", "polish"),
+    "polish_threshold": ("choose", "polish_threshold"),
+    "distinct_rot_deg": ("choose", "distinct_rot_deg"), "distinct_trans_m": ("choose", "distinct_trans_m"),
     "null_conditioning": ("degeneracy", "null_conditioning"), "max_scaled_sigma": ("degeneracy", "max_scaled_sigma"),
     "use_corners": ("joint", "use_corners"), "corner_sigma_px": ("joint", "corner_sigma_px"),
     "joint_f_scale_sigmas": ("joint", "f_scale_sigmas"), "joint_max_iter": ("joint", "max_iter"),
     "widen": ("joint", "widen"), "joint_outline": ("joint", "outline"), "bend": ("joint", "bend"),
 }
 """Flat keywords of ``calibrate(obs, "lidarcam", ...)`` and the (part, field) each sets (part None: the top)."""
-RENAMED = {"f_scale": "f_scale_m (metres) or f_scale_sigmas (range-noise stds)",
-           "min_conditioning": "null_conditioning (the refusal threshold; the warning's MIN_CONDITIONING is fixed)"}
-"""Option names that meant two things, and the names that replaced them (a call with the old one is refused
-with this hint rather than read one way)."""
-SOLVER_KEYWORDS = frozenset(p.name for p in inspect.signature(solve_triples).parameters.values()
-                            if p.kind is inspect.Parameter.KEYWORD_ONLY)
+SOLVER_KEYWORDS = solver_keywords("vasconcelos")
 """Keywords that go to the minimal solver (``ConsensusOptions.solver``)."""

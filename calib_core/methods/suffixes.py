@@ -9,21 +9,20 @@ import numpy as np
 from ..checks.degeneracy import explain_failure
 from ..data.lines import range_sigma
 from ..data.observations import Observations
-from ..errors import CalibrationError, SolveFailure
+from ..errors import SolveFailure
 from ..model.intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.joint import RANGE_ONLY_MODEL, JointOptions
-from ..refine.refine import F_SCALE_SIGMAS, refine
+from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV, refine
 from ..refine.uncertainty import conditioning
 from ..registry import Method, derived
 from .last_steps import fixed_calibration, fold_covariance, range_covariance, refuse_undetermined, try_joint
-from .options import RENAMED
 
 REFINE_OPTIONS = ("loss", "f_scale_m", "range_sigma_m", "max_nfev", "fixed")
 """Options of an ``X+ml`` / ``X+plane`` method that go to the refinement (metres); all others go to ``X``."""
 
 
 def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: str = "linear",
-                     f_scale_m: float | None = None, range_sigma_m: float | None = None, max_nfev: int = 100):
+                     f_scale_m: float | None = None, range_sigma_m: float | None = None, max_nfev: int = MAX_NFEV):
     """Refine ``T0`` on ``residual`` (robust scale ``f_scale_m`` metres, default ``F_SCALE_SIGMAS`` noise stds)
     and compute the covariance; returns (RefineResult, covariance, info).
 
@@ -45,15 +44,8 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
     return r, cov, info
 
 
-def _refuse_renamed(options: dict) -> None:
-    for key in RENAMED:
-        if key in options:
-            raise CalibrationError(f"option {key!r} is now {RENAMED[key]}")
-
-
 def _refine_options(options: dict) -> dict:
-    """The refinement's options popped from ``options`` (an option ``RENAMED`` is refused with its new name)."""
-    _refuse_renamed(options)
+    """The refinement's options popped from ``options`` (``calibrate`` has checked them against the schema)."""
     return {k: options.pop(k) for k in REFINE_OPTIONS if k in options}
 
 
@@ -79,7 +71,7 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
 
     what = "maximum-likelihood refinement on the range residuals" if residual == "range" else \
         "refinement on the point-to-plane distances"
-    return derived(base, suffix, func, f"{base.name}, then {what}, with covariance")
+    return derived(base, suffix, func, f"{base.name}, then {what}, with covariance", REFINE_OPTIONS)
 
 
 JOINT_OPTIONS = ("loss", "f_scale_sigmas", "range_sigma_m", "corner_sigma_px", "max_iter", "widen", "outline")
@@ -93,7 +85,6 @@ def joint_method(base: Method) -> Method:
     stds), with the extrinsic's covariance, board poses marginalised. Without corners on every board it is
     ``X+ml`` and says so in ``info["warnings"]`` (its covariance ignores the camera's noise)."""
     def func(obs: Observations, **options):
-        _refuse_renamed(options)
         jopts = {k: options.pop(k) for k in JOINT_OPTIONS if k in options}
         T0, cands, info = base.func(obs, **options)
         T0 = np.asarray(T0, float)
@@ -111,7 +102,7 @@ def joint_method(base: Method) -> Method:
                                       "warnings": [*info.get("warnings", []), warn]}
 
     return derived(base, "joint", func, f"{base.name}, then joint maximum likelihood over image corners and "
-                   "lidar ranges (board poses estimated), with covariance")
+                   "lidar ranges (board poses estimated), with covariance", JOINT_OPTIONS)
 
 
 SUFFIX_FACTORIES = {

@@ -25,6 +25,7 @@ import numpy as np
 from ..data.camera import Camera
 from ..data.lines import range_sigma, residual_sigma
 from ..data.observations import Observations
+from ..data.outcome import CovarianceModel
 from ..errors import JointError, ObservationError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.mounting import MountingPrior
@@ -38,9 +39,9 @@ from .bend import HeldDirection
 from .refine import F_SCALE_SIGMAS, robust_cost
 from .uncertainty import Crlb, inverse_information
 
-JOINT_MODEL = "joint"
-JOINT_INTRINSICS_MODEL = "joint, intrinsics uncertain"
-RANGE_ONLY_MODEL = "range-only, ignores camera noise"
+JOINT_MODEL = CovarianceModel.JOINT
+JOINT_INTRINSICS_MODEL = CovarianceModel.JOINT_INTRINSICS
+RANGE_ONLY_MODEL = CovarianceModel.RANGE_ONLY
 """The values of a result's ``info["covariance_model"]``: which likelihood produced its covariance."""
 
 CORNER_SIGMA_FLOOR_PX = 1e-3

@@ -21,7 +21,7 @@ from ..errors import SolveFailure, UncertaintyError
 from ..geometry.mounting import PARAMS, UNIT_NAMES, T_from_params, params_from_T, params_jacobian, with_units
 from ..geometry.transforms import make_T
 from ..model.residuals import RESIDUALS
-from .refine import loss_name
+from .refine import MAX_NFEV, loss_name
 from .uncertainty import refinement_covariance
 
 PLANAR_FIXED = np.array([True, True, False, False, False, True])
@@ -120,9 +120,9 @@ def _refine_free(obs: Observations, theta0: np.ndarray, free: np.ndarray, residu
     return full(sol.x), sol
 
 
-def calibrate_fixed(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.ndarray, starts: list[np.ndarray],
+def refine_free(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.ndarray, starts: list[np.ndarray],
                     *, residual: str = "range", loss: str = "linear", f_scale_m: float = 1.0,
-                    range_sigma_m: float | None = None, max_nfev: int = 100,
+                    range_sigma_m: float | None = None, max_nfev: int = MAX_NFEV,
                     fixed_sigma: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Refine the free mounting parameters from each start (its fixed parameters replaced by the given values)
     and keep the least cost; returns ``T_lidar_cam`` and ``info``.
@@ -201,7 +201,7 @@ def fixed_propagated(theta: np.ndarray, C: np.ndarray, fixed_mask: np.ndarray, f
 
 
 def fixed_starts(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.ndarray, full_start) -> list[np.ndarray]:
-    """Starts for ``calibrate_fixed``: the closed-form ``planar_start`` when roll, pitch and z are given, else
+    """Starts for ``refine_free``: the closed-form ``planar_start`` when roll, pitch and z are given, else
     ``full_start()`` (a full calibration's answer; its SolveFailure propagates)."""
     fixed_mask = np.asarray(fixed_mask, bool)
     if np.all(fixed_mask[PLANAR_FIXED]):

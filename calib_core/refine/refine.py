@@ -26,6 +26,10 @@ class Loss(StrEnum):
     ARCTAN = "arctan"
 
 
+MAX_NFEV = 100
+"""The evaluation budget of a refinement (``least_squares``' ``max_nfev``) wherever a caller gives none: the one
+default of every method and stage that refines."""
+
 F_SCALE_SIGMAS = 2.5
 """Default scale of a robust loss, in units of the range-noise std (residuals beyond 2.5 stds are down-weighted)."""
 
@@ -59,7 +63,7 @@ class RefineResult:
 
 
 def refine(data: ScanData, T0: np.ndarray, *, residual: str = "range", loss: str = "linear",
-           f_scale_m: float | None = None, max_nfev: int = 100, x_scale: np.ndarray | None = None,
+           f_scale_m: float | None = None, max_nfev: int = MAX_NFEV, x_scale: np.ndarray | None = None,
            prior: MountingPrior | None = None, prior_scale_m: float = 1.0) -> RefineResult:
     """Minimise ``sum rho(e_k^2)`` over the 6-dof extrinsic from ``T0``.
 

@@ -15,7 +15,7 @@ from ..errors import SolveFailure
 from ..model.linearised import lidarcam_linearised_many
 from ..model.residuals import perturb
 from ..model.score import ScoreOptions, evidence_cost, outline_term
-from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine, so3_left_jacobian
+from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV, Loss, RefineResult, refine, so3_left_jacobian
 from ..refine.trust_region import least_squares_many
 from .starts import DISTINCT_ROT_DEG, DISTINCT_TRANS_M, distinct_order, gauss_newton_steps, near_any
 
@@ -42,7 +42,7 @@ POLISH_METHOD = "trf"
 
 
 @dataclass(frozen=True)
-class RefineOptions:
+class ChooseOptions:
     """Choosing and refining: ``n_refine`` best distinct starts (``distinct_rot_deg``, ``distinct_trans_m``),
     maximum likelihood on the range residuals with ``loss`` at scale ``f_scale_m`` metres (default
     ``f_scale_sigmas`` range-noise stds), at most ``max_nfev`` evaluations; ``polish`` on the whole cost above
@@ -52,7 +52,7 @@ class RefineOptions:
     loss: Loss = Loss.LINEAR
     f_scale_m: float | None = None
     f_scale_sigmas: float = F_SCALE_SIGMAS
-    max_nfev: int = 100
+    max_nfev: int = MAX_NFEV
     polish: bool = True
     polish_threshold: float = POLISH_THRESHOLD
     distinct_rot_deg: float = DISTINCT_ROT_DEG
@@ -150,7 +150,7 @@ class Choice:
 
 
 def refine_start(obs: Observations, T0: np.ndarray, sigma_m: float, score: ScoreOptions,
-                 opts: RefineOptions, refined: RefineResult | None = None) -> tuple[Choice, bool]:
+                 opts: ChooseOptions, refined: RefineResult | None = None) -> tuple[Choice, bool]:
     """Refine one start on the range likelihood (``refined``: its refinement, already run on ``obs``): its
     ``Choice`` (unpolished) and whether the refined pose disagrees with the board outlines (endpoint and outline
     terms above ``opts.polish_threshold``)."""
@@ -163,7 +163,7 @@ def refine_start(obs: Observations, T0: np.ndarray, sigma_m: float, score: Score
     return Choice(float(final[0]), r, T1, False, T0), bool(off > opts.polish_threshold)
 
 
-def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
+def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOptions, opts: ChooseOptions,
                   give_up_above: float = np.inf) -> Choice:
     """``c`` polished on the whole evidence (``polish``) when that lowers its cost, else ``c``."""
     T2 = polish(obs, c.T, opts.max_nfev, score, sigma_m, give_up_above)
@@ -171,7 +171,7 @@ def polish_choice(obs: Observations, c: Choice, sigma_m: float, score: ScoreOpti
     return Choice(f2, c.refined, T2, True, c.start) if f2 < c.cost else c
 
 
-def with_ties(out: list[Choice], opts: RefineOptions, tie: float = TIE_LOG_LIKELIHOOD,
+def with_ties(out: list[Choice], opts: ChooseOptions, tie: float = TIE_LOG_LIKELIHOOD,
               weak: float = WEAK_LOG_LIKELIHOOD) -> Choice:
     """The best of ``out`` with ``ties`` (the others distinct from it, by the distinct-start rule, whose cost is
     within ``tie`` of its own) and ``runners_up`` (within ``weak``, not tied), each best first."""
@@ -187,7 +187,7 @@ def with_ties(out: list[Choice], opts: RefineOptions, tie: float = TIE_LOG_LIKEL
     return replace(best, ties=tuple(ties), runners_up=tuple(near))
 
 
-def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, opts: RefineOptions,
+def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: ScoreOptions, opts: ChooseOptions,
                       n_refine: int | None = None, refined: tuple = ()) -> Choice:
     """Score candidates ``C`` with ``score.evidence_cost`` on ``obs`` at range noise ``sigma_m``, refine the
     ``n_refine`` (default ``opts.n_refine``) best distinct ones on the range likelihood (``refine_start``; a start
@@ -207,7 +207,7 @@ def choose_and_refine(obs: Observations, C: np.ndarray, sigma_m: float, score: S
 
 
 def polish_choices(obs: Observations, refined: list[tuple[Choice, bool]], sigma_m: float, score: ScoreOptions,
-                   opts: RefineOptions) -> list[Choice]:
+                   opts: ChooseOptions) -> list[Choice]:
     """Each refined choice (best first), polished (``polish_choice``) when it disagrees with the outlines, all
     polishes at once (``polish_many``); the polish of a later start is stopped as hopeless after
     ``GIVE_UP_ITERATIONS`` iterations while its cost is above ``GIVE_UP_FACTOR`` times the best final cost of the
@@ -233,7 +233,7 @@ def polish_choices(obs: Observations, refined: list[tuple[Choice, bool]], sigma_
 
 
 def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score: ScoreOptions,
-                   opts: RefineOptions, known: tuple = ()) -> list[tuple[Choice, bool]]:
+                   opts: ChooseOptions, known: tuple = ()) -> list[tuple[Choice, bool]]:
     """``refine_start`` of each start (best first), except a start whose Gauss-Newton steps land within
     the distinct-start rule of a start already refined: it is in that start's basin (``BASIN_STEPS``). A start
     that is the optimum of a ``known`` refinement keeps it."""

@@ -12,6 +12,7 @@ from ..data.observations import Observations
 from ..errors import SolveFailure
 from ..model.plausible import implausible_reason
 from ..model.residuals import range_residuals
+from ..solvers._common import MIN_BOARDS
 from .consensus import TEST_CHI2, board_statistics, inflation
 from .inliers import TRIM_SIGMAS
 from .search import MIN_TESTABLE, Search, board_reason, rejection
@@ -59,7 +60,7 @@ def final_tests(s: Search, T: np.ndarray, *, reject: bool) -> FinalTests:
     q = board_statistics(s.obs_good, T, s.sigma_m, s.outline_sigma_m)[0]
     s2 = inflation(q[s.used])
     used = q <= TEST_CHI2 * s2 if reject and len(q) >= MIN_TESTABLE else s.used
-    if used.sum() < 3:
+    if used.sum() < MIN_BOARDS:
         raise SolveFailure(f"lidarcam: only {int(used.sum())} of {len(q)} boards pass the per-board test at the "
                            "refined extrinsic (at least 3 are needed): the boards do not agree on one extrinsic",
                            s.hyps.T)

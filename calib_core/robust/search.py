@@ -19,6 +19,7 @@ from ..errors import SolveFailure
 from ..geometry.mounting import MountingPrior
 from ..model.plausible import implausible_reason
 from ..refine.refine import F_SCALE_SIGMAS, Loss, RefineResult, refine
+from ..solvers._common import MIN_BOARDS
 from .consensus import SCORE_TAU, TEST_CHI2, board_statistics, inflation, msac_cost
 from .hypotheses import Hypotheses, hypotheses
 from .inliers import TrimReport
@@ -84,7 +85,7 @@ class Search:
         return self.obs.subset(self.good[self.used])
 
     @property
-    def all_candidates(self) -> np.ndarray:
+    def hypotheses_T(self) -> np.ndarray:
         return self.hyps.T
 
 
@@ -116,7 +117,7 @@ def local_optimise(obs: Observations, T0: np.ndarray, q0: np.ndarray, sigma_m: f
     used, T, q = (np.isfinite(q0) if start_all else q0 < SCORE_TAU), T0, q0
     s2, r = 1.0, None
     for _ in range(LO_ROUNDS):
-        if used.sum() < 3:
+        if used.sum() < MIN_BOARDS:
             break
         r = refine(obs.scan_data.of_boards(used), T, residual="range", loss=LO_LOSS,
                    f_scale_m=F_SCALE_SIGMAS * sigma_m, prior=prior, prior_scale_m=sigma_m)
@@ -140,7 +141,7 @@ def consensus_search(obs: Observations, trim: TrimReport | None, *, range_sigma_
     lines = scan_lines(obs)
     good = np.flatnonzero(lines.line_like)
     rejected = [rejection(i, f"no line fits its scan: {lines.problem[i]}") for i in np.flatnonzero(~lines.line_like)]
-    if len(good) < 3:
+    if len(good) < MIN_BOARDS:
         raise SolveFailure(f"lidarcam: only {len(good)} boards with a line-like scan (at least 3 are needed): "
                            + "; ".join(f"board {r['index']}: {r['reason']}" for r in rejected))
     obs_g = obs.subset(good)

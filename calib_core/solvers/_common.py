@@ -25,6 +25,9 @@ REASON_TRIANGLE = "scan triangle degenerate (2 area / longest side^2 < min_trian
 REASON_QUARTIC = "degenerate quartic (roots at both 0 and infinity)"
 REASON_NO_REAL = "no real solution"
 
+MIN_BOARDS = 3
+"""The fewest boards that fix the extrinsic: three planes each give a line's two constraints (the minimal solvers'
+triples, the consensus's tests, the degeneracy analysis and the methods' minimum all read this one number)."""
 MAX_SOLUTIONS = 8
 """Most solutions of one triple: 4 roots of a quartic, each with its mirror."""
 SCAN_LINE_PAIRS = np.array([[0, 1], [0, 2], [1, 2]])
@@ -74,7 +77,7 @@ class MinimalSolutions:
 
 def board_triples(n_boards: int) -> np.ndarray:
     """All ``C(n_boards, 3)`` triples of board indices, (C,3) int, lexicographic order."""
-    if n_boards < 3:
+    if n_boards < MIN_BOARDS:
         return np.zeros((0, 3), dtype=int)
     return np.array(list(itertools.combinations(range(int(n_boards)), 3)), dtype=int)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,7 +11,7 @@ from ..data.lines import scan_lines, triple_inputs
 from ..data.observations import Observations
 from ..errors import CalibrationError, SolveFailure
 from . import vasconcelos, vasconcelos_dual, zhou2014
-from ._common import board_triples
+from ._common import MIN_BOARDS, board_triples
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,11 +46,18 @@ def minimal_candidates(obs: Observations, solver: str = "vasconcelos", **solver_
 
     Raises SolveFailure for fewer than 3 boards or a board whose scan line cannot be fitted.
     """
-    if obs.n_boards < 3:
-        raise SolveFailure(f"the minimal solver needs at least 3 boards, got {obs.n_boards}")
+    if obs.n_boards < MIN_BOARDS:
+        raise SolveFailure(f"the minimal solver needs at least {MIN_BOARDS} boards, got {obs.n_boards}")
     if solver not in MINIMAL_SOLVERS:
         raise CalibrationError(f"unknown minimal solver {solver!r}; choose from {', '.join(MINIMAL_SOLVERS)}")
     scan_lines(obs).require_line_like()
     tri = board_triples(obs.n_boards)
     sol = MINIMAL_SOLVERS[solver](*triple_inputs(obs, tri), **solver_options)
     return CandidateSet(sol.T_lidar_cam, sol.triple, tri, sol.reasons)
+
+
+def solver_keywords(solver: str = "vasconcelos") -> frozenset[str]:
+    """The keyword options of the minimal solver ``solver`` (``MINIMAL_SOLVERS``): what a method that passes its
+    remaining keywords to ``minimal_candidates`` accepts from its caller."""
+    sig = inspect.signature(MINIMAL_SOLVERS[solver])
+    return frozenset(q.name for q in sig.parameters.values() if q.kind is inspect.Parameter.KEYWORD_ONLY)

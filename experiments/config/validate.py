@@ -1,46 +1,26 @@
 """Checks of a composed experiment config before any trial runs: every failure is one line naming the key.
 
 Ranges of the simulator options are ``simulate.SimOptions``' own checks; here: known method names, known
-options for each method (read from the method function's signature), counts, metric thresholds.
+options for each method (the registry's schema, as ``calibrate`` reads it), counts, metric thresholds.
 """
 
 from __future__ import annotations
 
-import inspect
 from typing import Any
 
 from calib_core import CalibrationError, get_method
-from calib_core.methods.suffixes import REFINE_OPTIONS
-from calib_core.robust.scorers import PENG2022_OPTIONS
+from calib_core.registry import accepted_options, check_options
 
 
 class ConfigError(CalibrationError, ValueError):
     """A config value that cannot run; the message names the key."""
 
 
-def _solver_options() -> set[str]:
-    from calib_core.solvers.vasconcelos import solve_triples
-
-    sig = inspect.signature(solve_triples)
-    return {p.name for p in sig.parameters.values() if p.kind is inspect.Parameter.KEYWORD_ONLY}
-
-
-def method_options(name: str) -> set[str]:
-    """The keyword options ``calibrate(obs, name, **options)`` accepts: the named parameters of the method
-    function; where it takes ``**options``, those its documented sinks take (the minimal solver's keywords, the
-    ``peng2022`` scorer's readings, the refinement options of an ``X+suffix`` variant and its base's options)."""
-    m = get_method(name)
-    base, plus, _ = name.rpartition("+")
-    if plus and base:
-        return set(REFINE_OPTIONS) | method_options(base)
-    sig = inspect.signature(m.func)
-    params = list(sig.parameters.values())[1:]        # the first is the observations
-    out = {p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
-    if any(p.kind is p.VAR_KEYWORD for p in params):
-        out |= _solver_options()
-        if name.split("/")[0] == "peng2022":
-            out |= set(PENG2022_OPTIONS)
-    return out | {"verdict"}
+def method_options(name: str) -> set[str] | None:
+    """The keyword options ``calibrate(obs, name, **options)`` accepts (the registry's schema,
+    ``calib_core.registry.accepted_options``; None: any name), plus ``verdict``."""
+    accepted = accepted_options(get_method(name))
+    return None if accepted is None else set(accepted) | {"verdict"}
 
 
 def _need(cond: bool, key: str, msg: str) -> None:
@@ -60,9 +40,10 @@ def check_methods(names, options: dict[str, Any]) -> None:
         _need(m in names, f"methods.options.{m}", f"options for a method that is not run (methods.names: "
                                                   f"{', '.join(map(str, names))})")
         _need(isinstance(opts, dict), f"methods.options.{m}", "must map option names to values")
-        unknown = sorted(set(opts) - method_options(m))
-        _need(not unknown, f"methods.options.{m}", f"unknown option(s) {unknown}; {m} takes "
-                                                   f"{', '.join(sorted(method_options(m)))}")
+        try:
+            check_options(get_method(m), set(opts) - {"verdict"})
+        except CalibrationError as err:
+            raise ConfigError(f"config key 'methods.options.{m}': {err}") from None
 
 
 def check_run(cfg) -> None:

@@ -12,8 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from calib_core import CalibrationError, calibrate
-from calib_core.entry import is_seed_method
+from calib_core import CalibrationError, calibrate, get_method
 from calib_core.geometry.metrics import is_valid, nees, pose_errors
 from calib_core.refine.joint import corner_residuals, joint_crlb
 from calib_core.refine.uncertainty import conditioning, crlb
@@ -121,7 +120,7 @@ def simulate_trial(cell: Cell, trial: int, methods: Sequence[str]) -> list[dict[
     for m in methods:
         try:
             # the verdict decides ok for our methods; for the paper's it is a warning no column reads
-            res = calibrate(obs, m, verdict=not is_seed_method(m), **cell.options_for(m))
+            res = calibrate(obs, m, verdict=not get_method(m).paper, **cell.options_for(m))
         except CalibrationError:
             raise  # unknown method or option: the configuration is wrong, every trial would fail
         except Exception as exc:  # noqa: BLE001

@@ -18,14 +18,18 @@ from .wording import cli_hint
 
 def _cmd_methods(args) -> int:
     from calib_core.registry import METHODS as table
+    from calib_core.registry import accepted_options
 
     w = max(len(n) for n in table)
-    print(f"{'method':<{w}}  min boards  origin / citation / summary / cost")
+    print(f"{'method':<{w}}  min boards  origin / citation / summary / cost / options")
     for m in table.values():
         pad = f"{'':<{w}}  {'':>10}  "
         print(f"{m.name:<{w}}  {m.min_boards:>10}  from {m.origin}: {m.citation}\n{pad}{m.summary}")
         if m.cost:
             print(f"{pad}cost: {m.cost}")
+        accepted = accepted_options(m)
+        names = "any keyword" if accepted is None else ", ".join(sorted(accepted)) or "none"
+        print(f"{pad}options: {names}{'; a mounting prior (--prior)' if m.takes_prior else ''}")
     return 0
 
 

@@ -8,8 +8,8 @@ from rigs import VERTICAL_OPTIONS, facing_board, general_rig, rig_from_boards, v
 from calib_core import calibrate
 from calib_core.checks.degeneracy import (
     AXES,
-    MIN_BOARDS,
     MIN_NORMAL_SPREAD_DEG,
+    WARN_BELOW_BOARDS,
     board_set_warnings,
     degeneracy_warnings,
     origin_jacobian,
@@ -151,8 +151,8 @@ def test_weak_for_lack_of_data_is_a_warning_not_a_refusal():
 def test_board_set_warnings_have_one_home():
     obs = general_rig(2, n_boards=6)
     assert board_set_warnings(obs) == []
-    few = obs.subset(range(MIN_BOARDS - 1))
-    assert any(f"fewer than {MIN_BOARDS}" in w for w in board_set_warnings(few))
+    few = obs.subset(range(WARN_BELOW_BOARDS - 1))
+    assert any(f"fewer than {WARN_BELOW_BOARDS}" in w for w in board_set_warnings(few))
     vert = vertical_rig(1)
     assert any("nearly in one plane" in w for w in board_set_warnings(vert))
     par = obs.subset([0, 0, 0, 0])

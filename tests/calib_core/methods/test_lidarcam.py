@@ -338,8 +338,8 @@ def test_a_start_the_consensus_refined_keeps_its_refinement(seed):
     opts = LidarcamOptions()
     s = consensus_search(obs, None, range_sigma_m=None, outline_sigma_m=opts.score.outline_sigma_m)
     assert s.refined and all(any(np.array_equal(r.T_lidar_cam, T) for T in s.pool) for r in s.refined)
-    kept = choose_and_refine(s.obs_used, s.pool, s.sigma_m, opts.score, opts.refine, refined=s.refined)
-    again = choose_and_refine(s.obs_used, s.pool, s.sigma_m, opts.score, opts.refine)
+    kept = choose_and_refine(s.obs_used, s.pool, s.sigma_m, opts.score, opts.choose, refined=s.refined)
+    again = choose_and_refine(s.obs_used, s.pool, s.sigma_m, opts.score, opts.choose)
     e_R, e_t = pose_errors(kept.T, again.T)  # degrees, metres: a thousandth of the noise's effect or less
     assert e_R < 1e-4 and e_t < 1e-5
     assert abs(kept.cost - again.cost) < 1e-6 * max(1.0, again.cost)

@@ -1,0 +1,144 @@
+"""The result's parts as types (``CalibrationResult.outcome``): the noise estimates named by their source, the
+consensus over boards, the selection, the covariance with its model as an enum, the verdict and the warnings; read
+from the same ``info`` that the ``lidarcam.result/1`` file holds, so a loaded file gives the same parts. Metres and
+radians, except where a name says otherwise."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from enum import StrEnum
+from typing import Any
+
+
+class CovarianceModel(StrEnum):
+    """What a result's covariance models (its value is the file's ``covariance_model`` text)."""
+
+    JOINT = "joint"
+    """Image corners and ranges, board poses estimated, intrinsics taken as exact."""
+    JOINT_INTRINSICS = "joint, intrinsics uncertain"
+    """As ``JOINT``, with the stated 1-sigma of the intrinsics carried as a prior."""
+    RANGE_ONLY = "range-only, ignores camera noise"
+    """The ranges alone, the board poses taken as exact."""
+    OTHER = "other"
+    """A plugin's own wording (kept as ``Covariance.model_text``)."""
+
+
+def _float(value) -> float | None:
+    return None if value is None else float(value)
+
+
+@dataclass(frozen=True)
+class Noise:
+    """The range-noise figures of one result, each named by what it is (metres; None where not computed):
+    ``scan_lines_m`` the scan lines' residual std the search scored with, ``trimmed_m`` the pooled std of the
+    points kept after trimming, ``joint_m`` the joint model's estimate at the answer, ``verdict_spread_m`` the
+    robust spread the consistency verdict tested against (with its pose floor)."""
+
+    scan_lines_m: float | None = None
+    trimmed_m: float | None = None
+    joint_m: float | None = None
+    verdict_spread_m: float | None = None
+
+    @classmethod
+    def from_info(cls, info: dict) -> Noise:
+        if info.get("noise") is not None:  # a loaded file: the figures by name
+            return cls(**{k: _float(v) for k, v in info["noise"].items() if k in cls.__dataclass_fields__})
+        return cls(_float(info.get("sigma_m_selection")), _float((info.get("points_trimmed") or {}).get("sigma_m")),
+                   _float(info.get("range_sigma_m")), _float((info.get("verdict") or {}).get("sigma_m")))
+
+    def to_dict(self) -> dict | None:
+        """The file's optional ``noise`` field (metres by name), or None when no figure was computed."""
+        d = asdict(self)
+        return d if any(v is not None for v in d.values()) else None
+
+
+@dataclass(frozen=True)
+class Consensus:
+    """The boards the answer rests on and those left out (``{"index", "reason", "statistic"}``), the points
+    trimmed, and how many hypotheses the search drew (None where the method has no search)."""
+
+    boards_used: tuple[int, ...] | None = None
+    boards_rejected: tuple[dict, ...] = ()
+    points_trimmed: int = 0
+    hypotheses: int | None = None
+
+    @classmethod
+    def from_info(cls, info: dict) -> Consensus:
+        used = info.get("boards_used")
+        return cls(None if used is None else tuple(int(i) for i in used),
+                   tuple(dict(r) for r in info.get("boards_rejected", [])),
+                   int((info.get("points_trimmed") or {}).get("total", 0)),
+                   (info.get("consensus") or {}).get("n_hypotheses"))
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The chosen answer's cost (its negative log-likelihood, or the method's own cost), the cost of the candidate
+    it was refined from, whether the polish moved it, and the answers a refused tie could not decide between."""
+
+    cost: float | None = None
+    start_cost: float | None = None
+    polished: bool | None = None
+    alternatives: tuple[dict, ...] = ()
+
+    @classmethod
+    def from_info(cls, info: dict) -> Selection:
+        return cls(_float(info.get("cost")), _float(info.get("score_start")), info.get("polished"),
+                   tuple(info.get("alternatives") or ()))
+
+
+@dataclass(frozen=True)
+class Covariance:
+    """The covariance's model, its text as written, how the intrinsics entered, the boards' dispersion test and the
+    likelihood's bend it holds (each a dict as in the file, or None)."""
+
+    model: CovarianceModel | None = None
+    model_text: str | None = None
+    intrinsics: str | None = None
+    dispersion: dict | None = None
+    bend: dict | None = None
+
+    @classmethod
+    def from_info(cls, info: dict) -> Covariance:
+        text = info.get("covariance_model")
+        model = None if text is None else CovarianceModel(text) if text in CovarianceModel._value2member_map_ \
+            else CovarianceModel.OTHER
+        return cls(model, None if text is None else str(text), info.get("intrinsics"), info.get("board_dispersion"),
+                   info.get("covariance_bend"))
+
+
+@dataclass(frozen=True)
+class VerdictPart:
+    """The consistency verdict of the answer: consistent (None where the method failed first), the reason, its
+    warnings and the likely causes it names."""
+
+    consistent: bool | None = None
+    reason: str | None = None
+    warnings: tuple[str, ...] = ()
+    causes: tuple[str, ...] = ()
+
+    @classmethod
+    def from_info(cls, info: dict) -> VerdictPart | None:
+        v = info.get("verdict")
+        if v is None:
+            return None
+        return cls(v.get("consistent"), v.get("reason"), tuple(v.get("warnings", ())), tuple(v.get("causes", ())))
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Every part of a result beside the extrinsic and its covariance matrix."""
+
+    noise: Noise
+    consensus: Consensus
+    selection: Selection
+    covariance: Covariance
+    verdict: VerdictPart | None
+    warnings: tuple[str, ...]
+    residual_rms: dict[str, Any] | None = None
+
+    @classmethod
+    def from_info(cls, info: dict) -> Outcome:
+        return cls(Noise.from_info(info), Consensus.from_info(info), Selection.from_info(info),
+                   Covariance.from_info(info), VerdictPart.from_info(info),
+                   tuple(str(w) for w in info.get("warnings", [])), info.get("residual_rms"))

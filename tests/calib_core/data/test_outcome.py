@@ -1,0 +1,56 @@
+"""The result's typed parts (``CalibrationResult.outcome``): each noise figure named by its source, the covariance
+model as an enum, the verdict and consensus parts; the same parts after a ``lidarcam.result/1`` round trip; the
+range residual RMS before and after a refinement, in the summary."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scenes import make_observations
+
+from calib_core import calibrate
+from calib_core.data.outcome import CovarianceModel
+from calib_core.data.result import CalibrationResult
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_lidarcam_parts_name_each_noise_figure_and_survive_the_file(seed, tmp_path):
+    obs = make_observations(np.random.default_rng(900 + seed), 6, 0.02)
+    r = calibrate(obs)
+    assert r.ok
+    o = r.outcome
+    noise = (o.noise.scan_lines_m, o.noise.trimmed_m, o.noise.verdict_spread_m)
+    assert all(v is not None and 0.005 < v < 0.08 for v in noise), noise   # 20 mm noise, named by source
+    assert o.covariance.model is CovarianceModel.RANGE_ONLY             # no corners in these scenes
+    assert o.verdict is not None and o.verdict.consistent
+    assert o.consensus.boards_used == tuple(range(6)) and o.consensus.hypotheses > 0
+    r.save(tmp_path / "r.json")
+    back = CalibrationResult.load(tmp_path / "r.json").outcome
+    assert back.noise == o.noise and back.covariance.model is o.covariance.model
+    assert back.consensus.boards_used == o.consensus.boards_used and back.verdict == o.verdict
+    assert back.residual_rms == pytest.approx(o.residual_rms)
+
+
+def test_ml_refinement_never_raises_the_range_rms_and_the_summary_says_both():
+    """``X+ml`` minimises the range residuals from its base's answer: the RMS at its answer is at most the RMS at
+    the start (its base's answer), and the summary of an answered call prints both."""
+    answered = 0
+    for seed in range(6):
+        obs = make_observations(np.random.default_rng(700 + seed), 6, 0.02)
+        r = calibrate(obs, "vasconcelos+ml")
+        rms = r.info["residual_rms"]
+        assert rms["answer_m"] <= rms["start_m"] * (1 + 1e-9)
+        base = calibrate(obs, "vasconcelos")
+        assert rms["start_m"] == pytest.approx(base.info["residual_rms"]["answer_m"], rel=1e-9)
+        if r.ok:
+            answered += 1
+            line = next(s for s in r.summary_lines() if s.startswith("range residual RMS"))
+            assert f"{1000 * rms['start_m']:.1f} mm at the start" in line
+            assert f"{1000 * rms['answer_m']:.1f} mm at the answer" in line
+    assert answered >= 3
+
+
+def test_a_plugin_s_own_covariance_wording_is_kept_as_other():
+    r = CalibrationResult("x", True, np.eye(4), covariance=np.eye(6) * 1e-6, info={"covariance_model": "my lab's"})
+    assert r.outcome.covariance.model is CovarianceModel.OTHER and r.outcome.covariance.model_text == "my lab's"
+    assert r.outcome.noise.to_dict() is None and "noise" not in r.to_dict()
