@@ -42,8 +42,8 @@ def reproduce(trials: int = 100, results_dir: str = "results", n_jobs: int = -1,
         from .report import write_paper_report
 
         for sweep, cs in cells.items():
-            keys = [c.key for c in cs]
-            write_tables(rows[rows["setting_key"].isin(keys)].reset_index(drop=True), sweep, out)
+            mine = rows["sweep"].isin({c.sweep for c in cs}) & rows["setting_key"].isin([c.key for c in cs])
+            write_tables(rows[mine].reset_index(drop=True), sweep, out)  # a key may be in both sweeps
             draw_sweep(out, sweep)
         report = write_paper_report(out)
         record(out, digest)
