@@ -22,7 +22,7 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP) ## Create .venv and install lidarcam with its dev tools (~1.5 min, fresh)
 
-test: $(STAMP) ## Run the fast test suite (~2 min; SHUFFLE=seed: random order)
+test: $(STAMP) ## Run the fast test suite (~3-5 min; SHUFFLE=seed: random order)
 	$(PY) -m pytest -n 2 $(if $(SHUFFLE),--shuffle $(SHUFFLE))
 
 test-slow: $(STAMP) ## Run only the slow, opt-in tests (not measured as a whole; 100-board peng2022 ~2 min)
@@ -42,7 +42,7 @@ bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughp
 
 PRESET ?=
 TRIALS ?= 500
-reproduce-paper: $(STAMP) ## Paper's sweeps -> results/paper/ (~2 min; ~30 s when the store holds the rows); PRESET=paper-matched [TRIALS=500]: -> results/paper-matched/ (~3 min)
+reproduce-paper: $(STAMP) ## Paper's sweeps -> results/paper/ (~2 min; when the store holds the rows and nothing changed, ~5 s of CPU: no redraw); PRESET=paper-matched [TRIALS=500]: -> results/paper-matched/ (~3 min)
 ifeq ($(strip $(PRESET)),)
 	$(PY) -m experiments reproduce
 else
@@ -59,7 +59,7 @@ corner-noise: $(STAMP) ## Camera-noise sweeps (joint model over corners and rang
 	$(PY) -m experiments corner-noise --trials 25 --boards-trials 25
 
 REAL_DATA ?= ../shared/real-data
-real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; ~1.5 min)
+real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; ~0.5-3 min: 22 s idle, 173 s on shared cores)
 	$(PY) -m experiments real-data --data $(REAL_DATA)
 
 leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v2.yaml -> results/leaderboard/ (~5 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
@@ -71,7 +71,7 @@ verify-results: $(STAMP) ## Check every stored trial chunk under results/ parses
 clean-results: ## Empty the trial stores under results/ (results/*/trials: every row is recomputed on the next run; < 1 s)
 	rm -rf results/*/trials
 
-rig-like: $(STAMP) ## Every method on boards 3-8 under rig conditions (conf/preset/rig-like.yaml), write results/rig-like/ (RIG_TRIALS=200)
+rig-like: $(STAMP) ## Every method on boards 3-8 under rig conditions (conf/preset/rig-like.yaml), write results/rig-like/ (RIG_TRIALS=200; ~1 min)
 	$(PY) -m experiments rig-like --trials $(or $(RIG_TRIALS),200)
 
 robustness: $(STAMP) ## Wrong boards, outlier points, mixed pixels (experiment=outliers), write results/outliers/ (~40 s)

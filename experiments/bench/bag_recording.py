@@ -11,7 +11,6 @@ run. Wall and CPU seconds of the conversion are both reported (the machine may b
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
 import tempfile
@@ -20,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..engine.cli import finite_float, nonnegative_float, positive_float, positive_int, study_parser
 from ..engine.paths import repo_relative
 
 
@@ -84,15 +84,15 @@ def measure(args) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
-    p.add_argument("--seconds", type=float, default=120.0)
-    p.add_argument("--fps", type=float, default=30.0)
-    p.add_argument("--scan-hz", type=float, default=40.0)
-    p.add_argument("--still-s", type=float, default=2.0)
-    p.add_argument("--move-s", type=float, default=2.0)
-    p.add_argument("--noise-mm", type=float, default=10.0)
-    p.add_argument("--offset-s", type=float, default=0.03)
-    p.add_argument("--max-poses", type=int, default=20)
+    p = study_parser(__doc__)
+    p.add_argument("--seconds", type=positive_float, default=120.0)
+    p.add_argument("--fps", type=positive_float, default=30.0)
+    p.add_argument("--scan-hz", type=positive_float, default=40.0)
+    p.add_argument("--still-s", type=nonnegative_float, default=2.0)
+    p.add_argument("--move-s", type=nonnegative_float, default=2.0)
+    p.add_argument("--noise-mm", type=nonnegative_float, default=10.0)
+    p.add_argument("--offset-s", type=finite_float, default=0.03)
+    p.add_argument("--max-poses", type=positive_int, default=20)
     p.add_argument("--format", default="jpeg", choices=["raw", "png", "jpeg"])
     p.add_argument("--ros", type=int, default=1, choices=[1, 2])
     p.add_argument("--storage", default="sqlite3", choices=["sqlite3", "mcap"])

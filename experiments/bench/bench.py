@@ -15,7 +15,6 @@ Single process, run it with ``OMP_NUM_THREADS=1`` (the Makefile exports it) for 
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 
@@ -27,6 +26,7 @@ from calib_core.geometry.metrics import is_valid, pose_errors
 from simulate import SimOptions, generate
 
 from ..engine.catalog import method_order
+from ..engine.cli import int_at_least, int_list, positive_int, study_parser
 
 
 def problems(n_boards: int, count: int, seed: int = 12345) -> list:
@@ -174,27 +174,37 @@ def time_joint(n_boards: int, count: int, repeats: int, seed: int = 12345) -> di
     return {k: (float(np.median(v)) if v else float("nan")) if isinstance(v, list) else v for k, v in out.items()}
 
 
+def method_lines(rows: list[dict]) -> list[str]:
+    """The per-method table of ``time_methods`` rows, its first column as wide as the longest method name."""
+    w = max([22, *(len(r["method"]) + 2 for r in rows)])
+    return [f"  {'method':<{w}}{'median ms':>11}{'p90 ms':>10}{'runs':>7}  valid",
+            *(f"  {r['method']:<{w}}{r['median_ms']:>11.2f}{r['p90_ms']:>10.2f}{r['runs']:>7}  {r['valid']}"
+              for r in rows)]
+
+
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
-    ap.add_argument("--boards", type=int, default=8)
-    ap.add_argument("--problems", type=int, default=10)
-    ap.add_argument("--repeats", type=int, default=20)
-    ap.add_argument("--triples", type=int, default=10_000)
-    ap.add_argument("--scaling", default="8,20,40,100", help="board counts of the default method's scaling table")
-    ap.add_argument("--scaling-problems", type=int, default=3)
-    ap.add_argument("--joint-boards", type=int, nargs="*", default=[8, 40])
-    ap.add_argument("--ratio-boards", default="3,4,5,6,7,8", help="board counts of the lidarcam / peng2022 table")
-    ap.add_argument("--ratio-problems", type=int, default=10)
-    ap.add_argument("--ratio-repeats", type=int, default=3)
+    ap = study_parser(__doc__)
+    ap.add_argument("--boards", type=int_at_least(3), default=8)
+    ap.add_argument("--problems", type=positive_int, default=10)
+    ap.add_argument("--repeats", type=positive_int, default=20)
+    ap.add_argument("--triples", type=positive_int, default=10_000)
+    ap.add_argument("--scaling", type=int_list(3, empty=True), default="8,20,40,100",
+                    help="board counts of the default method's scaling table ('': none)")
+    ap.add_argument("--scaling-problems", type=positive_int, default=3)
+    ap.add_argument("--joint-boards", type=int_at_least(3), nargs="*", default=[8, 40])
+    ap.add_argument("--ratio-boards", type=int_list(3, empty=True), default="3,4,5,6,7,8",
+                    help="board counts of the lidarcam / peng2022 table ('': none)")
+    ap.add_argument("--ratio-problems", type=positive_int, default=10)
+    ap.add_argument("--ratio-repeats", type=positive_int, default=3)
     args = ap.parse_args(argv)
-    ratio_counts = [int(c) for c in args.ratio_boards.split(",") if c.strip()]
+    ratio_counts = args.ratio_boards
     if ratio_counts:
         print(f"lidarcam vs peng2022 per call, exact board poses, {args.ratio_problems} problems x "
               f"{args.ratio_repeats} repetitions each, timed alternately:")
         print(f"  {'boards':>6}{'lidarcam ms':>13}{'peng2022 ms':>13}{'ratio':>8}")
         for r in time_ratio(ratio_counts, args.ratio_problems, args.ratio_repeats):
             print(f"  {r['boards']:>6}{r['method_ms']:>13.2f}{r['reference_ms']:>13.2f}{r['ratio']:>8.1f}")
-    counts = [int(c) for c in args.scaling.split(",") if c.strip()]
+    counts = args.scaling
     if counts:
         print(f"default method (lidarcam) vs board count, {args.scaling_problems} problems each, one process:")
         print(f"  {'boards':>6}{'median s':>10}{'max s':>9}{'x 1st':>8}  valid")
@@ -203,9 +213,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     obs_list = problems(args.boards, args.problems)
     rows = time_methods(obs_list, args.repeats)
     print(f"calibrate() on {args.boards} boards, {args.problems} problems x {args.repeats} repetitions:")
-    print(f"  {'method':<22}{'median ms':>11}{'p90 ms':>10}{'runs':>7}  valid")
-    for r in rows:
-        print(f"  {r['method']:<22}{r['median_ms']:>11.2f}{r['p90_ms']:>10.2f}{r['runs']:>7}  {r['valid']}")
+    print("\n".join(method_lines(rows)))
     mt = time_minimal(obs_list, args.triples)
     print(f"minimal solver (solve_triples, one call, one core): {mt['triples']} triples in {mt['seconds']:.3f} s = "
           f"{mt['triples_per_s']:,.0f} triples/s ({mt['solutions']} real solutions)")

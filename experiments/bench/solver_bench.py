@@ -11,7 +11,6 @@ Triples: every ``C(6,3) = 20`` triple of simulated 6-board problems (the paper's
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -24,6 +23,9 @@ from calib_core.solvers._common import board_triples
 from calib_core.solvers.candidates import MINIMAL_SOLVERS
 from lidarcam.rig.markdown import md_table
 from simulate import SimOptions, generate
+
+from ..engine.cli import nonnegative_float, positive_int, study_parser
+from ..engine.keep import write_unless_timings
 
 NOISE_LEVELS_MM = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
 NEAR_DEG, NEAR_M = 1.0, 0.050
@@ -81,14 +83,14 @@ def run(n_problems: int = 50, noise_levels: Sequence[float] = NOISE_LEVELS_MM,
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "solvers.md").write_text("\n".join(lines))
+        write_unless_timings(out / "solvers.md", "\n".join(lines), columns=("us per triple",))  # times alone: kept
     return rows
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--problems", type=int, default=50)
-    ap.add_argument("--noise-mm", type=float, nargs="+", default=list(NOISE_LEVELS_MM))
+    ap = study_parser(__doc__)
+    ap.add_argument("--problems", type=positive_int, default=50)
+    ap.add_argument("--noise-mm", type=nonnegative_float, nargs="+", default=list(NOISE_LEVELS_MM))
     ap.add_argument("--out", type=Path, default=Path("results/bench"))
     a = ap.parse_args(argv)
     run(a.problems, a.noise_mm, a.out)

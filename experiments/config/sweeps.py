@@ -9,10 +9,13 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException
+from omegaconf.errors import OmegaConfBaseException
 
 from ..engine.cell import Cell
-from .overrides import check_overrides
+from .overrides import check_overrides, composition_error, override_key
 from .schema import cell_from_cfg, register_configs
+from .validate import ConfigError
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 """The Hydra config folder of the project (``conf/``)."""
@@ -37,8 +40,11 @@ def experiment_cells(experiment: str, overrides: Sequence[str] = ()) -> list[Cel
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         base = [f"experiment={experiment}", *overrides]
         check_overrides(base, lambda choices: compose(config_name="config", overrides=choices), CONF_DIR)
-        cfg = compose(config_name="config", overrides=base, return_hydra_config=True)
-        swept = {k for k, _ in (o.split("=", 1) for o in overrides)}
-        params = {k: v for k, v in (cfg.hydra.sweeper.params or {}).items() if k not in swept}
-        return [cell_from_cfg(compose(config_name="config", overrides=[*base, *combo]))
-                for combo in expand_sweep_params(params)]
+        try:
+            cfg = compose(config_name="config", overrides=base, return_hydra_config=True)
+            swept = {override_key(o) for o in overrides}
+            params = {k: v for k, v in (cfg.hydra.sweeper.params or {}).items() if k not in swept}
+            return [cell_from_cfg(compose(config_name="config", overrides=[*base, *combo]))
+                    for combo in expand_sweep_params(params)]
+        except (HydraException, OmegaConfBaseException) as err:
+            raise ConfigError(composition_error(err)) from None

@@ -138,10 +138,14 @@ def provenance(methods: Sequence[str] = ()) -> str:
     return f"{REPORT_MARK} {', '.join(parts)}."
 
 
-def write_stamped(path: str | Path, text: str, methods: Sequence[str] = ()) -> Path:
-    """Write a generated report with its provenance line at the end."""
+def write_stamped(path: str | Path, text: str, methods: Sequence[str] = (), timing_columns: Sequence[str] = (),
+                  timing_patterns: Sequence[str] = ()) -> Path:
+    """Write a generated report with its provenance line at the end; with ``timing_columns`` / ``timing_patterns``,
+    a report there that differs from it only in those timings is kept (``engine.keep``)."""
+    from .keep import write_unless_timings
+
     path = Path(path)
-    path.write_text(text.rstrip("\n") + f"\n\n{provenance(methods)}\n")
+    write_unless_timings(path, text.rstrip("\n") + f"\n\n{provenance(methods)}\n", timing_columns, timing_patterns)
     return path
 
 

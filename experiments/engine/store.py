@@ -1,12 +1,18 @@
 """The results store: per cell, ``settings.json`` and ``chunk-<first>-<last>-<methods hash>.csv`` files under
 ``<results_dir>/<sweep>/trials/<setting-key>/``, each written whole (temporary file, then rename); reading,
 checking (a damaged chunk is never read in part), and the (trial, method) pairs still to compute.
+
+Every row carries a checksum (``CHECK_COLUMN``: SHA-1 of its values as the file reads back, the code fingerprint
+aside), so a row edited or damaged after it was written -- one digit changed, one ``valid`` flipped, text or bytes
+where a number belongs -- makes its chunk damaged: moved aside and recomputed, never served.
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 import json
+import math
 import os
 import re
 import socket
@@ -15,10 +21,36 @@ from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from .cell import CODE_COLUMN, RESULT_COLUMNS, Cell, RunnerError
 from .fingerprint import changed_parts
+
+CHECK_COLUMN = "row_check"
+"""The column holding each stored row's checksum (``row_checks``), written by the store after every other column."""
+
+
+def _canonical(value) -> str:
+    """One value as the checksum sees it: numbers as 10 significant digits (the precision the store writes),
+    booleans as True/False, empty and NaN as "", anything else as its text."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        return format(float(value), ".10g")
+    return str(value)
+
+
+def row_checks(df: pd.DataFrame) -> pd.Series:
+    """Per row, the 16-hex SHA-1 of its values (columns in name order; ``CODE_COLUMN`` and ``CHECK_COLUMN`` left
+    out: a changed fingerprint makes a row stale, which recomputes it as well)."""
+    cols = sorted(c for c in df.columns if c not in (CODE_COLUMN, CHECK_COLUMN))
+    text = pd.Series([""] * len(df), index=df.index, dtype=object)
+    for c in cols:
+        text = text + "\x1f" + df[c].map(_canonical)
+    return text.map(lambda t: hashlib.sha1(t.encode()).hexdigest()[:16])
 
 
 def read_table(path: Path, text_columns: Sequence[str] = ("reason",)) -> pd.DataFrame:
@@ -42,7 +74,33 @@ def methods_tag(methods: Sequence[str]) -> str:
 _CHUNK_NAME = re.compile(r"^chunk-(\d{5,})-(\d{5,})-([0-9a-f]{6})\.csv$")
 
 
+_PARSED: dict[Path, tuple[str, pd.DataFrame]] = {}
+"""Chunk files parsed and checked in this process, keyed by path, with the SHA-1 of the bytes they had: a sweep
+parses each chunk once although pruning, scheduling and loading each look at it; a file whose bytes changed in
+any way is parsed and checked again."""
+_PARSED_MAX = 4096
+
+
 def _read_chunk(path: Path) -> pd.DataFrame:
+    """``_parse_chunk`` of ``path``, from this process's cache when the file holds the bytes parsed before."""
+    if not _CHUNK_NAME.match(path.name) or not path.is_file():
+        return _parse_chunk(path, b"")
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DamagedChunk(f"{path}: damaged chunk file (unreadable: {exc.strerror})") from None
+    digest = hashlib.sha1(raw).hexdigest()
+    hit = _PARSED.get(path)
+    if hit is not None and hit[0] == digest:
+        return hit[1].copy()
+    df = _parse_chunk(path, raw)
+    if len(_PARSED) >= _PARSED_MAX:
+        _PARSED.clear()
+    _PARSED[path] = (digest, df)
+    return df.copy()
+
+
+def _parse_chunk(path: Path, raw: bytes) -> pd.DataFrame:
     """The rows of one chunk file, checked in full: the header has the result columns; every (trial, method) of
     the name's trial range and of the methods whose hash the name carries appears exactly once; trial, method,
     ok and valid are well-formed in every row. DamagedChunk otherwise."""
@@ -52,13 +110,21 @@ def _read_chunk(path: Path) -> pd.DataFrame:
     m = _CHUNK_NAME.match(path.name)
     if not m:
         raise damaged("name is not chunk-<first>-<last>-<methods hash>.csv")
+    if not path.is_file():
+        raise damaged("not a file")
     try:
-        df = read_table(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        df = read_table(io.BytesIO(raw))
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError, OSError) as exc:
         raise damaged(f"does not parse: {str(exc).splitlines()[0][:120]}") from None
     missing = [c for c in RESULT_COLUMNS if c not in df.columns and c != CODE_COLUMN]
     if missing:
         raise damaged(f"missing columns {missing[:4]}")
+    if CHECK_COLUMN not in df:
+        raise damaged(f"no {CHECK_COLUMN!r} column (written before rows carried checksums)")
+    bad = np.flatnonzero(row_checks(df).to_numpy() != df[CHECK_COLUMN].astype(str).to_numpy())
+    if bad.size:
+        raise damaged(f"{bad.size} row(s) fail their checksum, the first on line {bad[0] + 2} (edited or damaged)")
+    df = df.drop(columns=CHECK_COLUMN)
     if CODE_COLUMN in df and not df[CODE_COLUMN].map(lambda v: isinstance(v, str) and ":" in v).all():
         raise damaged(f"a row without its {CODE_COLUMN!r} (cut short?)")
     first, last = int(m.group(1)), int(m.group(2))
@@ -151,11 +217,19 @@ def _tmp_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
 
 
+def _csv_text(df: pd.DataFrame) -> str:
+    return df.to_csv(index=False, float_format="%.10g", lineterminator="\n")
+
+
 def _write_atomic(df: pd.DataFrame, path: Path) -> None:
-    """Write whole or not at all: a temporary file in the same folder, flushed to disk, then renamed."""
+    """Write whole or not at all: a temporary file in the same folder, flushed to disk, then renamed. Each row
+    gets its checksum over its values as they read back from the file (``row_checks``)."""
+    df = df.drop(columns=CHECK_COLUMN, errors="ignore")
+    back = read_table(io.StringIO(_csv_text(df)))
+    df = df.assign(**{CHECK_COLUMN: row_checks(back).to_numpy()})
     tmp = _tmp_name(path)
     with open(tmp, "w", newline="") as fh:
-        df.to_csv(fh, index=False, float_format="%.10g")
+        fh.write(_csv_text(df))
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, path)
@@ -171,7 +245,12 @@ def write_chunk(cell: Cell, trials: Sequence[int], methods: Sequence[str], rows:
 
 
 def prepare_cell(cell: Cell) -> None:
-    """The cell's folder and its ``settings.json`` (written once, whole or absent)."""
+    """The cell's folder and its ``settings.json`` (written once, whole or absent); RunnerError when the results
+    folder, or a folder on the way to the cell's, is not a folder."""
+    for p in (cell.dir, *cell.dir.parents):
+        if p.exists() and not p.is_dir():
+            raise RunnerError(f"{p}: not a folder (the results folder holds the trial store: "
+                              f"--results / results_dir={cell.results_dir})")
     cell.dir.mkdir(parents=True, exist_ok=True)
     settings = cell.dir / "settings.json"
     if not settings.exists():

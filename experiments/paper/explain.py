@@ -13,7 +13,6 @@ at 4 and 6 boards and 20 and 30 mm). Writes into ``<results>/explain/``: ``summa
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,8 +27,10 @@ import pandas as pd  # noqa: E402
 from calib_core.methods.ablations import ABLATIONS, INVARIANT, SCALE_ONLY  # noqa: E402
 from lidarcam.rig.markdown import md_table  # noqa: E402
 
+from ..config.overrides import refuse_flag_overrides
 from ..config.sweeps import experiment_cells  # noqa: E402
 from ..engine.catalog import method_colour, method_label, method_order  # noqa: E402
+from ..engine.cli import n_jobs, positive_int, study_parser
 from ..engine.fingerprint import write_stamped
 from ..engine.runner import run_cells  # noqa: E402
 from ..engine.store import load_cell  # noqa: E402
@@ -254,13 +255,14 @@ def explain(ablation_trials: int = 1000, sens_trials: int = 40, results_dir: str
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to every experiment")
-    ap.add_argument("--ablation-trials", type=int, default=1000)
-    ap.add_argument("--sens-trials", type=int, default=40, help="trials per sensitivity point (10-min budget)")
+    ap.add_argument("--ablation-trials", type=positive_int, default=1000)
+    ap.add_argument("--sens-trials", type=positive_int, default=40, help="trials per sensitivity point (10-min budget)")
     ap.add_argument("--experiments", nargs="+", default=list(EXPERIMENTS), choices=EXPERIMENTS)
     ap.add_argument("--results", default="results")
-    ap.add_argument("--n-jobs", type=int, default=-1)
+    ap.add_argument("--n-jobs", type=n_jobs, default=-1)
     a = ap.parse_args(argv)
+    refuse_flag_overrides(a.overrides, {"results_dir": "--results", "n_trials": "--ablation-trials and --sens-trials"})
     r = explain(a.ablation_trials, a.sens_trials, a.results, a.n_jobs, a.overrides, a.experiments)
     print(f"{r['cells']} settings solved in {r['run_s']:.1f} s, {r['total_s']:.1f} s in all. Report: {r['report']}")

@@ -11,7 +11,6 @@ resumes. Intervals: paired bootstrap over trials (``paper.claim_stats``), verdic
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 from dataclasses import replace
@@ -23,6 +22,7 @@ from lidarcam.rig.markdown import md_table
 
 from ..config.sweeps import experiment_cells
 from ..engine.catalog import method_label
+from ..engine.cli import n_jobs, nonnegative_int, positive_int, study_parser
 from ..engine.fingerprint import write_stamped
 from ..engine.runner import run_cells
 from ..engine.store import load_cell
@@ -94,10 +94,10 @@ def report_lines(out: Path, trials: int, more_trials: int, seconds: float) -> li
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--trials", type=int, default=500, help="trials at 3 and 4 boards")
-    ap.add_argument("--more-boards-trials", type=int, default=100, help="trials at 5-8 boards (0: skip)")
+    ap = study_parser(__doc__)
+    ap.add_argument("--trials", type=positive_int, default=500, help="trials at 3 and 4 boards")
+    ap.add_argument("--more-boards-trials", type=nonnegative_int, default=100, help="trials at 5-8 boards (0: skip)")
     ap.add_argument("--results", default="results")
-    ap.add_argument("--n-jobs", type=int, default=-1)
+    ap.add_argument("--n-jobs", type=n_jobs, default=-1)
     a = ap.parse_args(argv)
     print(run(a.trials, a.more_boards_trials, a.results, a.n_jobs))

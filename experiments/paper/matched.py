@@ -18,7 +18,6 @@ times of each part.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import shutil
@@ -29,8 +28,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..config.overrides import refuse_flag_overrides
 from ..config.sweeps import experiment_cells
 from ..engine.cell import Cell
+from ..engine.cli import n_jobs, nonnegative_int, positive_int, study_parser
 from ..engine.runner import run_cells
 from ..engine.store import load_cell
 from ..summary.aggregate import write_tables
@@ -136,16 +137,18 @@ def matched(preset: str = "paper-matched", trials: int = 500, compare_trials: in
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to every sweep")
     ap.add_argument("--preset", default="paper-matched", help="conf/preset/<name>.yaml")
-    ap.add_argument("--trials", type=int, default=500, help="trials per setting under the preset")
-    ap.add_argument("--compare-trials", type=int, default=500, help="trials per setting under the default (0: skip)")
+    ap.add_argument("--trials", type=positive_int, default=500, help="trials per setting under the preset")
+    ap.add_argument("--compare-trials", type=nonnegative_int, default=500,
+                    help="trials per setting under the default (0: skip)")
     ap.add_argument("--results", default="results")
-    ap.add_argument("--n-jobs", type=int, default=-1)
+    ap.add_argument("--n-jobs", type=n_jobs, default=-1)
     ap.add_argument("--no-run", action="store_true", help="tables and report of the stored trials only")
     ap.add_argument("--compare-from", default=None, help="take the default's tables from this folder instead")
     a = ap.parse_args(argv)
+    refuse_flag_overrides(a.overrides, {"results_dir": "--results", "n_trials": "--trials and --compare-trials"})
     r = matched(a.preset, a.trials, a.compare_trials, a.results, a.n_jobs, a.overrides, not a.no_run,
                 a.compare_from)
     print(", ".join(f"{k} {v:.1f}" for k, v in r.items() if k.endswith("_s")))

@@ -10,7 +10,6 @@ value and interval) and ``REPORT.md``.
 
 from __future__ import annotations
 
-import argparse
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -20,6 +19,8 @@ import pandas as pd
 from lidarcam.rig.markdown import md_table
 
 from ..engine.catalog import method_label
+from ..engine.cell import RunnerError
+from ..engine.cli import study_parser
 from ..engine.fingerprint import write_stamped
 from ..summary.aggregate import load_summary, load_trials
 from ..summary.figures import PAPER_SWEEPS
@@ -225,6 +226,9 @@ def edge_lines(search_dir: Path, conf) -> list[str]:
 
 
 def build(tables: Path, preset: str, search_dir: Path) -> str:
+    if not any((tables / f"summary_{sw}.csv").is_file() for sw in PAPER_SWEEPS):
+        raise RunnerError(f"{tables}: no summary_<sweep>.csv (run `python -m experiments matched` first, or give "
+                          "--tables the folder of the preset's tables)")
     presets = [preset] + (["default"] if (tables / "default" / "summary_boards.csv").exists() else [])
     folders = {preset: tables, **({"default": tables / "default"} if "default" in presets else {})}
     ct = claims_table(folders)
@@ -305,7 +309,7 @@ def write_matched_report(tables: str | Path, preset: str, search_dir: str | Path
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("--tables", default="results/paper-matched")
     ap.add_argument("--preset", default="paper-matched")
     ap.add_argument("--search", default="results/search")

@@ -9,7 +9,6 @@ The claims are data (``experiments.paper.claims``), judged on the point values o
 
 from __future__ import annotations
 
-import argparse
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -22,6 +21,8 @@ from calib_core.geometry.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M
 from lidarcam.rig.markdown import md_table
 
 from ..engine.catalog import method_label, method_order
+from ..engine.cell import RunnerError
+from ..engine.cli import study_parser
 from ..engine.fingerprint import write_stamped
 from ..summary.aggregate import load_settings, load_summary
 from ..summary.figures import PAPER_SWEEPS
@@ -244,7 +245,8 @@ def build_paper_report(tables: str | Path) -> str:
             sweeps[sweep] = load_summary(tables, sweep)
             settings[sweep] = load_settings(tables, sweep)
     if not sweeps:
-        raise FileNotFoundError(f"no summary_<sweep>.csv under {tables}: run experiments.summary.aggregate first")
+        raise RunnerError(f"{tables}: no summary_<sweep>.csv (run `python -m experiments reproduce` first, or give "
+                          "--tables the folder of the tables)")
     verdicts = check_claims(tables, sweeps)
     counts = pd.Series([v.verdict for v in verdicts]).value_counts()
     n_trials = sorted({int(n) for s in sweeps.values() for n in s["n_trials"].unique()})
@@ -301,6 +303,6 @@ def write_paper_report(tables: str | Path) -> Path:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("--tables", default="results/paper", help="folder of the summary tables")
     print(write_paper_report(ap.parse_args(argv).tables))

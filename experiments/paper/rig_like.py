@@ -16,7 +16,6 @@ NEES), the figure ``figures/rig_like.png`` and ``REPORT.md``. Valid: the paper's
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -27,6 +26,7 @@ from lidarcam.rig.markdown import md_table, num
 
 from ..config.sweeps import experiment_cells
 from ..engine.catalog import method_colour, method_label, method_order
+from ..engine.cli import n_jobs, positive_int, study_parser
 from ..engine.fingerprint import write_stamped
 from ..engine.runner import run_cells
 from ..engine.store import load_cell
@@ -167,10 +167,10 @@ def run(trials: int, results_dir: str, n_jobs: int, compute: bool = True, system
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
-    ap.add_argument("--trials", type=int, default=200)
+    ap = study_parser(__doc__)
+    ap.add_argument("--trials", type=positive_int, default=200)
     ap.add_argument("--results", default="results")
-    ap.add_argument("--n-jobs", type=int, default=-1)
+    ap.add_argument("--n-jobs", type=n_jobs, default=-1)
     ap.add_argument("--stored", action="store_true", help="only tabulate the trials already stored (no runs)")
     ap.add_argument("--systematic", choices=("rig", "none"), default="rig",
                     help="the per-board systematic range error (conf/systematic/): the preset's, or none")

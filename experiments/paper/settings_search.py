@@ -19,7 +19,6 @@ Writes ``<results>/search/``: ``points_<stage>.csv`` (settings, objective per Zh
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import time
@@ -34,6 +33,7 @@ from simulate import SimOptions
 
 from ..config.sweeps import CONF_DIR, experiment_cells
 from ..engine.cell import Cell
+from ..engine.cli import n_jobs, positive_int, study_parser
 from ..engine.runner import run_cells
 from ..engine.store import load_cell
 from ..summary.figures import PAPER_SWEEPS
@@ -224,15 +224,15 @@ def search(stage: str = "all", coarse_trials: int | None = None, fine_trials: in
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("--stage", choices=("coarse", "fine", "sensitivity", "all"), default="all")
-    ap.add_argument("--coarse-trials", type=int, default=None, help="trials per coarse point (config: 16)")
-    ap.add_argument("--fine-trials", type=int, default=None, help="trials per fine point (config: 1000)")
-    ap.add_argument("--best", type=int, default=None, help="coarse points taken to the fine stage (config: 3)")
-    ap.add_argument("--sensitivity-trials", type=int, default=None,
+    ap.add_argument("--coarse-trials", type=positive_int, default=None, help="trials per coarse point (config: 16)")
+    ap.add_argument("--fine-trials", type=positive_int, default=None, help="trials per fine point (config: 1000)")
+    ap.add_argument("--best", type=positive_int, default=None, help="coarse points taken to the fine stage (config: 3)")
+    ap.add_argument("--sensitivity-trials", type=positive_int, default=None,
                     help="trials per point of the one-at-a-time lines through the winner (config: 100)")
     ap.add_argument("--results", default="results")
-    ap.add_argument("--n-jobs", type=int, default=-1)
+    ap.add_argument("--n-jobs", type=n_jobs, default=-1)
     ap.add_argument("--write-preset", action="store_true", help="write conf/preset/paper-matched.yaml")
     a = ap.parse_args(argv)
     r = search(a.stage, a.coarse_trials, a.fine_trials, a.best, a.results, a.n_jobs, a.write_preset,

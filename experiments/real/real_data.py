@@ -17,7 +17,8 @@ one holding none of the sets, is an error (one line, exit 2) and nothing is writ
 
 from __future__ import annotations
 
-import argparse
+import contextlib
+import io
 import json
 import time
 from dataclasses import replace
@@ -37,7 +38,9 @@ from lidarcam.rig.intrinsics import format_intrinsics, refit_camera
 from lidarcam.rig.markdown import md_table
 from lidarcam.rig.report import capture_verdict, save_overlay
 
+from ..engine.cli import nonnegative_int, positive_int, study_parser
 from ..engine.fingerprint import write_stamped
+from ..engine.keep import write_json_unless_timings
 from ..engine.paths import repo_relative
 from . import real_subsets as sub
 from .real_eval import (
@@ -49,6 +52,9 @@ from .real_eval import (
 )
 
 ROOT = Path(__file__).resolve().parents[2]
+REPORT_TIMING_COLUMNS = ("time (s)",)
+REPORT_TIMING_PATTERNS = (r"\(\S+: \d+ s in one worker\)", r"Total: \d+ s wall")
+"""What differs between two runs of unchanged code in REPORT.md: the time columns and the time sentences."""
 METHODS = ("zhang_pless_linear", "zhang_pless", "vasconcelos", "peng2022", "lidarcam")
 OVERLAY_METHOD = "lidarcam"
 SHORT = {ps.EDENSHIN: "edenshin", ps.KAZMIERCZAK: "kazmierczak", ps.NOWICKI: "nowicki", ps.ACFR: "acfr",
@@ -289,17 +295,24 @@ def run_set(name: str, folder: Path, out: Path, n_subsets: int, n_jobs: int) -> 
     return md, summary
 
 
-def _timed_set(name: str, folder: Path, out: Path, n_subsets: int) -> tuple[list[str], dict]:
-    """``run_set`` in one worker, timed; an import failure is the section's one line."""
+def _timed_set(name: str, folder: Path, out: Path, n_subsets: int) -> tuple[str, list[str], dict, str]:
+    """``run_set`` in one worker, timed; an import failure is the section's one line. Returns the name, the
+    section, the summary and what the run printed (held back, so that the parent prints each set's lines under
+    its own heading whole, not interleaved with another worker's)."""
     t1 = time.perf_counter()
-    print(f"== {name}", flush=True)
-    try:
-        section, summary = run_set(name, folder, out, n_subsets, n_jobs=1)
-    except DatasetError as err:
-        section, summary = [f"## {name}", "", f"Import failed: {err}", ""], {"error": str(err)}
+    log = io.StringIO()
+    with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+        try:
+            section, summary = run_set(name, folder, out, n_subsets, n_jobs=1)
+        except DatasetError as err:
+            section, summary = [f"## {name}", "", f"Import failed: {err}", ""], {"error": str(err)}
     summary["seconds"] = time.perf_counter() - t1
-    print(f"== {name}: {summary['seconds']:.0f} s", flush=True)
-    return section, summary
+    return name, section, summary, log.getvalue()
+
+
+def print_set(name: str, seconds: float, log: str) -> None:
+    """One data set's block: its heading, the lines its run printed, its time."""
+    print("\n".join([f"== {name}", *log.rstrip("\n").splitlines(), f"== {name}: {seconds:.0f} s"]), flush=True)
 
 
 def present_sets(data: Path) -> list[str]:
@@ -316,11 +329,12 @@ def present_sets(data: Path) -> list[str]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("--data", default=str(ROOT.parent / "shared" / "real-data"), help="folder of the data sets")
     ap.add_argument("--out", default=str(ROOT / "results" / "real"), help="output folder")
-    ap.add_argument("--subsets", type=int, default=sub.N_SUBSETS, help="random subsets per board count (0: none)")
-    ap.add_argument("--jobs", type=int, default=2, help="parallel workers (one data set each at a time)")
+    ap.add_argument("--subsets", type=nonnegative_int, default=sub.N_SUBSETS,
+                    help="random subsets per board count (0: none)")
+    ap.add_argument("--jobs", type=positive_int, default=2, help="parallel workers (one data set each at a time)")
     args = ap.parse_args(argv)
     data, out = Path(args.data), Path(args.out)
     present = present_sets(data)
@@ -334,8 +348,11 @@ def main(argv=None) -> int:
     for n in LOADERS:
         if n not in present:
             print(f"skipped {n}: {repo_relative(data / n)} not found", flush=True)
-    done = dict(zip(present, Parallel(n_jobs=args.jobs)(delayed(_timed_set)(n, data / n, out, args.subsets)
-                                                         for n in present), strict=True))
+    done = {}
+    for name, section, summ, log in Parallel(n_jobs=args.jobs, return_as="generator_unordered")(
+            delayed(_timed_set)(n, data / n, out, args.subsets) for n in present):
+        print_set(name, summ["seconds"], log)
+        done[name] = section, summ
     summary = {}
     for name in LOADERS:
         if name not in done:
@@ -344,7 +361,9 @@ def main(argv=None) -> int:
         section, summary[name] = done[name]
         md += section + [f"({name}: {summary[name]['seconds']:.0f} s in one worker)", ""]
     md += [f"Total: {time.perf_counter() - t0:.0f} s wall ({args.jobs} workers, one data set each at a time)."]
-    write_stamped(out / "REPORT.md", "\n".join(md) + "\n")
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str) + "\n")
+    # timings alone differ between runs: a report that differs only in them is kept as it is
+    write_stamped(out / "REPORT.md", "\n".join(md) + "\n", timing_columns=REPORT_TIMING_COLUMNS,
+                  timing_patterns=REPORT_TIMING_PATTERNS)
+    write_json_unless_timings(out / "summary.json", summary, keys=("seconds",))
     print(f"wrote {out / 'REPORT.md'} ({time.perf_counter() - t0:.0f} s)")
     return 0

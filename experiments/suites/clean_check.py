@@ -9,11 +9,12 @@ Only absolute imports of ``calib_core`` and ``simulate``: run as a script agains
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
+
+from ..engine.cli import int_list, positive_int, study_parser
 
 
 def clean_check(trials: int, boards: Sequence[int] = (3, 4, 5, 6, 7, 8), method: str = "lidarcam") -> pd.DataFrame:
@@ -53,9 +54,9 @@ def clean_check(trials: int, boards: Sequence[int] = (3, 4, 5, 6, 7, 8), method:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
-    ap.add_argument("--trials", type=int, default=100)
-    ap.add_argument("--boards", default="3,4,5,6,7,8")
+    ap = study_parser(__doc__)
+    ap.add_argument("--trials", type=positive_int, default=100)
+    ap.add_argument("--boards", type=int_list(3), default="3,4,5,6,7,8", help="board counts (3 or more each)")
     args = ap.parse_args(argv)
-    df = clean_check(args.trials, [int(b) for b in args.boards.split(",")])
+    df = clean_check(args.trials, args.boards)
     print(df.to_string(index=False, float_format=lambda x: f"{x:.3f}"))

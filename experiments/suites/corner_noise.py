@@ -14,7 +14,6 @@ covariance. Writes into ``<results>/corner_noise/``: ``summary_*.csv`` / ``trial
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,8 +27,10 @@ import pandas as pd  # noqa: E402
 
 from lidarcam.rig.markdown import md_table, num  # noqa: E402
 
+from ..config.overrides import refuse_flag_overrides
 from ..config.sweeps import experiment_cells  # noqa: E402
 from ..engine.catalog import PAPER_METHODS, method_colour, method_label, method_order  # noqa: E402
+from ..engine.cli import n_jobs, positive_int, study_parser
 from ..engine.fingerprint import write_stamped
 from ..engine.runner import run_cells  # noqa: E402
 from ..engine.store import load_cell  # noqa: E402
@@ -163,12 +164,13 @@ def corner_noise(trials: int = 100, boards_trials: int = 100, results_dir: str =
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to both experiments")
-    ap.add_argument("--trials", type=int, default=100, help="trials per corner-noise point")
-    ap.add_argument("--boards-trials", type=int, default=100, help="trials per board count at 0.5 px")
+    ap.add_argument("--trials", type=positive_int, default=100, help="trials per corner-noise point")
+    ap.add_argument("--boards-trials", type=positive_int, default=100, help="trials per board count at 0.5 px")
     ap.add_argument("--results", default="results")
-    ap.add_argument("--n-jobs", type=int, default=-1)
+    ap.add_argument("--n-jobs", type=n_jobs, default=-1)
     a = ap.parse_args(argv)
+    refuse_flag_overrides(a.overrides, {"results_dir": "--results", "n_trials": "--trials and --boards-trials"})
     r = corner_noise(a.trials, a.boards_trials, a.results, a.n_jobs, a.overrides)
     print(f"done in {r['total_s']:.1f} s. Report: {r['report']}")

@@ -16,29 +16,32 @@ table), ``summary_<suite>.csv`` (per setting x method, ``experiments.summary.agg
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import os
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
+import yaml
 from hydra import compose, initialize_config_dir
+from hydra.errors import HydraException
 from omegaconf import OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
-from calib_core import CalibrationError, LidarcamError, calibrate, load_observations
+from calib_core import CalibrationError, calibrate, load_observations
 from calib_core.data.io import OBS_SCHEMA
 from calib_core.plugins import load_plugins
 from calib_core.registry import METHODS, get_method
 
-from ..config.overrides import check_overrides
+from ..config.overrides import check_overrides, composition_error, refuse_flag_overrides
 from ..config.schema import register_configs
 from ..config.sweeps import CONF_DIR, experiment_cells
+from ..config.validate import ConfigError
 from ..engine.cell import Cell, resolve_methods
+from ..engine.cli import n_jobs, positive_int, study_parser
 from ..engine.fingerprint import write_stamped
 from ..engine.paths import repo_relative
 from ..engine.runner import run_cells
@@ -67,10 +70,24 @@ class Suite:
 
 
 def load_suites(path: str | Path) -> tuple[str, list[Suite]]:
-    """The version and the suites of a leaderboard suite file."""
-    d = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
-    suites = [Suite(name=k, **{**v, "overrides": tuple(v.get("overrides") or ())})
-              for k, v in (d.get("suites") or {}).items()]
+    """The version and the suites of a leaderboard suite file; ConfigError naming the file and what is wrong
+    (absent, not YAML text, not a mapping of suites, an unknown field)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such suite file (--suite)")
+    try:
+        d = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+    except (UnicodeDecodeError, yaml.YAMLError, OmegaConfBaseException) as exc:
+        raise ConfigError(f"{path}: not a YAML suite file ({' '.join(str(exc).split())[:120]})") from None
+    if not isinstance(d, dict) or not isinstance(d.get("suites") or {}, dict):
+        raise ConfigError(f"{path}: a suite file is a mapping with a 'suites' mapping (see {DEFAULT_SUITE.name})")
+    suites = []
+    fields = set(Suite.__dataclass_fields__) - {"name"}
+    for k, v in (d.get("suites") or {}).items():
+        if not isinstance(v, dict) or set(v) - fields:
+            extra = sorted(set(v) - fields) if isinstance(v, dict) else v
+            raise ConfigError(f"{path}: suite {k!r}: unknown field(s) {extra} (fields: {', '.join(sorted(fields))})")
+        suites.append(Suite(name=str(k), **{**v, "overrides": tuple(v.get("overrides") or ())}))
     return str(d.get("version", "?")), suites
 
 
@@ -80,7 +97,10 @@ def chosen_methods(overrides: Sequence[str]) -> tuple[tuple[str, ...], tuple[str
     register_configs()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         check_overrides(overrides, lambda choices: compose(config_name="config", overrides=choices), CONF_DIR)
-        cfg = compose(config_name="config", overrides=list(overrides))
+        try:
+            cfg = compose(config_name="config", overrides=list(overrides))
+        except (HydraException, OmegaConfBaseException) as err:
+            raise ConfigError(composition_error(err)) from None
     plugins = tuple(str(p) for p in cfg.methods.get("plugins", None) or ())
     load_plugins(plugins)
     keys = {o.split("=", 1)[0].lstrip("+~") for o in overrides}
@@ -246,23 +266,20 @@ def build_leaderboard_report(table: pd.DataFrame, real: pd.DataFrame | None, inf
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("overrides", nargs="*", help="Hydra overrides applied to every suite")
     ap.add_argument("--suite", default=str(DEFAULT_SUITE), help="suite file (default: %(default)s)")
     ap.add_argument("--full", action="store_true", help="full trial counts (the suite file's full_trials)")
-    ap.add_argument("--trials", type=int, help="trials per setting in every suite (overrides the suite file)")
+    ap.add_argument("--trials", type=positive_int, help="trials per setting in every suite (overrides the suite file)")
     ap.add_argument("--methods", help="comma-separated methods (default: every registered one)")
     ap.add_argument("--results", default="results", help="results store (default: results)")
     ap.add_argument("--out", help="where the leaderboard goes (default: <results>/leaderboard)")
-    ap.add_argument("--n-jobs", type=int, default=-1, help="worker processes (-1: all cores)")
+    ap.add_argument("--n-jobs", type=n_jobs, default=-1, help="worker processes (-1: all cores)")
     a = ap.parse_args(argv)
+    refuse_flag_overrides(a.overrides, {"results_dir": "--results", "n_trials": "--trials"})
     overrides = list(a.overrides) + ([_names_override(a.methods.split(","))] if a.methods else [])
-    try:
-        r = run_leaderboard(a.suite, full=a.full, trials=a.trials, overrides=overrides, results_dir=a.results,
-                            out_dir=a.out, n_jobs=a.n_jobs)
-    except LidarcamError as err:  # a plugin that does not load, an unknown method: one line, exit 2
-        print(f"experiments.suites.leaderboard: error: {err}", file=sys.stderr)
-        raise SystemExit(2) from None
+    r = run_leaderboard(a.suite, full=a.full, trials=a.trials, overrides=overrides, results_dir=a.results,
+                        out_dir=a.out, n_jobs=a.n_jobs)  # a plugin that does not load: one line, exit 2 (run_main)
     for line in r["skipped"]:
         print(f"suite {line}")
     print(f"{len(r['methods'])} methods on {', '.join(r['cells']) or 'no suite'}: {r['rows_computed']} rows computed "

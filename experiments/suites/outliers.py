@@ -13,7 +13,6 @@ boards caught, the share of trials naming every wrong board, and the share of tr
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from lidarcam.rig.markdown import md_table, pct
 
 from ..config.sweeps import experiment_cells
 from ..engine.catalog import method_colour, method_label, method_order
+from ..engine.cli import n_jobs, nonnegative_int, positive_int, study_parser
 from ..engine.fingerprint import write_stamped
 from ..engine.runner import run_cells
 from ..engine.store import load_cell
@@ -130,12 +130,12 @@ def run(trials: int, results_dir: str, n_jobs: int, chunk_size: int = 0, compute
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
-    ap.add_argument("--trials", type=int, default=100)
+    ap = study_parser(__doc__)
+    ap.add_argument("--trials", type=positive_int, default=100)
     ap.add_argument("--results", default="results")
-    ap.add_argument("--n-jobs", type=int, default=-1)
+    ap.add_argument("--n-jobs", type=n_jobs, default=-1)
     ap.add_argument("--clean", action="store_true", help="only the clean-data check (printed)")
-    ap.add_argument("--chunk-size", type=int, default=0, help="trials per stored chunk (0: automatic)")
+    ap.add_argument("--chunk-size", type=nonnegative_int, default=0, help="trials per stored chunk (0: automatic)")
     ap.add_argument("--stored", action="store_true", help="only tabulate the trials already stored (no runs)")
     args = ap.parse_args(argv)
     if args.clean:

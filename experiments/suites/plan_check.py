@@ -15,7 +15,6 @@ cells already there (same configuration) and resumes exactly. Writes ``results/p
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import time
@@ -33,6 +32,7 @@ from calib_core.planning.views import PlanRig, Workspace, board_poses_lidar, fea
 from simulate import SimOptions, observe_poses
 from simulate.camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners
 
+from ..engine.cli import positive_float, positive_int, study_parser
 from ..engine.fingerprint import package_hash
 from ..summary.intervals import bootstrap_interval
 from .plan_report import write_plan_report
@@ -156,11 +156,11 @@ def tasks(conf) -> tuple[list[dict], dict]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("--conf", default=str(CONF), help="sizes and settings (default: %(default)s)")
     ap.add_argument("--out", default=str(OUT), help="results folder (default: %(default)s)")
-    ap.add_argument("--jobs", type=int, default=2, help="parallel workers (default: %(default)s)")
-    ap.add_argument("--scale", type=float, default=1.0, help="multiply every redraw count (e.g. 0.1 to try)")
+    ap.add_argument("--jobs", type=positive_int, default=2, help="parallel workers (default: %(default)s)")
+    ap.add_argument("--scale", type=positive_float, default=1.0, help="multiply every redraw count (e.g. 0.1 to try)")
     args = ap.parse_args(argv)
     conf = OmegaConf.load(args.conf)
     for part in ("prediction", "versus"):

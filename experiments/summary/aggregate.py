@@ -11,7 +11,6 @@ invalid (it stays in ``n_trials``); error means and medians are over the trials 
 
 from __future__ import annotations
 
-import argparse
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -20,7 +19,8 @@ import numpy as np
 import pandas as pd
 
 from ..engine.catalog import method_order
-from ..engine.cell import RESULT_COLUMNS, TIMING_COLUMNS
+from ..engine.cell import RESULT_COLUMNS, TIMING_COLUMNS, RunnerError
+from ..engine.cli import study_parser
 from ..engine.store import load_sweep, read_table
 from .intervals import wilson_interval
 
@@ -172,16 +172,27 @@ def load_settings(out_dir: str | Path, sweep: str) -> dict:
     return json.loads(path.read_text()) if path.exists() else {}
 
 
+def _table(path: Path, text_columns: Sequence[str] = ("reason",)) -> pd.DataFrame:
+    """A table this module wrote; RunnerError naming it when it is absent or does not parse."""
+    if not path.is_file():
+        raise RunnerError(f"{path}: no such table (the sweep's study writes it; "
+                          f"{'is --tables the folder of its tables?' if not path.parent.is_dir() else 'run it first'})")
+    try:
+        return read_table(path, text_columns)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError) as exc:
+        raise RunnerError(f"{path}: not a readable table ({str(exc).splitlines()[0][:120]})") from None
+
+
 def load_summary(out_dir: str | Path, sweep: str) -> pd.DataFrame:
-    return read_table(Path(out_dir) / f"summary_{sweep}.csv", ("top_failure",))
+    return _table(Path(out_dir) / f"summary_{sweep}.csv", ("top_failure",))
 
 
 def load_trials(out_dir: str | Path, sweep: str) -> pd.DataFrame:
-    return read_table(Path(out_dir) / f"trials_{sweep}.csv")
+    return _table(Path(out_dir) / f"trials_{sweep}.csv")
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("sweeps", nargs="*", default=["boards", "noise"])
     ap.add_argument("--results", default="results", help="results folder of the runner (default: results)")
     ap.add_argument("--out", default=None, help="where the tables go (default: <results>/paper)")

@@ -9,7 +9,6 @@ Errors are over the trials where a method returned a result; failures count only
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +23,7 @@ import pandas as pd  # noqa: E402
 from calib_core.geometry.metrics import VALID_MAX_ROT_DEG, VALID_MAX_TRANS_M  # noqa: E402
 
 from ..engine.catalog import method_colour, method_label, method_order  # noqa: E402
+from ..engine.cli import study_parser
 from .aggregate import load_summary, load_trials  # noqa: E402
 
 
@@ -155,7 +155,7 @@ def draw_sweep(tables_dir: str | Path, sweep: str, out_dir: str | Path | None = 
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = study_parser(__doc__)
     ap.add_argument("sweeps", nargs="*", default=["boards", "noise"])
     ap.add_argument("--tables", default="results/paper", help="folder of the summary/trial tables")
     ap.add_argument("--out", default=None, help="figure folder (default: <tables>/figures)")
