@@ -109,7 +109,7 @@ def test_cli_flags_write_the_stated_scale(tmp_path):
     assert obs.board_range_sigma_m == 0.004 and obs.subset([0, 1]).board_range_sigma_m == 0.004
     assert obs.meta["options"]["lidar_dark_offset_mm"] == 15.0
     bad = subprocess.run(cmd[:-2] + ["--board-bow-mm", "-2"], capture_output=True, text=True)
-    assert bad.returncode == 2 and "board_bow_mm" in bad.stderr and "Traceback" not in bad.stderr
+    assert bad.returncode == 2 and "--board-bow-mm" in bad.stderr and "Traceback" not in bad.stderr
 
 
 def test_the_rig_like_preset_has_them_and_systematic_none_takes_them_off():

@@ -14,7 +14,7 @@ from lidarcam.rig.plan_figure import LABEL_MERGE_M
 from lidarcam.rig.plan_rig import load_plan_rig
 from simulate import SimOptions, generate
 
-RIG_FILE = Path(__file__).resolve().parents[3] / "conf" / "plan" / "rig.yaml"
+RIG_FILE = Path(__file__).resolve().parents[3] / "lidarcam" / "rig" / "plan_template.yaml"
 QUARTER = np.array([[0.0, -1, 0, 0], [1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])   # board' -> board
 
 
