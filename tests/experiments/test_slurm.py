@@ -22,6 +22,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from experiments.engine.store import CHECK_COLUMN
+
 pytestmark = pytest.mark.slurm
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -31,7 +33,8 @@ SWEEP = {"n_trials": 10, "chunk_size": 2, "boards": (4, 6), "noises": (10, 30)} 
 # default) and is killed about 5 s later on dev/slurm's cluster (measured), with most of its trials still to do.
 CANCEL = {"n_trials": 200, "chunk_size": 10, "boards": (6,), "noises": (20,)}
 CANCEL_AT_MOST = 3  # chunks stored when the job is cancelled
-TIMING = ("seconds",)  # the one column that differs between two runs of the same settings (wall time)
+# The columns that differ between two runs of the same settings: the wall time, and the row checksum over it.
+TIMING = ("seconds", CHECK_COLUMN)
 SLURM = ("hydra/launcher=slurm", "n_jobs=1", "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1",
          "hydra.launcher.timeout_min=10")
 
