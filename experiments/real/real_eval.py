@@ -181,7 +181,7 @@ def why_off(r: dict) -> str:
                           "leave-one-out spread needs: the excess is not explained by the held-out residuals.")
 
 
-def degeneracy_verdict(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: float) -> tuple[str, bool | None]:
+def degeneracy_note(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: float) -> tuple[str, bool | None]:
     """(one sentence, determined?) from the library's information-matrix analysis."""
     d = undetermined_directions(obs, T_lidar_cam, sigma_m)
     return d.message(), d.determined

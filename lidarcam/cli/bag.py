@@ -54,18 +54,18 @@ def cmd_bag(args) -> int:
     if not conv.poses:
         print("no still frame passed: see the reasons in picking.json")
         return 1
-    print(f"capture plan: {cli_hint(_capture_verdict(conv.out, eo))}")
+    print(f"capture plan: {cli_hint(_capture_advice(conv.out, eo))}")
     return 0
 
 
-def _capture_verdict(folder, eo) -> str:
+def _capture_advice(folder, eo) -> str:
     """The capture planner's verdict on the poses written to ``folder``, extracted as ``lidarcam extract`` would."""
     from lidarcam.rig.dataset import load_dataset
     from lidarcam.rig.extract import extract
-    from lidarcam.rig.report import capture_verdict
+    from lidarcam.rig.report import capture_advice
 
     obs, _ = extract(load_dataset(folder), eo)
-    return capture_verdict(obs) if obs.n_boards else "no plan: no pose of the folder gives a board"
+    return capture_advice(obs) if obs.n_boards else "no plan: no pose of the folder gives a board"
 
 
 def add_parsers(subparsers) -> None:

@@ -81,7 +81,7 @@ def cmd_extract(args) -> int:
 
     from calib_core.data.io import save_observations
     from lidarcam.rig.extract import direction_line, extract, format_diagnostics, noise_line
-    from lidarcam.rig.report import capture_verdict
+    from lidarcam.rig.report import capture_advice
 
     from .hints import square_hint
     from .outputs import writable_file
@@ -106,7 +106,7 @@ def cmd_extract(args) -> int:
         return 1
     save_observations(obs, args.out)
     print(f"wrote {args.out} ({obs.n_boards} boards)")
-    print(f"capture plan: {cli_hint(capture_verdict(obs))}")
+    print(f"capture plan: {cli_hint(capture_advice(obs))}")
     return 0
 
 
