@@ -27,12 +27,15 @@ class DatasetError(LidarcamError, ValueError):
 
 @dataclass(frozen=True, eq=False)
 class CameraModel:
-    """Pinhole camera with OpenCV distortion.
+    """A camera as a file states it (``lidarcam.rig.camera_files``): by default pinhole with OpenCV distortion.
 
-    Attributes: ``width``, ``height`` (pixels); ``K`` 3x3 camera matrix; ``dist`` (D,) OpenCV distortion
-    coefficients (k1, k2, p1, p2[, k3, ...]); may be empty; ``std_intrinsics`` the optional 1-sigma of fx, fy, cx,
-    cy (pixels) and then of ``dist`` (OpenCV's ``stdDeviationsIntrinsics`` order, ``calib_core.data.camera.Camera``),
-    None when the source states none.
+    Attributes: ``width``, ``height`` (pixels); ``K`` 3x3 camera matrix; ``dist`` (D,) distortion coefficients of
+    the model (pinhole/radtan: OpenCV's k1, k2, p1, p2[, k3, ...]; pinhole/equidistant: k1..k4); may be empty;
+    ``std_intrinsics`` the optional 1-sigma of fx, fy, cx, cy (pixels), the model's parameters, then of ``dist``
+    (``calib_core``'s ``intrinsics`` order), None when the source states none; ``camera_model`` and
+    ``distortion_model`` Kalibr's names of the model (``calib_core.data.cameras.CAMERA_MODELS``); ``params`` the
+    values of the model's own parameters (its ``param_names``: xi for omni, xi and alpha for ds, alpha and beta for
+    eucm; unitless); ``note`` what the reader chose for the user (e.g. the camera of a several-camera camchain).
     """
 
     width: int
@@ -40,6 +43,31 @@ class CameraModel:
     K: np.ndarray
     dist: np.ndarray
     std_intrinsics: np.ndarray | None = None
+    camera_model: str = "pinhole"
+    distortion_model: str = "radtan"
+    params: tuple[float, ...] = ()
+    note: str = ""
+
+    @property
+    def name(self) -> str:
+        """The model's one-word name (``pinhole-radtan``, ``pinhole-equidistant``, ``omni-radtan``, ``ds``,
+        ``eucm``)."""
+        none = self.distortion_model == "none"
+        return self.camera_model if none else f"{self.camera_model}-{self.distortion_model}"
+
+    @property
+    def is_opencv_pinhole(self) -> bool:
+        """True for pinhole + OpenCV distortion, the model ``cv2.projectPoints`` and ``cv2.undistortPoints`` take."""
+        return (self.camera_model, self.distortion_model) == ("pinhole", "radtan")
+
+    def core(self):
+        """The ``calib_core`` camera of this model (``calib_core.data.cameras.camera_class``); raises
+        ``ObservationError`` naming the field the model refuses."""
+        from calib_core.data.cameras import camera_class
+
+        cls = camera_class(self.camera_model, self.distortion_model)
+        extra = dict(zip(cls.param_names, self.params, strict=True))
+        return cls(self.K, self.dist, self.width, self.height, self.std_intrinsics, **extra)
 
 
 @dataclass(frozen=True, eq=False)

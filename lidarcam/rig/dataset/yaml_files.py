@@ -1,4 +1,5 @@
-"""The dataset's YAML files (plain or OpenCV FileStorage): camera.yaml, board.yaml, windows.yaml,
+"""The dataset's YAML files (plain or OpenCV FileStorage): camera.yaml's OpenCV keys (``camera_files`` reads the
+file), board.yaml, windows.yaml,
 ground_truth.yaml, and the checked numeric matrices they hold."""
 
 from __future__ import annotations
@@ -98,14 +99,9 @@ def _require(data: dict, key: str, path: Path):
     return data[key]
 
 
-def load_camera(path) -> CameraModel:
-    """Read camera.yaml: ``image_width``, ``image_height``, ``camera_matrix`` (3x3), ``distortion_coefficients``."""
-    path = Path(path)
-    return camera_from_dict(read_yaml(path), path)
-
-
 def camera_from_dict(data: dict, path: Path) -> CameraModel:
-    """A CameraModel from camera.yaml's keys (already parsed); errors name ``path``."""
+    """A pinhole CameraModel from the OpenCV keys (already parsed; the checks of every form that has them, the lens
+    model left to ``lidarcam.rig.dataset.camera_files``, which reads camera files); errors name ``path``."""
     try:
         w, h = int(_require(data, "image_width", path)), int(_require(data, "image_height", path))
     except (TypeError, ValueError):
