@@ -1,0 +1,193 @@
+"""Camera files in their three forms (OpenCV keys, ROS camera_info, Kalibr camchain) read to the same intrinsics
+and the right ``calib_core`` model; a model or key the project does not know is one line naming file and key;
+an equidistant ``camera.yaml`` is the fisheye model (it was read as a pinhole); ``--refit-intrinsics`` recovers an
+equidistant camera from its corners."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calib_core.data.cameras import EUCM, Camera, DoubleSphere, Equidistant, Omni
+from lidarcam.rig.dataset import BoardSpec, CameraModel, DatasetError, camera_yaml, read_camera
+from lidarcam.rig.dataset.camera_files import camera_formats
+
+K = [[500.0, 0.0, 320.5], [0.0, 510.0, 240.25], [0.0, 0.0, 1.0]]
+FISH = [-0.01, 0.02, -0.005, 0.001]
+
+
+def _write(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def _opencv(dist, extra=""):
+    return (f"image_width: 640\nimage_height: 480\ncamera_matrix: {K}\n{extra}"
+            f"distortion_coefficients: {list(dist)}\n")
+
+
+def _ros(model, dist):
+    return ("image_width: 640\nimage_height: 480\ncamera_name: front\ncamera_matrix:\n  rows: 3\n  cols: 3\n"
+            f"  data: {sum(K, [])}\ndistortion_model: {model}\ndistortion_coefficients:\n  rows: 1\n"
+            f"  cols: {len(dist)}\n  data: {list(dist)}\nrectification_matrix:\n  rows: 3\n  cols: 3\n"
+            "  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]\nprojection_matrix:\n  rows: 3\n  cols: 4\n"
+            "  data: [500, 0, 320, 0, 0, 510, 240, 0, 0, 0, 1, 0]\n")
+
+
+def _kalibr(model, dmodel, intr, dist, name="cam0"):
+    return (f"{name}:\n  camera_model: {model}\n  intrinsics: {list(intr)}\n  distortion_model: {dmodel}\n"
+            f"  distortion_coeffs: {list(dist)}\n  resolution: [640, 480]\n  rostopic: /cam/image_raw\n")
+
+
+def _same(a: CameraModel, b: CameraModel):
+    assert (a.name, a.width, a.height) == (b.name, b.width, b.height)
+    np.testing.assert_array_equal(a.K, b.K)
+    np.testing.assert_array_equal(a.dist, b.dist)
+    np.testing.assert_array_equal(a.params, b.params)
+
+
+def test_pinhole_radtan_reads_the_same_in_every_form(tmp_path):
+    radtan = [0.1, -0.2, 0.001, -0.002]
+    cams = [read_camera(_write(tmp_path, "o.yaml", _opencv(radtan))),
+            read_camera(_write(tmp_path, "r.yaml", _ros("plumb_bob", radtan))),
+            read_camera(_write(tmp_path, "k.yaml", _kalibr("pinhole", "radtan", [500, 510, 320.5, 240.25], radtan)))]
+    for c in cams:
+        _same(c, cams[0])
+        assert isinstance(c.core(), Camera) and c.is_opencv_pinhole
+    np.testing.assert_array_equal(cams[0].dist, radtan)
+
+
+def test_equidistant_reads_the_same_in_every_form_and_is_the_fisheye_model(tmp_path):
+    cams = [read_camera(_write(tmp_path, "r.yaml", _ros("equidistant", FISH))),
+            read_camera(_write(tmp_path, "k.yaml", _kalibr("pinhole", "equidistant", [500, 510, 320.5, 240.25],
+                                                            FISH))),
+            read_camera(_write(tmp_path, "o.yaml", _opencv(FISH, "fisheye_model: 1\n")))]
+    for c in cams:
+        _same(c, cams[0])
+        lens = c.core()
+        assert isinstance(lens, Equidistant) and not c.is_opencv_pinhole
+        np.testing.assert_array_equal(lens.dist, FISH)
+        np.testing.assert_array_equal(lens.K, K)
+
+
+def test_a_dataset_camera_yaml_with_equidistant_is_not_read_as_a_pinhole(tmp_path):
+    """Before: ``distortion_model: equidistant`` was passed over and k1..k4 read as OpenCV's k1, k2, p1, p2."""
+    from lidarcam.rig.dataset import load_camera
+
+    cam = load_camera(_write(tmp_path, "camera.yaml", _ros("equidistant", FISH)))
+    assert (cam.camera_model, cam.distortion_model) == ("pinhole", "equidistant")
+    P = np.array([[0.3, -0.2, 1.0]])
+    ref = Equidistant(np.array(K), FISH, 640, 480).project(P)
+    np.testing.assert_allclose(cam.core().project(P), ref)
+
+
+@pytest.mark.parametrize("model, dmodel, intr, dist, cls, params", [
+    ("ds", "none", [-0.2, 0.6, 340, 341, 320, 240], [], DoubleSphere, {"xi": -0.2, "alpha": 0.6}),
+    ("omni", "radtan", [0.9, 700, 701, 320, 240], [-0.1, 0.02, 0.001, 0.0005], Omni, {"xi": 0.9}),
+    ("eucm", "none", [0.6, 1.1, 350, 351, 320, 240], [], EUCM, {"alpha": 0.6, "beta": 1.1}),
+    ("pinhole", "equidistant", [400, 401, 320, 240], FISH, Equidistant, {}),
+    ("pinhole", "radtan", [400, 401, 320, 240], [0.1, -0.05, 0.001, 0.002], Camera, {}),
+])
+def test_kalibr_camchains_map_to_the_right_model_and_parameters(tmp_path, model, dmodel, intr, dist, cls, params):
+    cam = read_camera(_write(tmp_path, "camchain.yaml", _kalibr(model, dmodel, intr, dist)))
+    lens = cam.core()
+    assert type(lens) is cls
+    fu, fv, pu, pv = intr[-4:]
+    np.testing.assert_array_equal(lens.K, [[fu, 0, pu], [0, fv, pv], [0, 0, 1]])
+    for name, value in params.items():
+        assert getattr(lens, name) == value
+    np.testing.assert_array_equal(lens.dist[:len(dist)], dist)
+    assert not np.any(lens.dist[len(dist):])
+    back = read_camera(_write(tmp_path, "camera.yaml", camera_yaml(cam)))   # the writer keeps every model
+    _same(back, cam)
+
+
+def test_ds_camchain_projects_as_the_double_sphere_formula(tmp_path):
+    xi, alpha, fu, fv, pu, pv = -0.2, 0.6, 340.0, 341.0, 320.0, 240.0
+    cam = read_camera(_write(tmp_path, "c.yaml", _kalibr("ds", "none", [xi, alpha, fu, fv, pu, pv], [])))
+    P = np.array([0.4, -0.3, 0.5])
+    d1 = np.linalg.norm(P)
+    w = xi * d1 + P[2]
+    den = alpha * np.sqrt(P[0] ** 2 + P[1] ** 2 + w ** 2) + (1 - alpha) * w
+    np.testing.assert_allclose(cam.core().project(P[None])[0], [fu * P[0] / den + pu, fv * P[1] / den + pv])
+
+
+def test_a_camchain_of_several_cameras_reads_cam0_with_a_note_or_the_one_named(tmp_path):
+    text = _kalibr("pinhole", "radtan", [500, 510, 320, 240], []) + \
+        _kalibr("ds", "none", [-0.2, 0.6, 340, 341, 320, 240], [], name="cam1")
+    p = _write(tmp_path, "camchain.yaml", text)
+    c0 = read_camera(p)
+    assert c0.name == "pinhole-radtan" and "cam0 read" in c0.note and "cam1" in c0.note
+    c1 = read_camera(f"{p}:cam1")
+    assert c1.name == "ds" and c1.note == ""
+    with pytest.raises(DatasetError, match="no camera 'cam2' \\(has cam0, cam1\\)"):
+        read_camera(f"{p}:cam2")
+
+
+@pytest.mark.parametrize("text, words", [
+    (_ros("fisheye", FISH), ["distortion_model", "'fisheye'", "plumb_bob, rational_polynomial, equidistant"]),
+    (_ros("equidistant", [0.1, 0.2, 0.0, 0.0, 0.1]), ["distortion_coefficients", "takes 4"]),
+    (_opencv([0.1, 0.2, 0, 0]) + "xi: 0.8\n", ["key 'xi'", "Kalibr camchain"]),
+    (_kalibr("fov", "none", [1, 2, 3, 4], []), ["cam0.camera_model", "'fov'", "pinhole, omni, ds, eucm"]),
+    (_kalibr("ds", "radtan", [-0.2, 0.6, 1, 2, 3, 4], []), ["cam0.distortion_model", "accepted: none"]),
+    (_kalibr("omni", "radtan", [500, 510, 320, 240], []), ["cam0.intrinsics", "xi, fu, fv, pu, pv"]),
+    (_kalibr("ds", "none", [-0.2, 1.5, 300, 300, 320, 240], []), ["cam0.intrinsics", "alpha"]),
+    (_kalibr("pinhole", "radtan", [500, 510, 320, 240], []).replace("  rostopic", "  focal_mm: 4\n  rostopic"),
+     ["cam0.focal_mm", "accepted: camera_model"]),
+])
+def test_an_unknown_model_or_key_is_one_line_naming_file_and_key(tmp_path, text, words):
+    p = _write(tmp_path, "camera.yaml", text)
+    with pytest.raises(DatasetError) as err:
+        read_camera(p)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(str(p))
+    for w in words:
+        assert w in msg
+
+
+def test_extract_on_a_folder_with_an_unknown_lens_model_exits_2_in_one_line(tmp_path, capsys):
+    from lidarcam.cli import main
+
+    root = tmp_path / "ds"
+    root.mkdir()
+    _write(root, "camera.yaml", _ros("kannala_brandt", FISH))
+    _write(root, "board.yaml", "cols: 6\nrows: 5\nsquare_m: 0.1\n")
+    assert main(["extract", str(root), "--out", str(tmp_path / "o.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "camera.yaml" in err and "distortion_model" in err
+    assert "Traceback" not in err
+
+
+def test_camera_formats_lists_every_model_and_form():
+    text = "\n".join(camera_formats())
+    for w in ("pinhole/equidistant", "ds/none", "eucm/none", "omni/radtan", "ROS", "Kalibr", "OpenCV keys"):
+        assert w in text
+
+
+def test_refit_recovers_an_equidistant_camera_from_its_corners():
+    from calib_core.geometry.transforms import make_T, rotvec_to_matrix
+    from lidarcam.rig.intrinsics import calibrate_equidistant, format_intrinsics
+
+    true = Equidistant(np.array([[380.0, 0, 512.0], [0, 381.0, 384.0], [0, 0, 1]]), FISH, 1024, 768)
+    board = BoardSpec(8, 6, 0.05, np.array([[-0.05, -0.05], [0.4, -0.05], [0.4, 0.3], [-0.05, 0.3]]))
+    rng = np.random.default_rng(4)
+    corners = {}
+    while len(corners) < 12:
+        T = make_T(rotvec_to_matrix(rng.uniform(-0.6, 0.6, 3)), [rng.uniform(-0.6, 0.6), rng.uniform(-0.4, 0.4),
+                                                                  rng.uniform(0.35, 0.8)])
+        P = board.corners @ T[:3, :3].T + T[:3, 3]
+        if not true.valid(P).all():
+            continue
+        uv = true.project(P) + rng.normal(0, 0.2, (len(P), 2))
+        if np.all((uv > 0) & (uv < [1023, 767])):
+            corners[f"{len(corners):03d}"] = uv
+    start = CameraModel(1024, 768, np.array([[360.0, 0, 500.0], [0, 360.0, 390.0], [0, 0, 1]]), np.zeros(4), None,
+                        "pinhole", "equidistant")
+    fit = calibrate_equidistant(corners, board, start)
+    assert fit.camera.name == "pinhole-equidistant" and 0.15 < fit.rms_px < 0.35
+    truth = np.r_[380.0, 381.0, 512.0, 384.0, FISH]
+    got = fit.camera.core().intrinsics
+    sigma = np.array(list(fit.sigma.values()))
+    assert np.all(sigma > 0) and np.all(np.abs(got - truth) < 5 * sigma), (got - truth) / sigma
+    assert "cv2.fisheye.calibrate" in format_intrinsics(fit)[0]
