@@ -191,3 +191,44 @@ def test_refit_recovers_an_equidistant_camera_from_its_corners():
     sigma = np.array(list(fit.sigma.values()))
     assert np.all(sigma > 0) and np.all(np.abs(got - truth) < 5 * sigma), (got - truth) / sigma
     assert "cv2.fisheye.calibrate" in format_intrinsics(fit)[0]
+
+
+def _info_bag(path, model, D, ros=1):
+    """A bag holding one CameraInfo of ``model`` with coefficients ``D``."""
+    from simulate.recording import RecordingOptions, _BagOut
+
+    out = _BagOut(path, RecordingOptions(ros=ros))
+    T = out.ts.types
+    names = ("D", "K", "R", "P") if out.ros1 else ("d", "k", "r", "p")
+    vals = (np.asarray(D, float), np.ravel(K), np.eye(3).ravel(), np.hstack([K, np.zeros((3, 1))]).ravel())
+    roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+    msg = T["sensor_msgs/msg/CameraInfo"](header=out.header(10**9, "camera"), height=480, width=640,
+                                          distortion_model=model, binning_x=0, binning_y=0, roi=roi,
+                                          **{n: np.asarray(v, np.float64) for n, v in zip(names, vals, strict=True)})
+    out.write("/cam/camera_info", msg, 10**9)
+    out.close()
+    return path
+
+
+@pytest.mark.parametrize("ros", [1, 2])
+def test_a_bag_camera_info_with_equidistant_is_the_fisheye_model(tmp_path, ros):
+    from lidarcam.rig.bag import BagSource, read_camera_info
+
+    bag = _info_bag(tmp_path / ("b.bag" if ros == 1 else "b"), "equidistant", FISH, ros)
+    with BagSource(bag) as src:
+        cam = read_camera_info(src, "/cam/camera_info")
+    assert cam.name == "pinhole-equidistant"
+    np.testing.assert_array_equal(cam.dist, FISH)
+    _same(read_camera(_write(tmp_path, "camera.yaml", camera_yaml(cam))), cam)   # as frombag writes it
+
+
+@pytest.mark.parametrize("model, D, words", [("fisheye", FISH, ["'fisheye'", "equidistant"]),
+                                             ("equidistant", [0.1, 0.2, 0.0, 0.0, 0.1], ["takes 4"])])
+def test_a_bag_camera_info_of_an_unknown_model_is_one_line(tmp_path, model, D, words):
+    from lidarcam.rig.bag import BagError, BagSource, read_camera_info
+
+    bag = _info_bag(tmp_path / "b.bag", model, D)
+    with BagSource(bag) as src, pytest.raises(BagError) as err:
+        read_camera_info(src, "/cam/camera_info")
+    msg = str(err.value)
+    assert "\n" not in msg and "/cam/camera_info" in msg and all(w in msg for w in words)
