@@ -94,6 +94,8 @@ def cmd_extract(args) -> int:
     print(format_diagnostics(diags))
     print(direction_line(obs.meta))
     print(noise_line(obs.meta))
+    if obs.meta.get("camera_file_note"):
+        print(f"note: {obs.meta['camera_file_note']}")
     if args.diagnostics:
         Path(args.diagnostics).write_text(json.dumps([d.to_dict() for d in diags], indent=1) + "\n")
         print(f"wrote {args.diagnostics}")
@@ -135,8 +137,7 @@ def cmd_report(args) -> int:
 
             from lidarcam.rig.dataset import CameraModel
 
-            c = obs.camera
-            ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist))
+            ds = replace(ds, camera=CameraModel.from_core(obs.camera))
     fit = result_fit(res, obs, args.result, args.obs or args.dataset)
     summary = write_report(ds, obs, res, args.out, alerts=fit.warnings)
     from .wording import cli_hint

@@ -236,6 +236,8 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
             "reproj_rms_px": [reps[i].reproj_rms_px for i in range(len(boards))],
             "extraction_noise": noise.to_dict(),
             "scan_direction": dataset.scan_direction, "scan_direction_source": dataset.scan_direction_source}
+    if dataset.camera.note:
+        meta["camera_file_note"] = dataset.camera.note
     if camera is None:
         boards = [replace(b, corners_px=None, corners_board=None) for b in boards]
         meta["camera_note"] = camera_note

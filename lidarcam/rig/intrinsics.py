@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .dataset import BoardSpec, CameraModel, Dataset, DatasetError
+from .dataset.camera_files import lens_camera
 from .detect import find_chessboard
 from .markdown import md_table
 
@@ -104,9 +105,7 @@ def calibrate_equidistant(corners: dict[str, np.ndarray], board: BoardSpec, star
                                                       flags=flags, criteria=crit)
     except cv2.error as exc:
         raise DatasetError(f"cv2.fisheye.calibrate failed on {len(names)} boards ({exc.err})") from None
-    cam = CameraModel(start.width, start.height, np.asarray(K, float), np.asarray(D, float).ravel(), None,
-                      "pinhole", "equidistant")
-    lens = cam.core()
+    lens = lens_camera("pinhole", "equidistant", K, np.asarray(D, float).ravel(), start.width, start.height).core()
     res, J_k, J_pose = [], [], []
     for rv, tv, n in zip(rvecs, tvecs, names, strict=True):
         R = cv2.Rodrigues(np.asarray(rv, float))[0]
@@ -131,7 +130,7 @@ def calibrate_equidistant(corners: dict[str, np.ndarray], board: BoardSpec, star
     cov = np.linalg.pinv(J.T @ J) * s2
     std = np.sqrt(np.clip(np.diag(cov)[:8], 0.0, None))
     per_view = {n: float(np.sqrt(np.mean(e.reshape(-1, 2) ** 2) * 2)) for n, e in zip(names, res, strict=True)}
-    cam = CameraModel(cam.width, cam.height, cam.K, cam.dist, std, "pinhole", "equidistant")
+    cam = lens_camera("pinhole", "equidistant", lens.K, lens.dist, lens.width, lens.height, std=std)
     return IntrinsicsFit(cam, float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2) * 2)),
                          dict(zip(EQUIDISTANT_NAMES, std.tolist(), strict=True)), per_view, tuple(names))
 

@@ -10,7 +10,7 @@ import pytest
 
 from calib_core.data.cameras import EUCM, Camera, DoubleSphere, Equidistant, Omni
 from lidarcam.rig.dataset import BoardSpec, CameraModel, DatasetError, camera_yaml, read_camera
-from lidarcam.rig.dataset.camera_files import camera_formats
+from lidarcam.rig.dataset.camera_files import camera_formats, lens_camera
 
 K = [[500.0, 0.0, 320.5], [0.0, 510.0, 240.25], [0.0, 0.0, 1.0]]
 FISH = [-0.01, 0.02, -0.005, 0.001]
@@ -103,6 +103,25 @@ def test_kalibr_camchains_map_to_the_right_model_and_parameters(tmp_path, model,
     _same(back, cam)
 
 
+@pytest.mark.parametrize("model, dmodel, intr, dist", [
+    ("ds", "none", [-0.2, 0.6, 340, 341, 320, 240], []),
+    ("omni", "radtan", [0.9, 700, 701, 320, 240], [-0.1, 0.02, 0.001, 0.0005]),
+    ("eucm", "none", [0.6, 1.1, 350, 351, 320, 240], []),
+    ("pinhole", "equidistant", [400, 401, 320, 240], FISH),
+])
+def test_opencv_keys_with_kalibr_model_names_read_as_the_camchain(tmp_path, model, dmodel, intr, dist):
+    """The OpenCV keys with Kalibr's ``camera_model``, ``distortion_model`` and the model's parameters beside them
+    (as the simulator writes a lens's camera.yaml) read to the same camera as the camchain."""
+    fu, fv, pu, pv = intr[-4:]
+    names = {"omni": ["xi"], "ds": ["xi", "alpha"], "eucm": ["alpha", "beta"]}.get(model, [])
+    params = "".join(f"{n}: {v}\n" for n, v in zip(names, intr, strict=False))
+    text = (f"image_width: 640\nimage_height: 480\ncamera_model: {model}\ndistortion_model: {dmodel}\n{params}"
+            f"camera_matrix: [[{fu}, 0, {pu}], [0, {fv}, {pv}], [0, 0, 1]]\ndistortion_coefficients: {dist}\n")
+    a = read_camera(_write(tmp_path, "camera.yaml", text))
+    b = read_camera(_write(tmp_path, "camchain.yaml", _kalibr(model, dmodel, intr, dist)))
+    _same(a, b)
+
+
 def test_ds_camchain_projects_as_the_double_sphere_formula(tmp_path):
     xi, alpha, fu, fv, pu, pv = -0.2, 0.6, 340.0, 341.0, 320.0, 240.0
     cam = read_camera(_write(tmp_path, "c.yaml", _kalibr("ds", "none", [xi, alpha, fu, fv, pu, pv], [])))
@@ -128,7 +147,10 @@ def test_a_camchain_of_several_cameras_reads_cam0_with_a_note_or_the_one_named(t
 @pytest.mark.parametrize("text, words", [
     (_ros("fisheye", FISH), ["distortion_model", "'fisheye'", "plumb_bob, rational_polynomial, equidistant"]),
     (_ros("equidistant", [0.1, 0.2, 0.0, 0.0, 0.1]), ["distortion_coefficients", "takes 4"]),
-    (_opencv([0.1, 0.2, 0, 0]) + "xi: 0.8\n", ["key 'xi'", "Kalibr camchain"]),
+    (_opencv([0.1, 0.2, 0, 0]) + "xi: 0.8\n", ["key 'xi'", "needs camera_model"]),
+    (_opencv([]) + "camera_model: ds\nxi: -0.2\n", ["key 'alpha'", "missing"]),
+    (_opencv([]) + "camera_model: eucm\nalpha: 0.6\nbeta: 1.1\nxi: 0.1\n", ["key 'xi'", "accepted: alpha, beta"]),
+    (_opencv([]) + "model_type: MEI\n", ["key 'model_type'", "Kalibr camchain"]),
     (_kalibr("fov", "none", [1, 2, 3, 4], []), ["cam0.camera_model", "'fov'", "pinhole, omni, ds, eucm"]),
     (_kalibr("ds", "radtan", [-0.2, 0.6, 1, 2, 3, 4], []), ["cam0.distortion_model", "accepted: none"]),
     (_kalibr("omni", "radtan", [500, 510, 320, 240], []), ["cam0.intrinsics", "xi, fu, fv, pu, pv"]),
@@ -182,8 +204,8 @@ def test_refit_recovers_an_equidistant_camera_from_its_corners():
         uv = true.project(P) + rng.normal(0, 0.2, (len(P), 2))
         if np.all((uv > 0) & (uv < [1023, 767])):
             corners[f"{len(corners):03d}"] = uv
-    start = CameraModel(1024, 768, np.array([[360.0, 0, 500.0], [0, 360.0, 390.0], [0, 0, 1]]), np.zeros(4), None,
-                        "pinhole", "equidistant")
+    start = lens_camera("pinhole", "equidistant", np.array([[360.0, 0, 500.0], [0, 360.0, 390.0], [0, 0, 1]]),
+                        np.zeros(4), 1024, 768)
     fit = calibrate_equidistant(corners, board, start)
     assert fit.camera.name == "pinhole-equidistant" and 0.15 < fit.rms_px < 0.35
     truth = np.r_[380.0, 381.0, 512.0, 384.0, FISH]
@@ -249,7 +271,7 @@ def test_a_board_seen_through_a_fisheye_gets_its_pose_through_the_lens():
     sim = SimBoard(1.0, 7, 6, 0.12)
     T = make_T(rotvec_to_matrix([0.1, -0.5, 0.05]), [0.0, -0.2, 0.5])
     gray = render_board_lens(lens, T, sim, supersample=3)
-    cam = CameraModel(1024, 768, lens.K, np.asarray(lens.dist), None, "pinhole", "equidistant")
+    cam = CameraModel(1024, 768, lens.K, np.asarray(lens.dist), None, lens)
     board = BoardSpec(6, 5, 0.12, np.array([[-0.12, -0.12], [0.72, -0.12], [0.72, 0.6], [-0.12, 0.6]]))
     truth = checkerboard_corners(sim) @ T[:3, :3].T + T[:3, 3]
 

@@ -48,10 +48,12 @@ KALIBR_DIST_LENGTH = {"radtan": 4, "equidistant": 4, "none": 0}
 KALIBR_KEYS = ("camera_model", "intrinsics", "distortion_model", "distortion_coeffs", "resolution", "rostopic",
                "T_cn_cnm1", "T_cam_imu", "cam_overlaps", "timeshift_cam_imu", "line_delay")
 """The keys of one camera of a camchain (the last six Kalibr writes and this reader passes over)."""
-FOREIGN_KEYS = ("camera_model", "model_type", "projection_model", "distortion_type", "xi", "alpha", "beta",
-                "intrinsics", "distortion_coeffs", "projection_parameters", "distortion_parameters",
-                "mirror_parameters")
-"""Keys naming a lens model that the OpenCV/ROS form has no place for: refused, never passed over."""
+LENS_PARAMS = ("xi", "alpha", "beta")
+"""Keys of the models' own parameters beside the OpenCV keys (with a top-level Kalibr ``camera_model``)."""
+FOREIGN_KEYS = ("model_type", "projection_model", "distortion_type", "intrinsics", "distortion_coeffs",
+                "projection_parameters", "distortion_parameters", "mirror_parameters")
+"""Keys naming a lens in another tool's form that the OpenCV/ROS form has no place for: refused, never passed
+over."""
 KALIBR_NAME = re.compile(r"^cam\d+$")
 
 
@@ -100,28 +102,88 @@ def camera_from_mapping(data: dict, path, cam: str | None = None, prefix: str = 
 
 
 def _opencv_ros(data: dict, path: Path, prefix: str = "") -> CameraModel:
-    """OpenCV keys, with ROS's ``distortion_model`` when present."""
+    """OpenCV keys, with ROS's ``distortion_model`` or (with a top-level ``camera_model``) Kalibr's model names and
+    the model's parameters (``xi``, ``alpha``, ``beta``) beside them."""
     foreign = [k for k in FOREIGN_KEYS if k in data]
     if foreign:
         raise DatasetError(f"key '{prefix}{foreign[0]}' is not a key of an OpenCV/ROS camera file (image_width, "
                            "image_height, camera_matrix, distortion_model, distortion_coefficients, "
-                           "rectification_matrix, projection_matrix); an omni, ds or eucm camera is read from a "
+                           "rectification_matrix, projection_matrix; camera_model with xi, alpha, beta) nor of a "
                            "Kalibr camchain (cam0: {camera_model, intrinsics, distortion_model, distortion_coeffs, "
                            "resolution})", file=path)
-    dmodel = _distortion_model(data, path, prefix)
+    if "camera_model" in data:
+        cm, dm, params = _named_model(data, path, prefix)
+    else:
+        cm, dm, params = "pinhole", _distortion_model(data, path, prefix), ()
+        stray = [k for k in LENS_PARAMS if k in data]
+        if stray:
+            raise DatasetError(f"key '{prefix}{stray[0]}': a model parameter needs camera_model (omni: xi; ds: xi, "
+                               "alpha; eucm: alpha, beta)", file=path)
     if "image_Width" in data and "image_width" not in data:  # OpenCV sample spelling
         data = dict(data, image_width=data["image_Width"], image_height=data.get("image_Height"))
     for key, shape in (("rectification_matrix", (3, 3)), ("projection_matrix", (3, 4))):
         if key in data:
             matrix_field(data[key], prefix + key, path, shape)
-    cam = camera_from_dict(data, path)
-    if dmodel == "radtan":
-        return cam
-    if cam.dist.size not in (0, 4):
-        raise DatasetError(f"key '{prefix}distortion_coefficients': the equidistant model takes 4 coefficients (k1, "
-                           f"k2, k3, k4), got {cam.dist.size}", file=path)
-    return _checked(CameraModel(cam.width, cam.height, cam.K, cam.dist, None, "pinhole", "equidistant"), path,
-                    prefix + "camera_matrix")
+    if (cm, dm) == ("pinhole", "radtan"):
+        return camera_from_dict(data, path)
+    cam = camera_from_dict({k: v for k, v in data.items() if k != "distortion_coefficients"}, path)
+    dist = matrix_field(data.get("distortion_coefficients", []), prefix + "distortion_coefficients", path, (None,))
+    n = KALIBR_DIST_LENGTH.get(dm) if cm != "omni" else None
+    if n is not None and dist.size not in (0, n):
+        raise DatasetError(f"key '{prefix}distortion_coefficients': the {dm} model takes {n} coefficients, got "
+                           f"{dist.size}", file=path)
+    return lens_camera(cm, dm, cam.K, dist, cam.width, cam.height, params, file=path,
+                       key=prefix + "distortion_coefficients")
+
+
+def _named_model(data: dict, path: Path, prefix: str) -> tuple[str, str, tuple[float, ...]]:
+    """Kalibr's ``camera_model`` / ``distortion_model`` at the top of an OpenCV-keys file, and the model's
+    parameters."""
+    cm = str(data["camera_model"]).strip().lower()
+    if cm not in KALIBR_INTRINSICS:
+        raise DatasetError(f"key '{prefix}camera_model': {data['camera_model']!r} is not a model the project knows "
+                           f"(accepted: {', '.join(KALIBR_INTRINSICS)})", file=path)
+    raw = data.get("distortion_model", KALIBR_DISTORTIONS[cm][0])
+    dm = str(raw).strip().lower()
+    dm = ROS_MODELS.get(dm, dm) if cm == "pinhole" else ("radtan" if dm in ROS_MODELS and cm == "omni" else dm)
+    if dm not in KALIBR_DISTORTIONS[cm]:
+        raise DatasetError(f"key '{prefix}distortion_model': {raw!r} is not a model the project knows with "
+                           f"camera_model {cm} (accepted: {', '.join(KALIBR_DISTORTIONS[cm])})", file=path)
+    if dm == "none" and cm in ("pinhole", "omni"):
+        dm = "radtan"
+    names = KALIBR_INTRINSICS[cm][:-4]
+    stray = [k for k in LENS_PARAMS if k in data and k not in names]
+    if stray:
+        raise DatasetError(f"key '{prefix}{stray[0]}' is not a parameter of the {cm} model (accepted: "
+                           f"{', '.join(names) or 'none'})", file=path)
+    missing = [k for k in names if k not in data]
+    if missing:
+        raise DatasetError(f"key '{prefix}{missing[0]}': missing (the {cm} model's parameter)", file=path)
+    try:
+        params = tuple(float(data[k]) for k in names)
+    except (TypeError, ValueError):
+        raise DatasetError(f"key '{prefix}{names[0]}': the {cm} model's {', '.join(names)} must be numbers",
+                           file=path) from None
+    return cm, dm, params
+
+
+def lens_camera(camera_model: str, distortion_model: str, K: np.ndarray, dist, width: int, height: int,
+                params=(), std=None, *, file=None, key: str = "camera_matrix") -> CameraModel:
+    """The CameraModel of Kalibr's ``(camera_model, distortion_model)`` (``model`` None for pinhole + radtan, the
+    OpenCV path) with ``K`` (pixels), ``dist``, the image size and the model's ``params`` (its ``param_names``
+    order); DatasetError naming ``file`` and ``key`` when the model refuses a value."""
+    from calib_core.data.cameras import camera_class
+
+    dist = np.asarray(dist, float).ravel()
+    if (camera_model, distortion_model) == ("pinhole", "radtan"):
+        return CameraModel(int(width), int(height), np.asarray(K, float), dist, std)
+    cls = camera_class(camera_model, distortion_model)
+    try:
+        model = cls(np.asarray(K, float), dist, int(width), int(height), std,
+                    **dict(zip(cls.param_names, params, strict=True)))
+    except ObservationError as err:
+        raise DatasetError(f"key '{key}': the {cls.camera_model} model refuses it ({err})", file=file) from None
+    return CameraModel(int(width), int(height), model.K, dist, model.std_intrinsics, model)
 
 
 def _distortion_model(data: dict, path: Path, prefix: str) -> str:
@@ -161,8 +223,7 @@ def _kalibr_chain(cams: dict, path: Path, cam: str | None, prefix: str) -> Camer
     if not isinstance(cams[cam], dict):
         raise DatasetError(f"key '{prefix}{cam}': expected a mapping (camera_model, intrinsics, ...)", file=path)
     out = _kalibr(cams[cam], path, prefix + cam)
-    return CameraModel(out.width, out.height, out.K, out.dist, None, out.camera_model, out.distortion_model,
-                       out.params, note)
+    return CameraModel(out.width, out.height, out.K, out.dist, None, out.model, note)
 
 
 def _kalibr(c: dict, path: Path, name: str) -> CameraModel:
@@ -202,18 +263,8 @@ def _kalibr(c: dict, path: Path, name: str) -> CameraModel:
     if dmodel == "none":
         dmodel = "radtan" if model in ("pinhole", "omni") else "none"
         dist = np.zeros(0)
-    cam = CameraModel(int(res[0]), int(res[1]), K, dist if np.any(dist) else np.zeros(0), None, model, dmodel,
-                      tuple(float(v) for v in k[:-4]))
-    return _checked(cam, path, at + "intrinsics")
-
-
-def _checked(cam: CameraModel, path: Path, key: str) -> CameraModel:
-    """``cam`` when its ``calib_core`` model takes its values; DatasetError naming ``key`` otherwise."""
-    try:
-        cam.core()
-    except ObservationError as err:
-        raise DatasetError(f"key '{key}': the {cam.name} model refuses it ({err})", file=path) from None
-    return cam
+    return lens_camera(model, dmodel, K, dist if np.any(dist) else np.zeros(0), int(res[0]), int(res[1]),
+                       tuple(float(v) for v in k[:-4]), file=path, key=at + "intrinsics")
 
 
 def _opencv_xml(path: Path) -> CameraModel:
