@@ -84,7 +84,8 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--image-topic", help="sensor_msgs/Image or CompressedImage topic")
     p.add_argument("--scan-topic", help="sensor_msgs/LaserScan topic")
     p.add_argument("--camera-info-topic", help="sensor_msgs/CameraInfo topic (else --camera)")
-    p.add_argument("--camera", help="camera.yaml, when the bag has no usable CameraInfo")
+    p.add_argument("--camera", help="camera file (OpenCV keys, ROS camera_info or Kalibr camchain), when the bag has "
+                   "no usable CameraInfo")
     p.add_argument("--board", help="board.yaml of the checkerboard (docs/dataset.md)")
     p.add_argument("--out", help="dataset folder to write")
     g = p.add_argument_group("picking")

@@ -283,3 +283,23 @@ def test_a_board_seen_through_a_fisheye_gets_its_pose_through_the_lens():
     assert error_m(det) < 0.003 and det.reproj_rms_px < 0.3
     pinhole = detect_board(gray, CameraModel(1024, 768, lens.K, np.zeros(0)), board)
     assert error_m(pinhole) > 0.03
+
+
+def test_every_camera_file_example_of_the_docs_reads():
+    """docs/dataset.md's camera.yaml section: each YAML example is a camera file the reader takes."""
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "dataset.md").read_text()
+    section = text[text.index("## camera.yaml"):text.index("## board.yaml")]
+    blocks = re.findall(r"```yaml\n(.*?)```", section, re.S)
+    assert len(blocks) >= 5
+    names = set()
+    for k, block in enumerate(blocks):
+        p = Path(__file__).parent / f"_doc_camera_{k}.yaml"
+        try:
+            p.write_text(block)
+            names.add(read_camera(p).name)
+        finally:
+            p.unlink()
+    assert {"pinhole-radtan", "pinhole-equidistant", "ds"} <= names
