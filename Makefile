@@ -62,7 +62,7 @@ REAL_DATA ?= ../shared/real-data
 real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; ~0.5-3 min: 22 s idle, 173 s on shared cores)
 	$(PY) -m experiments real-data --data $(REAL_DATA)
 
-leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v2.yaml -> results/leaderboard/ (~5 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
+leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v3.yaml -> results/leaderboard/ (~5 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
 	$(PY) -m experiments leaderboard $(if $(FULL),--full) $(ARGS)
 
 verify-results: $(STAMP) ## Check every stored trial chunk under results/ parses in full; list reports stale against the code (~3 s)
