@@ -187,23 +187,29 @@ def test_camera_formats_lists_every_model_and_form():
         assert w in text
 
 
-def test_refit_recovers_an_equidistant_camera_from_its_corners():
+def _corners(lens, board, n, rng, noise_px=0.2):
+    """Corners (name -> (N,2) pixels, 0.2 px noise) of ``n`` board poses that ``lens`` sees whole, 0.35-0.8 m away."""
     from calib_core.geometry.transforms import make_T, rotvec_to_matrix
+
+    corners = {}
+    while len(corners) < n:
+        T = make_T(rotvec_to_matrix(rng.uniform(-0.6, 0.6, 3)), [rng.uniform(-0.6, 0.6), rng.uniform(-0.4, 0.4),
+                                                                  rng.uniform(0.35, 0.8)])
+        P = board.corners @ T[:3, :3].T + T[:3, 3]
+        if not lens.valid(P).all():
+            continue
+        uv = lens.project(P) + rng.normal(0, noise_px, (len(P), 2))
+        if np.all((uv > 0) & (uv < [lens.width - 1, lens.height - 1])):
+            corners[f"{len(corners):03d}"] = uv
+    return corners
+
+
+def test_refit_recovers_an_equidistant_camera_from_its_corners():
     from lidarcam.rig.intrinsics import calibrate_equidistant, format_intrinsics
 
     true = Equidistant(np.array([[380.0, 0, 512.0], [0, 381.0, 384.0], [0, 0, 1]]), FISH, 1024, 768)
     board = BoardSpec(8, 6, 0.05, np.array([[-0.05, -0.05], [0.4, -0.05], [0.4, 0.3], [-0.05, 0.3]]))
-    rng = np.random.default_rng(4)
-    corners = {}
-    while len(corners) < 12:
-        T = make_T(rotvec_to_matrix(rng.uniform(-0.6, 0.6, 3)), [rng.uniform(-0.6, 0.6), rng.uniform(-0.4, 0.4),
-                                                                  rng.uniform(0.35, 0.8)])
-        P = board.corners @ T[:3, :3].T + T[:3, 3]
-        if not true.valid(P).all():
-            continue
-        uv = true.project(P) + rng.normal(0, 0.2, (len(P), 2))
-        if np.all((uv > 0) & (uv < [1023, 767])):
-            corners[f"{len(corners):03d}"] = uv
+    corners = _corners(true, board, 12, np.random.default_rng(4))
     start = lens_camera("pinhole", "equidistant", np.array([[360.0, 0, 500.0], [0, 360.0, 390.0], [0, 0, 1]]),
                         np.zeros(4), 1024, 768)
     fit = calibrate_equidistant(corners, board, start)
@@ -303,3 +309,26 @@ def test_every_camera_file_example_of_the_docs_reads():
         finally:
             p.unlink()
     assert {"pinhole-radtan", "pinhole-equidistant", "ds"} <= names
+
+
+@pytest.mark.parametrize("lens", [
+    DoubleSphere(np.array([[340.0, 0, 640.0], [0, 341.0, 512.0], [0, 0, 1]]), [], 1280, 1024, xi=-0.2, alpha=0.6),
+    EUCM(np.array([[350.0, 0, 640.0], [0, 351.0, 512.0], [0, 0, 1]]), [], 1280, 1024, alpha=0.6, beta=1.1),
+    Omni(np.array([[700.0, 0, 640.0], [0, 701.0, 512.0], [0, 0, 1]]), [-0.1, 0.02, 0.001, 0.0005], 1280, 1024, xi=0.9),
+], ids=lambda c: c.name)
+def test_refit_recovers_omni_ds_and_eucm_cameras_by_least_squares(lens):
+    from lidarcam.rig.intrinsics import calibrate_lens, format_intrinsics
+
+    board = BoardSpec(8, 6, 0.05, np.array([[-0.05, -0.05], [0.4, -0.05], [0.4, 0.3], [-0.05, 0.3]]))
+    corners = _corners(lens, board, 12, np.random.default_rng(5))
+    k = lens.intrinsics.copy()
+    k[:4] *= [0.95, 1.05, 1.01, 0.99]            # a rough start: focal lengths 5% off, the centre 5 px off
+    n_fit = lens.n_core + (4 if lens.camera_model == "omni" else 0)
+    start = CameraModel.from_core(lens.with_intrinsics(k))
+    fit = calibrate_lens(corners, board, start)
+    got = fit.camera.core().intrinsics[:n_fit]
+    sigma = np.array(list(fit.sigma.values()))
+    assert fit.camera.name == lens.name and len(sigma) == n_fit and 0.15 < fit.rms_px < 0.35
+    assert np.all(sigma > 0) and np.all(np.abs(got - lens.intrinsics[:n_fit]) < 5 * sigma), \
+        (got - lens.intrinsics[:n_fit]) / sigma
+    assert "least squares" in format_intrinsics(fit)[0]
