@@ -375,3 +375,24 @@ def test_a_fisheye_dataset_extracts_and_calibrates_through_its_ros_camera_yaml(t
     e_R, e_t = pose_errors(T, np.asarray(gt["T_lidar_cam"], float))
     assert e_R < 0.5 and e_t < 0.020, (e_R, e_t)
     print(f"fisheye dataset: e_R {e_R:.3f} deg, e_t {1000 * e_t:.1f} mm")
+
+
+def test_a_plan_rig_file_takes_every_camera_form(tmp_path):
+    """``lidarcam plan`` rig files: the camera section in the ROS form, or ``file:`` naming a Kalibr camchain."""
+    from lidarcam.rig.plan_rig import load_plan_rig, template_text
+
+    text = template_text()
+    head, rest = text[:text.index("camera:\n")], text[text.index("lidar:\n"):]
+    fish = tmp_path / "fish.yaml"
+    fish.write_text(head + "camera:\n" + "".join(f"  {ln}\n" for ln in _ros("equidistant", FISH).splitlines())
+                    + "  corner_sigma_px: 0.5\n" + rest)
+    _write(tmp_path, "camchain.yaml", _kalibr("ds", "none", [-0.2, 0.6, 340, 341, 320, 240], []))
+    ds = tmp_path / "ds.yaml"
+    ds.write_text(head + "camera:\n  file: camchain.yaml\n  corner_sigma_px: 0.5\n" + rest)
+    assert isinstance(load_plan_rig(fish).camera, Equidistant)
+    cam = load_plan_rig(ds).camera
+    assert isinstance(cam, DoubleSphere) and (cam.xi, cam.alpha) == (-0.2, 0.6)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(head + "camera:\n  file: camchain.yaml\n  image_width: 640\n" + rest)
+    with pytest.raises(DatasetError, match="'file' names the camera file; drop image_width"):
+        load_plan_rig(bad)
