@@ -396,3 +396,42 @@ def test_a_plan_rig_file_takes_every_camera_form(tmp_path):
     bad.write_text(head + "camera:\n  file: camchain.yaml\n  image_width: 640\n" + rest)
     with pytest.raises(DatasetError, match="'file' names the camera file; drop image_width"):
         load_plan_rig(bad)
+
+
+def test_opencv_xml_reads_its_fisheye_flag_and_the_ros_model(tmp_path):
+    import cv2
+
+    def xml(name, **extra):
+        p = tmp_path / name
+        fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_WRITE)
+        fs.write("image_width", 640)
+        fs.write("image_height", 480)
+        fs.write("camera_matrix", np.array(K))
+        fs.write("distortion_coefficients", np.array(FISH).reshape(1, -1))
+        for k, v in extra.items():
+            fs.write(k, v)
+        fs.release()
+        return p
+
+    assert read_camera(xml("plain.xml")).name == "pinhole-radtan"
+    for p in (xml("flag.xml", fisheye_model=1), xml("ros.xml", distortion_model="equidistant")):
+        cam = read_camera(p)
+        assert cam.name == "pinhole-equidistant"
+        np.testing.assert_array_equal(cam.dist, FISH)
+    with pytest.raises(DatasetError, match="fisheye_model': 1 contradicts distortion_model 'plumb_bob'"):
+        read_camera(xml("both.xml", fisheye_model=1, distortion_model="plumb_bob"))
+
+
+def test_overlays_project_through_the_lens():
+    from lidarcam.rig.overlay import project_scan
+
+    lens = DoubleSphere(np.array([[340.0, 0, 640.0], [0, 341.0, 512.0], [0, 0, 1]]), [], 1280, 1024, xi=-0.2,
+                        alpha=0.6)
+    cam = CameraModel.from_core(lens)
+    T_cam_lidar = np.array([[0.0, -1, 0, 0], [0, 0, -1, 0.1], [1, 0, 0, 0], [0, 0, 0, 1]])  # lidar x = camera z
+    bearing = np.radians(np.linspace(-85, 85, 35))
+    scan = 2.0 * np.column_stack([np.cos(bearing), np.sin(bearing)])
+    uv, ok = project_scan(cam, T_cam_lidar, scan)
+    P = scan @ np.array([[0.0, 0, 1], [-1, 0, 0]]) + [0, 0.1, 0]
+    assert ok.all()                                   # 85 deg off the axis: inside the double sphere's view
+    np.testing.assert_allclose(uv, lens.project(P))
