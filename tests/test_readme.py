@@ -30,7 +30,7 @@ def _table_rows() -> dict[str, str]:
     return rows
 
 
-def test_every_base_method_is_in_the_readme_with_its_minimum_boards():
+def test_every_base_method_is_in_the_method_table_with_its_minimum_boards():
     rows = _table_rows()
     base = [m for m in METHODS.values() if "+" not in m.name and "/" not in m.name and m.origin == "lidarcam"]
     assert base, "no project methods registered"
@@ -39,7 +39,7 @@ def test_every_base_method_is_in_the_readme_with_its_minimum_boards():
         assert rows[m.name] == str(m.min_boards), f"{m.name}: the table says {rows[m.name]}, registry {m.min_boards}"
 
 
-def test_every_readme_row_is_a_method():
+def test_every_method_table_row_is_a_method():
     names = [n for n in _table_rows() if n not in ("X+ml", "X+plane", "X+joint", "peng2022/...")]
     assert names and all(n in METHODS for n in names), names
 
