@@ -102,7 +102,7 @@ def cmd_extract(args) -> int:
     hint = square_hint(ds, diags)
     if hint:
         print(hint)
-    if obs.n_boards == 0:  # no answer, as calibrate's: exit 1 (README, lidarcam --help)
+    if obs.n_boards == 0:  # no answer, as calibrate's: exit 1 (docs/usage.md, lidarcam --help)
         print(f"lidarcam extract: {args.dataset}: no usable pose (see the skip reasons above); nothing written",
               file=sys.stderr)
         return 1

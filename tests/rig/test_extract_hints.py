@@ -1,6 +1,6 @@
 """``lidarcam extract`` on a small simulated dataset folder: a board.yaml square off by a unit factor ends with a
 hint naming square_m and the factor, an all-NaN scan is skipped as "no returns", no usable pose is exit 1 (no
-answer, as README and --help say), and the capture plan speaks the command line's ``--fix`` words."""
+answer, as docs/usage.md and --help say), and the capture plan speaks the command line's ``--fix`` words."""
 
 from __future__ import annotations
 
