@@ -98,13 +98,23 @@ def _skew_rows(v: np.ndarray) -> np.ndarray:
     return s
 
 
+def _view(board: BoardSpec, c) -> tuple[np.ndarray, np.ndarray]:
+    """(board points (N,3) m, pixels (N,2)) of one view's corners ``c``: the whole grid in ``board.corners``' order
+    (N,2), or pixels with each corner's identity, an index of ``board.corners`` (N,3)."""
+    c = np.asarray(c, float)
+    if c.shape[1] == 3:
+        return board.corners[c[:, 2].astype(int)], c[:, :2]
+    return board.corners, c
+
+
 def _residuals(lens, board: BoardSpec, uv: dict, poses: dict, n_fit: int, jacobian: bool = True):
     """Pixel residuals (stacked per view, ``poses``' order) of the board's corners through ``lens`` at ``poses``
     (name -> (R, t) of ``T_cam_board``), and their Jacobian in the first ``n_fit`` intrinsics and each view's
     pose (left rotation increment, then translation; 6 columns per view)."""
     res, rows = [], []
     for n, (R, t) in poses.items():
-        RP = board.corners @ R.T
+        X, px = _view(board, uv[n])
+        RP = X @ R.T
         P = RP + t
         with np.errstate(all="ignore"):
             if jacobian:
@@ -113,7 +123,7 @@ def _residuals(lens, board: BoardSpec, uv: dict, poses: dict, n_fit: int, jacobi
                              np.concatenate([Jp @ -_skew_rows(RP), Jp], axis=2).reshape(-1, 6)))
             else:
                 pred = lens.project(P)
-        e = (pred - np.asarray(uv[n], float)).ravel()
+        e = (pred - px).ravel()
         res.append(np.where(np.isfinite(e) & lens.valid(P).repeat(2), e, 1e3))
     r = np.concatenate(res)
     if not jacobian:
@@ -136,8 +146,8 @@ def _fit(lens, board: BoardSpec, uv: dict, poses: dict, n_fit: int, name: str) -
     n_dist = LENS_DIST_FITTED[name]
     cam = lens_camera(lens.camera_model, lens.distortion_model, lens.K, lens.dist[:n_dist], lens.width,
                       lens.height, tuple(lens.params), std=std)
-    per = r.reshape(len(poses), -1)
-    per_view = {n: float(np.sqrt(np.mean(e ** 2) * 2)) for n, e in zip(poses, per, strict=True)}
+    ends = np.cumsum([2 * len(_view(board, uv[n])[1]) for n in poses])
+    per_view = {n: float(np.sqrt(np.mean(e ** 2) * 2)) for n, e in zip(poses, np.split(r, ends[:-1]), strict=True)}
     return IntrinsicsFit(cam, float(np.sqrt(np.mean(r ** 2) * 2)),
                          dict(zip(lens.intrinsic_names[:n_fit], std.tolist(), strict=True)), per_view, tuple(poses))
 
@@ -151,14 +161,16 @@ def _views(corners: dict[str, np.ndarray]) -> list[str]:
 
 def calibrate_equidistant(corners: dict[str, np.ndarray], board: BoardSpec, start: CameraModel) -> IntrinsicsFit:
     """Fit K and the equidistant coefficients k1..k4 (``cv2.fisheye.calibrate``, from ``start``'s values, no skew)
-    to the corners (name -> (N,2) pixels, canonical order as ``board.corners``) of at least ``MIN_VIEWS`` views.
-    The 1-sigma of each intrinsic is from the Gauss-Newton covariance of the pixel residuals over the intrinsics
-    and every view's pose (``calib_core``'s Jacobians of the model), scaled by the residuals' variance."""
+    to the corners (name -> (N,2) pixels in ``board.corners``' order, or (N,3) pixels and each corner's index of
+    ``board.corners``) of at least ``MIN_VIEWS`` views. The 1-sigma of each intrinsic is from the Gauss-Newton
+    covariance of the pixel residuals over the intrinsics and every view's pose (``calib_core``'s Jacobians of the
+    model), scaled by the residuals' variance."""
     import cv2
 
     names = _views(corners)
-    obj = [board.corners.reshape(1, -1, 3).astype(np.float64) for _ in names]
-    img = [np.asarray(corners[n], np.float64).reshape(1, -1, 2) for n in names]
+    views = [_view(board, corners[n]) for n in names]
+    obj = [X.reshape(1, -1, 3).astype(np.float64) for X, _ in views]
+    img = [px.reshape(1, -1, 2).astype(np.float64) for _, px in views]
     flags = cv2.fisheye.CALIB_USE_INTRINSIC_GUESS | cv2.fisheye.CALIB_RECOMPUTE_EXTRINSIC | cv2.fisheye.CALIB_FIX_SKEW
     d0 = np.r_[np.asarray(start.dist, float), np.zeros(4)][:4].reshape(4, 1)
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
@@ -175,8 +187,8 @@ def calibrate_equidistant(corners: dict[str, np.ndarray], board: BoardSpec, star
 
 def calibrate_lens(corners: dict[str, np.ndarray], board: BoardSpec, start: CameraModel) -> IntrinsicsFit:
     """Fit the intrinsics of an ``omni-radtan``, ``ds`` or ``eucm`` camera (fx, fy, cx, cy, the model's own
-    parameters, and omni's k1, k2, p1, p2) and every view's pose to the corners (name -> (N,2) pixels, canonical
-    order as ``board.corners``) of at least ``MIN_VIEWS`` views: ``scipy.optimize.least_squares`` (trust region,
+    parameters, and omni's k1, k2, p1, p2) and every view's pose to the corners (as ``calibrate_equidistant``'s) of
+    at least ``MIN_VIEWS`` views: ``scipy.optimize.least_squares`` (trust region,
     the model's parameters bounded to its domain, ``calib_core``'s analytic Jacobians) from ``start``'s
     intrinsics and each view's pose through them (``calib_core.data.cameras.pose.pose_from_corners``; a view
     without one is skipped). 1-sigma as ``calibrate_equidistant``'s."""
@@ -192,7 +204,7 @@ def calibrate_lens(corners: dict[str, np.ndarray], board: BoardSpec, start: Came
     poses, skipped = {}, {}
     for n in _views(corners):
         try:
-            T = pose_from_corners(lens, board.corners, np.asarray(corners[n], float))
+            T = pose_from_corners(lens, *_view(board, corners[n]))
             poses[n] = (T[:3, :3], T[:3, 3])
         except ObservationError as err:
             skipped[n] = f"no pose through the starting {name} camera: {err.message}"
