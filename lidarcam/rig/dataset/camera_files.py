@@ -216,8 +216,9 @@ def _kalibr_chain(cams: dict, path: Path, cam: str | None, prefix: str) -> Camer
     if cam is None:
         cam = "cam0" if "cam0" in cams else names[0]
         if len(names) > 1:
-            note = (f"{path.name} is a camchain of {len(names)} cameras ({', '.join(names)}): {cam} read (another "
-                    f"with {path.name}:camN)")
+            note = (f"{path.name} is a camchain of {len(names)} cameras ({', '.join(names)}): {cam} read (another: "
+                    f"--camera {path.name}:camN where a command takes a camera file; in a dataset folder, make it "
+                    "cam0)")
     if cam not in cams:
         raise DatasetError(f"Kalibr camchain has no camera {cam!r} (has {', '.join(names)})", file=path)
     if not isinstance(cams[cam], dict):
