@@ -17,7 +17,8 @@ from .outcome import Outcome
 RESULT_SCHEMA = "lidarcam.result/1"
 
 JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior",
-             "intrinsics", "board_dispersion", "covariance_bend", "residual_rms", "observations")
+             "intrinsics", "board_dispersion", "covariance_bend", "residual_rms", "observations", "noise_model",
+             "board_error")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
@@ -29,7 +30,9 @@ the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.re
 residuals' RMS over the boards used at the method's start and at its answer (``residual_rms``: ``start_m``,
 ``answer_m``, metres), and which observations the answer was computed from (``observations``:
 ``observations_fingerprint``). The file's ``noise`` field names each range-noise figure by its source
-(``data.outcome.Noise``, metres)."""
+(``data.outcome.Noise``, metres); ``noise_model`` names the noise model the covariance holds, each scale with
+its value and source, and ``board_error`` the per-board systematic error's scale and source
+(``data.outcome.NoiseModel``, ``data.outcome.BoardErrorPart``)."""
 BEND_REPORTED = 0.5
 """The summary names the covariance's bend (``covariance_bend``) when a re-fit departed from the Gaussian by this
 many sigmas or more."""

@@ -10,6 +10,7 @@ from ..data.lines import range_sigma
 from ..data.observations import Observations
 from ..errors import JointError, UncertaintyError
 from ..geometry.mounting import MountingPrior
+from ..model.board_error import BoardErrorScale
 from ..model.corners import board_poses
 from ..model.intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS
 from ..model.residuals import perturb
@@ -23,7 +24,8 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
                range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                max_iter: int = MAX_ITER, widen: bool = True, names=None,
                outline: bool = False, mounting: MountingPrior | None = None,
-               bend: bool = True) -> tuple[np.ndarray, np.ndarray, dict]:
+               bend: bool = True, board_error: BoardErrorScale | None = None,
+               spread_held: bool = False, reweight: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
     (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
     ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
@@ -32,23 +34,29 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
     ``names``, default their index) and where it fails the covariance is widened to the boards' spread, with a
     warning that says so. With ``bend`` (and no mounting prior, whose rows cut the ridge to the prior's width) the
     covariance first takes the likelihood's bend along its weakest direction (``refine.bend``: two re-fits),
-    reported in ``info["covariance_bend"]``.
+    reported in ``info["covariance_bend"]``. ``board_error``: the per-board systematic error the model holds
+    (``model.board_error``, ``refine.systematic``); the dispersion test is then of the model with it, and with
+    ``spread_held`` (its scale estimated from these boards) the test is reported without widening; ``reweight``:
+    the boards weighed by the term too (``joint.joint_refine``).
 
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
-                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline, mounting=mounting)
+                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline, mounting=mounting,
+                     board_error=board_error, reweight=reweight)
     exact, cov, warnings = j.camera is None, j.covariance, []
     bent = {}
     if bend and mounting is None:
-        cov, bent, why = bent_joint_covariance(obs, j, loss, f_scale_sigmas, max_iter, outline)
+        cov, bent, why = bent_joint_covariance(obs, j, loss, f_scale_sigmas, max_iter, outline, reweight)
         warnings += [why] if why else []
     widen = widen and obs.n_boards > 3  # three boards fit exactly; units: the noise each sensor shows alone
     if widen:
         sc = corner_sigma_px if corner_sigma_px is not None else \
             estimate_sigmas(obs, j.T_lidar_cam, board_poses(obs), 6 * obs.n_boards, j.camera)[0]
         sr = range_sigma(obs, range_sigma_m)
-        cov, disp = widened_covariance(cov, *board_scores(obs, j.T_lidar_cam, j.T_cam_board, sc, sr, j.camera))
+        n_intrinsics = 0 if j.intrinsics is None else len(j.intrinsics)  # they absorb some of the boards' spread
+        cov, disp = widened_covariance(cov, *board_scores(obs, j.T_lidar_cam, j.T_cam_board, sc, sr, j.camera),
+                                       extra_params=n_intrinsics, held=spread_held)
         warnings += [disp.warning(names)] if disp.widened else []
     info = {"covariance_model": JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
             "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
@@ -64,7 +72,7 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
 
 
 def bent_joint_covariance(obs: Observations, j, loss: str, f_scale_sigmas: float, max_iter: int,
-                          outline: bool) -> tuple[np.ndarray, dict, str | None]:
+                          outline: bool, reweight: bool = False) -> tuple[np.ndarray, dict, str | None]:
     """The joint answer ``j``'s (``refine.joint.JointResult``) covariance with the bend of the likelihood along its
     weakest direction (``refine.bend``; rotation scaled by the scan points' median range): each re-fit is the joint
     model at ``j``'s noise stds with that direction held. Returns (covariance, ``bend_summary``, None), or ``j``'s
@@ -77,7 +85,7 @@ def bent_joint_covariance(obs: Observations, j, loss: str, f_scale_sigmas: float
         r = joint_refine(obs, perturb(j.T_lidar_cam, x0), corner_sigma_px=j.corner_sigma_px,
                          range_sigma_m=j.range_sigma_m, loss=loss, f_scale_sigmas=f_scale_sigmas, max_iter=max_iter,
                          sigma_iters=1, intrinsics=j.camera is not None, outline=outline, hold=hold, covariance=False,
-                         start=j, tol=REFIT_COST_RTOL)
+                         start=j, tol=REFIT_COST_RTOL, board_error=j.board_error, reweight=reweight)
         return hold.offset(r.T_lidar_cam)
 
     try:

@@ -1,0 +1,135 @@
+"""The per-board systematic error of the lidar's view of a board: an error shared by all the beams of one board.
+
+A real board, as the lidar sees it, is not exactly the plane the camera sees: the plate is not flat, the range
+bias of the surface depends on its finish and on the incidence angle, and the camera's estimate of the board's
+pose carries more than its corner noise. What of this moves the board's scan points as a whole is, on the scan
+line, an offset along the board normal and a tilt of the plane about the in-plane axis across the scan line (a
+2D lidar sees one line of the board, so a tilt about the line itself is not seen apart from an offset). Per board
+``i`` the model is
+
+    e_k = n_k  +  u_i,0 / (m . b_k)  +  u_i,1 t_k / (R_i (m . b_k))       (range residual of point k, metres)
+
+with ``n_k`` the per-beam range noise (std ``sigma``), ``m`` the board's unit normal in the lidar frame, ``b_k`` the
+beam's unit direction (``1 / (m . b)`` turns a displacement along the normal into one along the beam), ``t_k`` the
+point's signed distance along the scan line from the board's centroid of points and ``R_i`` the RMS of ``t_k``;
+``u_i ~ N(0, diag(offset_m^2, tilt_m^2))`` independent between boards. ``offset_m`` is the 1-sigma of the offset
+along the normal; ``tilt_m`` the 1-sigma of the tilt as the RMS displacement it gives the board's scan points (the
+tilt angle's 1-sigma is ``tilt_m / R_i``). Both in metres.
+
+Marginalising ``u_i`` gives each board's range residuals the covariance ``Sigma_i = sigma^2 I + B_i P B_i^T``
+(``B_i`` (K_i,2) the two columns above, ``P = diag(offset_m^2, tilt_m^2)``). ``BoardWhitening`` applies
+``Sigma_i^-1/2`` to the range rows (residuals and Jacobians) of a least-squares problem, board by board, in closed
+form (a rank-2 correction of ``1 / sigma``), so that any Gauss-Newton model built on normalised rows (the range
+model, the joint model) holds the term by whitening its range rows once. With both scales zero it is division by
+``sigma``, exactly. The scales' estimate is ``calib_core.refine.systematic``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data.observations import ScanData
+from .residuals import MIN_BEAM_INCIDENCE
+
+
+@dataclass(frozen=True)
+class BoardErrorScale:
+    """The per-board systematic error's 1-sigma (metres): ``offset_m`` along the board normal, ``tilt_m`` the tilt
+    as the RMS displacement of the board's scan points (module docstring)."""
+
+    offset_m: float = 0.0
+    tilt_m: float = 0.0
+
+    @property
+    def active(self) -> bool:
+        """Whether the term holds any error (both zero: the per-beam noise model alone, exactly)."""
+        return self.offset_m > 0 or self.tilt_m > 0
+
+    @property
+    def variances(self) -> np.ndarray:
+        """``(offset_m^2, tilt_m^2)`` (m^2)."""
+        return np.array([self.offset_m, self.tilt_m], float) ** 2
+
+
+def _per_board_sum(values: np.ndarray, board: np.ndarray, n_boards: int) -> np.ndarray:
+    """Sum of ``values`` (K, ...) over each board's points -> (N, ...)."""
+    out = np.zeros((n_boards,) + values.shape[1:])
+    np.add.at(out, board, values)
+    return out
+
+
+def systematic_basis(data: ScanData, normals_lidar: np.ndarray) -> np.ndarray:
+    """The term's two columns (K,2) at every scan point (module docstring's ``B``): ``1 / (m . b)`` (an offset of
+    1 m along the normal) and ``t / (R (m . b))`` (a tilt giving the board's points an RMS displacement of 1 m);
+    ``normals_lidar`` (N,3) the boards' unit normals in the lidar frame (``R_lidar_cam n``). Signs are immaterial
+    (the term enters through ``B P B^T``)."""
+    N = len(normals_lidar)
+    p = data.points[:, :2]
+    cnt = np.bincount(data.board, minlength=N).astype(float)
+    centroid = _per_board_sum(p, data.board, N) / np.maximum(cnt, 1)[:, None]
+    d = p - centroid[data.board]
+    S = _per_board_sum(np.einsum("ka,kb->kab", d, d), data.board, N)            # (N,2,2) scatter
+    ang = 0.5 * np.arctan2(2 * S[:, 0, 1], S[:, 0, 0] - S[:, 1, 1])              # principal direction
+    v = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    t = np.einsum("ka,ka->k", d, v[data.board])
+    R = np.sqrt(_per_board_sum(t**2, data.board, N) / np.maximum(cnt, 1))
+    b = data.points / np.linalg.norm(data.points, axis=1, keepdims=True)
+    mb = np.abs(np.einsum("kj,kj->k", normals_lidar[data.board], b))
+    mb = np.maximum(mb, MIN_BEAM_INCIDENCE)
+    return np.stack([1.0 / mb, t / (np.maximum(R[data.board], 1e-12) * mb)], axis=1)
+
+
+def _sym_power(A: np.ndarray, p: float) -> np.ndarray:
+    """``A^p`` of symmetric positive semi-definite (...,2,2) matrices (eigenvalues floored at a tiny fraction)."""
+    w, V = np.linalg.eigh(0.5 * (A + np.swapaxes(A, -1, -2)))
+    w = np.maximum(w, 1e-300 + 1e-14 * w[..., -1:])
+    return np.einsum("...ij,...j,...kj->...ik", V, w**p, V)
+
+
+@dataclass(frozen=True, eq=False)
+class BoardWhitening:
+    """``Sigma_i^-1/2`` of every board's range rows (module docstring), for a fixed basis and noise.
+
+    ``apply(y)`` maps range rows ``y`` (K,) or (K,p) (residuals or Jacobian columns, metres) to whitened ones
+    (noise stds): ``(y - B_k Q_i B_i^T y) / sigma`` with ``Q_i`` (N,2,2). ``logdet`` is ``sum_i log det Sigma_i``.
+    """
+
+    basis: np.ndarray
+    board: np.ndarray
+    Q: np.ndarray
+    sigma_m: float
+    logdet: float
+
+    @classmethod
+    def of(cls, basis: np.ndarray, board: np.ndarray, n_boards: int, sigma_m: float,
+           scale: BoardErrorScale) -> BoardWhitening:
+        """The whitening of per-beam noise ``sigma_m`` and the term ``scale`` on the columns ``basis`` (K,2)."""
+        s2 = float(sigma_m) ** 2
+        G = _per_board_sum(np.einsum("ka,kb->kab", basis, basis), board, n_boards)   # (N,2,2) B^T B
+        Gh, Gih = _sym_power(G, 0.5), _sym_power(G, -0.5)
+        M = Gh * scale.variances[None, None, :] @ Gh                                # G^1/2 P G^1/2
+        C = np.eye(2) - np.sqrt(s2) * _sym_power(s2 * np.eye(2) + M, -0.5)
+        Q = Gih @ C @ Gih
+        cnt = np.bincount(board, minlength=n_boards)
+        logdet = float(np.sum((cnt - 2) * np.log(s2)) + np.sum(np.linalg.slogdet(s2 * np.eye(2) + M)[1]))
+        return cls(basis, board, Q, float(sigma_m), logdet)
+
+    def apply(self, y: np.ndarray) -> np.ndarray:
+        """Whitened range rows (same shape as ``y``)."""
+        y = np.asarray(y, float)
+        N = len(self.Q)
+        if y.ndim == 1:
+            c = _per_board_sum(self.basis * y[:, None], self.board, N)                   # (N,2) B^T y
+            return (y - np.einsum("ka,ka->k", self.basis, np.einsum("nab,nb->na", self.Q, c)[self.board])) \
+                / self.sigma_m
+        c = _per_board_sum(np.einsum("ka,kp->kap", self.basis, y), self.board, N)       # (N,2,p)
+        return (y - np.einsum("ka,kap->kp", self.basis, (self.Q @ c)[self.board])) / self.sigma_m
+
+
+def whitening_at(data: ScanData, T_lidar_cam: np.ndarray, sigma_m: float, scale: BoardErrorScale) -> BoardWhitening:
+    """``BoardWhitening`` of the scan points of ``data`` at the extrinsic ``T_lidar_cam`` (the boards' planes of
+    ``data`` carried into the lidar frame)."""
+    normals = data.normals @ np.asarray(T_lidar_cam, float)[:3, :3].T
+    return BoardWhitening.of(systematic_basis(data, normals), data.board, len(data.normals), sigma_m, scale)

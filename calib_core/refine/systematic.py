@@ -1,0 +1,173 @@
+"""The scale of the per-board systematic error (``calib_core.model.board_error``): stated by the observation file,
+estimated from the boards by restricted maximum likelihood, or a prior where the boards leave too few degrees of
+freedom.
+
+Estimate. At an answer ``T`` (the range model's, board poses as observed), each board's range residuals ``r_i``
+reduce to their two coefficients on the term's columns, ``c_i = G_i^-1 B_i^T r_i`` (``G_i = B_i^T B_i``): the
+offset and tilt of the board's scan line against its plane. What is left within the board is per-beam noise and
+carries no information on the term. Linearised in the extrinsic ``x`` (6), ``c_i = C_i x + u_i + v_i`` with
+``C_i = G_i^-1 B_i^T J_i``, the term ``u_i ~ N(0, diag(theta_o, theta_t))`` and ``v_i ~ N(0, K_i)``,
+``K_i = sigma^2 G_i^-1 + Cb_i Sigma_b,i Cb_i^T``: the beams' noise (``sigma`` of the scan lines) and, with image
+corners, the camera's board-pose error from its corner noise alone (``Sigma_b,i = sigma_c^2 (Jc_i^T Jc_i)^-1``,
+``Cb_i = G_i^-1 B_i^T Jb_i``), so that the camera's known error is not counted as the lidar's. With
+``V_i = K_i + diag(theta)`` the restricted log-likelihood (the extrinsic integrated out) is
+
+    l_R(theta) = -1/2 [ sum log det V_i + log det A + sum c_i^T V_i^-1 c_i - b^T A^-1 b ],
+    A = sum C_i^T V_i^-1 C_i,  b = sum C_i^T V_i^-1 c_i,
+
+on ``2N - 6`` degrees of freedom (none at three boards). The prior enters as ``PRIOR_DOF`` pseudo degrees of
+freedom per component that showed its value: ``-1/2 PRIOR_DOF (log theta + s0^2 / theta)`` (its mode is ``s0^2``).
+The estimate maximises the sum (over ``log theta``); its 1-sigma is from the curvature there. With
+``ESTIMATE_MIN_BOARDS`` boards or more the estimate is used; below, the prior (3-4 boards: 0-2 degrees of freedom
+for two components).
+
+The prior (``DEFAULT_PRIOR``) is measured on the public rigs: docs/lidarcam.md, "Per-board systematic error".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+
+from ..data.lines import range_sigma, residual_sigma
+from ..data.observations import Observations
+from ..errors import JointError
+from ..model.board_error import BoardErrorScale, _per_board_sum, _sym_power, systematic_basis
+from ..model.corners import board_poses, corner_residuals, joint_range_residuals
+from ..model.residuals import range_linearised
+
+DEFAULT_PRIOR = BoardErrorScale(offset_m=0.005, tilt_m=0.0035)
+"""The prior scale of the per-board systematic error (metres; offset along the normal, tilt as the RMS
+displacement of the board's scan points), measured on the public rigs (docs/lidarcam.md)."""
+PRIOR_DOF = 4.0
+"""Weight of the prior in the estimate, as degrees of freedom per component (about two boards' worth)."""
+ESTIMATE_MIN_BOARDS = 5
+"""Fewest boards whose disagreement estimates the scale (4 boards leave 2 degrees of freedom for 2 components)."""
+STATED, ESTIMATED, PRIOR = "stated", "estimated", "prior"
+"""Where a scale came from (``BoardErrorEstimate.source``)."""
+
+
+@dataclass(frozen=True)
+class BoardErrorEstimate:
+    """The per-board systematic error's scale used, its source (``STATED``: the file's ``board_range_sigma_m``,
+    an offset, no tilt; ``ESTIMATED``; ``PRIOR``), the boards' degrees of freedom for it (``2N - 6``), the 1-sigma
+    of the estimate's two scales (metres; None unless estimated) and the prior."""
+
+    scale: BoardErrorScale
+    source: str
+    dof: int
+    se_offset_m: float | None = None
+    se_tilt_m: float | None = None
+    prior: BoardErrorScale = DEFAULT_PRIOR
+
+    def to_dict(self) -> dict:
+        """``info["board_error"]``: scales in metres and where they came from."""
+        return {"offset_m": self.scale.offset_m, "tilt_m": self.scale.tilt_m, "source": self.source,
+                "dof": self.dof, "se_offset_m": self.se_offset_m, "se_tilt_m": self.se_tilt_m,
+                "prior_offset_m": self.prior.offset_m, "prior_tilt_m": self.prior.tilt_m, "prior_dof": PRIOR_DOF}
+
+
+@dataclass(frozen=True, eq=False)
+class BoardCoefficients:
+    """Each board's coefficients ``c`` (N,2), their extrinsic Jacobian ``C`` (N,2,6) and known covariance ``K``
+    (N,2,2) at an answer (module docstring)."""
+
+    c: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+
+
+def board_coefficients(obs: Observations, T: np.ndarray, range_sigma_m: float | None = None) -> BoardCoefficients:
+    """``BoardCoefficients`` of ``obs`` at the extrinsic ``T`` (range model, board poses as observed); the
+    camera's board-pose error from the corner noise in ``K`` where every board has corners."""
+    T = np.asarray(T, float)
+    data, N = obs.scan_data, obs.n_boards
+    e, J = range_linearised(T, data)
+    B = systematic_basis(data, data.normals @ T[:3, :3].T)
+    Gi = _sym_power(_per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, N), -1.0)
+    c = np.einsum("nab,nb->na", Gi, _per_board_sum(B * e[:, None], data.board, N))
+    C = Gi @ _per_board_sum(np.einsum("ka,kp->kap", B, J), data.board, N)
+    K = range_sigma(obs, range_sigma_m) ** 2 * Gi
+    if obs.has_corners and obs.camera is not None:
+        try:
+            K = K + _camera_part(obs, T, B, Gi)
+        except (JointError, np.linalg.LinAlgError):
+            pass
+    return BoardCoefficients(c, C, K)
+
+
+def _camera_part(obs: Observations, T: np.ndarray, B: np.ndarray, Gi: np.ndarray) -> np.ndarray:
+    """``Cb_i Sigma_b,i Cb_i^T`` (N,2,2): the camera's board-pose error (corner noise alone) in the coefficients."""
+    N = obs.n_boards
+    Tb = board_poses(obs)
+    ec, Jc = corner_residuals(obs, Tb, jacobian=True)
+    sc = residual_sigma(ec, 6 * N)
+    idx = np.concatenate([np.full(len(b.corners_px), i) for i, b in enumerate(obs.boards)])
+    H = _per_board_sum(np.einsum("jca,jcb->jab", Jc, Jc), idx, N)          # (N,6,6)
+    Sb = sc**2 * np.linalg.inv(H)
+    _, _, Jb = joint_range_residuals(obs, T, Tb, jacobian=True)
+    Cb = Gi @ _per_board_sum(np.einsum("ka,kp->kap", B, Jb), obs.scan_data.board, N)       # (N,2,6)
+    return Cb @ Sb @ np.swapaxes(Cb, 1, 2)
+
+
+def restricted_loglik(theta: np.ndarray, co: BoardCoefficients) -> float:
+    """``l_R(theta)`` (module docstring) at the variances ``theta`` (2,) (m^2), without the prior."""
+    V = co.K + np.diag(np.asarray(theta, float))[None]
+    Vi = np.linalg.inv(V)
+    A = np.einsum("nap,nab,nbq->pq", co.C, Vi, co.C)
+    b = np.einsum("nap,nab,nb->p", co.C, Vi, co.c)
+    sA, ldA = np.linalg.slogdet(A)
+    if sA <= 0:
+        return -np.inf
+    quad = float(np.einsum("na,nab,nb->", co.c, Vi, co.c) - b @ np.linalg.solve(A, b))
+    return -0.5 * (float(np.sum(np.linalg.slogdet(V)[1])) + ldA + quad)
+
+
+def _objective(log_theta: np.ndarray, co: BoardCoefficients, prior: BoardErrorScale) -> float:
+    theta = np.exp(log_theta)
+    s0 = prior.variances
+    return -restricted_loglik(theta, co) + 0.5 * PRIOR_DOF * float(np.sum(log_theta + s0 / theta))
+
+
+def _hessian(f, x: np.ndarray, h: float = 1e-3) -> np.ndarray:
+    """Central finite-difference Hessian of ``f`` at ``x``."""
+    E = np.eye(len(x)) * h
+    H = np.empty((len(x), len(x)))
+    for a in range(len(x)):
+        for b in range(a, len(x)):
+            H[a, b] = H[b, a] = (f(x + E[a] + E[b]) - f(x + E[a] - E[b]) - f(x - E[a] + E[b])
+                                 + f(x - E[a] - E[b])) / (4 * h * h)
+    return H
+
+
+def estimate_scale(co: BoardCoefficients, prior: BoardErrorScale = DEFAULT_PRIOR) -> tuple[BoardErrorScale, np.ndarray]:
+    """The restricted maximum likelihood scale with the prior (module docstring) and the 1-sigma (2,) of its two
+    scales (metres), from the curvature in ``log theta``."""
+    x0 = np.log(prior.variances)
+    res = minimize(_objective, x0, args=(co, prior), method="Nelder-Mead",
+                   options={"xatol": 1e-4, "fatol": 1e-9, "maxiter": 400})
+    x = res.x
+    H = _hessian(lambda z: _objective(z, co, prior), res.x)
+    s = np.exp(0.5 * x)
+    try:
+        var_log = np.diag(np.linalg.inv(H))
+        se = 0.5 * s * np.sqrt(np.clip(var_log, 0, None))          # d s = s / 2 d(log theta)
+    except np.linalg.LinAlgError:
+        se = np.full(2, np.nan)
+    return BoardErrorScale(float(s[0]), float(s[1])), se
+
+
+def board_error_estimate(obs: Observations, T: np.ndarray, range_sigma_m: float | None = None,
+                         prior: BoardErrorScale = DEFAULT_PRIOR) -> BoardErrorEstimate:
+    """The per-board systematic scale for ``obs`` at the answer ``T``: the file's ``board_range_sigma_m`` where it
+    states one (an offset, no tilt), else estimated from the boards (``ESTIMATE_MIN_BOARDS`` or more), else the
+    prior."""
+    dof = max(2 * obs.n_boards - 6, 0)
+    if obs.board_range_sigma_m is not None:
+        return BoardErrorEstimate(BoardErrorScale(float(obs.board_range_sigma_m), 0.0), STATED, dof, prior=prior)
+    if obs.n_boards < ESTIMATE_MIN_BOARDS:
+        return BoardErrorEstimate(prior, PRIOR, dof, prior=prior)
+    scale, se = estimate_scale(board_coefficients(obs, T, range_sigma_m), prior)
+    return BoardErrorEstimate(scale, ESTIMATED, dof, float(se[0]), float(se[1]), prior)
