@@ -7,14 +7,18 @@ line, an offset along the board normal and a tilt of the plane about the in-plan
 2D lidar sees one line of the board, so a tilt about the line itself is not seen apart from an offset). Per board
 ``i`` the model is
 
-    e_k = n_k  +  u_i,0 / (m . b_k)  +  u_i,1 t_k / (R_i (m . b_k))       (range residual of point k, metres)
+    e_k = n_k  +  u_i,0  +  u_i,1 t_k / (R_i (m . b_k))       (range residual of point k, metres)
 
 with ``n_k`` the per-beam range noise (std ``sigma``), ``m`` the board's unit normal in the lidar frame, ``b_k`` the
 beam's unit direction (``1 / (m . b)`` turns a displacement along the normal into one along the beam), ``t_k`` the
 point's signed distance along the scan line from the board's centroid of points and ``R_i`` the RMS of ``t_k``;
-``u_i ~ N(0, diag(offset_m^2, tilt_m^2))`` independent between boards. ``offset_m`` is the 1-sigma of the offset
-along the normal; ``tilt_m`` the 1-sigma of the tilt as the RMS displacement it gives the board's scan points (the
-tilt angle's 1-sigma is ``tilt_m / R_i``). Both in metres.
+``u_i ~ N(0, diag(offset_m^2, tilt_m^2))`` independent between boards. ``offset_m`` is the 1-sigma of a range
+offset shared by the board's beams (the quantity an observation file states as ``board_range_sigma_m``, and what a
+surface's finish and incidence give a lidar; an offset of the plate along its normal is the same up to the
+incidence's cosine, and the tilt column takes up the difference along the line); ``tilt_m`` the 1-sigma of a tilt
+of the plane about the in-plane axis across the scan line, through the points' centroid, as the RMS displacement
+along the normal it gives the board's scan points (the tilt angle's 1-sigma is ``tilt_m / R_i``). Both in
+metres.
 
 Marginalising ``u_i`` gives each board's range residuals the covariance ``Sigma_i = sigma^2 I + B_i P B_i^T``
 (``B_i`` (K_i,2) the two columns above, ``P = diag(offset_m^2, tilt_m^2)``). ``BoardWhitening`` applies
@@ -61,8 +65,8 @@ def _per_board_sum(values: np.ndarray, board: np.ndarray, n_boards: int) -> np.n
 
 
 def systematic_basis(data: ScanData, normals_lidar: np.ndarray) -> np.ndarray:
-    """The term's two columns (K,2) at every scan point (module docstring's ``B``): ``1 / (m . b)`` (an offset of
-    1 m along the normal) and ``t / (R (m . b))`` (a tilt giving the board's points an RMS displacement of 1 m);
+    """The term's two columns (K,2) at every scan point (module docstring's ``B``): ``1`` (a range offset of 1 m)
+    and ``t / (R (m . b))`` (a tilt giving the board's points an RMS displacement of 1 m along the normal);
     ``normals_lidar`` (N,3) the boards' unit normals in the lidar frame (``R_lidar_cam n``). Signs are immaterial
     (the term enters through ``B P B^T``)."""
     N = len(normals_lidar)
@@ -78,7 +82,7 @@ def systematic_basis(data: ScanData, normals_lidar: np.ndarray) -> np.ndarray:
     b = data.points / np.linalg.norm(data.points, axis=1, keepdims=True)
     mb = np.abs(np.einsum("kj,kj->k", normals_lidar[data.board], b))
     mb = np.maximum(mb, MIN_BEAM_INCIDENCE)
-    return np.stack([1.0 / mb, t / (np.maximum(R[data.board], 1e-12) * mb)], axis=1)
+    return np.stack([np.ones(len(t)), t / (np.maximum(R[data.board], 1e-12) * mb)], axis=1)
 
 
 def _sym_power(A: np.ndarray, p: float) -> np.ndarray:

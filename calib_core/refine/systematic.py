@@ -38,9 +38,10 @@ from ..model.board_error import BoardErrorScale, _per_board_sum, _sym_power, sys
 from ..model.corners import board_poses, corner_residuals, joint_range_residuals
 from ..model.residuals import range_linearised
 
-DEFAULT_PRIOR = BoardErrorScale(offset_m=0.005, tilt_m=0.0035)
+DEFAULT_PRIOR = BoardErrorScale(offset_m=0.0058, tilt_m=0.0020)
 """The prior scale of the per-board systematic error (metres; offset along the normal, tilt as the RMS
-displacement of the board's scan points), measured on the public rigs (docs/lidarcam.md)."""
+displacement of the board's scan points), measured on the public rigs: each variance the mean over EdenShin,
+Kazmierczak and Nowicki of their restricted maximum likelihood estimates without a prior (docs/lidarcam.md)."""
 PRIOR_DOF = 4.0
 """Weight of the prior in the estimate, as degrees of freedom per component (about two boards' worth)."""
 ESTIMATE_MIN_BOARDS = 5
@@ -125,10 +126,10 @@ def restricted_loglik(theta: np.ndarray, co: BoardCoefficients) -> float:
     return -0.5 * (float(np.sum(np.linalg.slogdet(V)[1])) + ldA + quad)
 
 
-def _objective(log_theta: np.ndarray, co: BoardCoefficients, prior: BoardErrorScale) -> float:
+def _objective(log_theta: np.ndarray, co: BoardCoefficients, prior: BoardErrorScale, prior_dof: float) -> float:
     theta = np.exp(log_theta)
     s0 = prior.variances
-    return -restricted_loglik(theta, co) + 0.5 * PRIOR_DOF * float(np.sum(log_theta + s0 / theta))
+    return -restricted_loglik(theta, co) + 0.5 * prior_dof * float(np.sum(log_theta + s0 / theta))
 
 
 def _hessian(f, x: np.ndarray, h: float = 1e-3) -> np.ndarray:
@@ -142,21 +143,24 @@ def _hessian(f, x: np.ndarray, h: float = 1e-3) -> np.ndarray:
     return H
 
 
-def estimate_scale(co: BoardCoefficients, prior: BoardErrorScale = DEFAULT_PRIOR) -> tuple[BoardErrorScale, np.ndarray]:
-    """The restricted maximum likelihood scale with the prior (module docstring) and the 1-sigma (2,) of its two
-    scales (metres), from the curvature in ``log theta``."""
+def estimate_scale(co: BoardCoefficients, prior: BoardErrorScale = DEFAULT_PRIOR,
+                   prior_dof: float = PRIOR_DOF) -> tuple[BoardErrorScale, np.ndarray]:
+    """The restricted maximum likelihood scale with the prior (module docstring; ``prior_dof`` its weight, 0: the
+    boards alone) and the 1-sigma (2,) of its two scales (metres), from the curvature in ``log theta``."""
     x0 = np.log(prior.variances)
-    res = minimize(_objective, x0, args=(co, prior), method="Nelder-Mead",
+    res = minimize(_objective, x0, args=(co, prior, prior_dof), method="Nelder-Mead",
                    options={"xatol": 1e-4, "fatol": 1e-9, "maxiter": 400})
     x = res.x
-    H = _hessian(lambda z: _objective(z, co, prior), res.x)
+    H = _hessian(lambda z: _objective(z, co, prior, prior_dof), res.x)
     s = np.exp(0.5 * x)
+    d = np.diag(H)
     try:
-        var_log = np.diag(np.linalg.inv(H))
-        se = 0.5 * s * np.sqrt(np.clip(var_log, 0, None))          # d s = s / 2 d(log theta)
+        var_log = np.diag(np.linalg.inv(H)) if np.all(np.linalg.eigvalsh(H) > 0) else np.full(2, np.nan)
     except np.linalg.LinAlgError:
-        se = np.full(2, np.nan)
-    return BoardErrorScale(float(s[0]), float(s[1])), se
+        var_log = np.full(2, np.nan)
+    # a scale at zero leaves its log flat: then each scale's own curvature, and none where that is flat too
+    var_log = np.where(np.isfinite(var_log), var_log, np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.nan))
+    return BoardErrorScale(float(s[0]), float(s[1])), 0.5 * s * np.sqrt(var_log)     # d s = s / 2 d(log theta)
 
 
 def board_error_estimate(obs: Observations, T: np.ndarray, range_sigma_m: float | None = None,
@@ -170,4 +174,5 @@ def board_error_estimate(obs: Observations, T: np.ndarray, range_sigma_m: float 
     if obs.n_boards < ESTIMATE_MIN_BOARDS:
         return BoardErrorEstimate(prior, PRIOR, dof, prior=prior)
     scale, se = estimate_scale(board_coefficients(obs, T, range_sigma_m), prior)
-    return BoardErrorEstimate(scale, ESTIMATED, dof, float(se[0]), float(se[1]), prior)
+    se = [float(v) if np.isfinite(v) else None for v in se]
+    return BoardErrorEstimate(scale, ESTIMATED, dof, se[0], se[1], prior)
