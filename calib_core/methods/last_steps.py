@@ -88,8 +88,7 @@ def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, 
         return joint_step(obs, T, corner_sigma_px=options.corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
                           f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter, widen=options.widen,
                           names=names, outline=options.outline, mounting=mounting, bend=options.bend,
-                          board_error=board_error, spread_held=spread_held,
-                          reweight=options.reweight), None
+                          board_error=board_error, spread_held=spread_held), None
     except (JointError, UncertaintyError) as err:
         return None, f"joint refinement failed ({err})"
 

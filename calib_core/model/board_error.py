@@ -21,11 +21,9 @@ along the normal it gives the board's scan points (the tilt angle's 1-sigma is `
 metres.
 
 Marginalising ``u_i`` gives each board's range residuals the covariance ``Sigma_i = sigma^2 I + B_i P B_i^T``
-(``B_i`` (K_i,2) the two columns above, ``P = diag(offset_m^2, tilt_m^2)``). ``BoardWhitening`` applies
-``Sigma_i^-1/2`` to the range rows (residuals and Jacobians) of a least-squares problem, board by board, in closed
-form (a rank-2 correction of ``1 / sigma``), so that any Gauss-Newton model built on normalised rows (the range
-model, the joint model) holds the term by whitening its range rows once. With both scales zero it is division by
-``sigma``, exactly. The scales' estimate is ``calib_core.refine.systematic``.
+(``B_i`` (K_i,2) the two columns above, ``systematic_basis``; ``P = diag(offset_m^2, tilt_m^2)``). The scales'
+estimate and the covariances that hold the term are in ``calib_core.refine.systematic`` (the joint model) and
+``calib_core.refine.uncertainty`` (the range model).
 """
 
 from __future__ import annotations
@@ -83,57 +81,3 @@ def systematic_basis(data: ScanData, normals_lidar: np.ndarray) -> np.ndarray:
     mb = np.abs(np.einsum("kj,kj->k", normals_lidar[data.board], b))
     mb = np.maximum(mb, MIN_BEAM_INCIDENCE)
     return np.stack([np.ones(len(t)), t / (np.maximum(R[data.board], 1e-12) * mb)], axis=1)
-
-
-def _sym_power(A: np.ndarray, p: float) -> np.ndarray:
-    """``A^p`` of symmetric positive semi-definite (...,2,2) matrices (eigenvalues floored at a tiny fraction)."""
-    w, V = np.linalg.eigh(0.5 * (A + np.swapaxes(A, -1, -2)))
-    w = np.maximum(w, 1e-300 + 1e-14 * w[..., -1:])
-    return np.einsum("...ij,...j,...kj->...ik", V, w**p, V)
-
-
-@dataclass(frozen=True, eq=False)
-class BoardWhitening:
-    """``Sigma_i^-1/2`` of every board's range rows (module docstring), for a fixed basis and noise.
-
-    ``apply(y)`` maps range rows ``y`` (K,) or (K,p) (residuals or Jacobian columns, metres) to whitened ones
-    (noise stds): ``(y - B_k Q_i B_i^T y) / sigma`` with ``Q_i`` (N,2,2). ``logdet`` is ``sum_i log det Sigma_i``.
-    """
-
-    basis: np.ndarray
-    board: np.ndarray
-    Q: np.ndarray
-    sigma_m: float
-    logdet: float
-
-    @classmethod
-    def of(cls, basis: np.ndarray, board: np.ndarray, n_boards: int, sigma_m: float,
-           scale: BoardErrorScale) -> BoardWhitening:
-        """The whitening of per-beam noise ``sigma_m`` and the term ``scale`` on the columns ``basis`` (K,2)."""
-        s2 = float(sigma_m) ** 2
-        G = _per_board_sum(np.einsum("ka,kb->kab", basis, basis), board, n_boards)   # (N,2,2) B^T B
-        Gh, Gih = _sym_power(G, 0.5), _sym_power(G, -0.5)
-        M = Gh * scale.variances[None, None, :] @ Gh                                # G^1/2 P G^1/2
-        C = np.eye(2) - np.sqrt(s2) * _sym_power(s2 * np.eye(2) + M, -0.5)
-        Q = Gih @ C @ Gih
-        cnt = np.bincount(board, minlength=n_boards)
-        logdet = float(np.sum((cnt - 2) * np.log(s2)) + np.sum(np.linalg.slogdet(s2 * np.eye(2) + M)[1]))
-        return cls(basis, board, Q, float(sigma_m), logdet)
-
-    def apply(self, y: np.ndarray) -> np.ndarray:
-        """Whitened range rows (same shape as ``y``)."""
-        y = np.asarray(y, float)
-        N = len(self.Q)
-        if y.ndim == 1:
-            c = _per_board_sum(self.basis * y[:, None], self.board, N)                   # (N,2) B^T y
-            return (y - np.einsum("ka,ka->k", self.basis, np.einsum("nab,nb->na", self.Q, c)[self.board])) \
-                / self.sigma_m
-        c = _per_board_sum(np.einsum("ka,kp->kap", self.basis, y), self.board, N)       # (N,2,p)
-        return (y - np.einsum("ka,kap->kp", self.basis, (self.Q @ c)[self.board])) / self.sigma_m
-
-
-def whitening_at(data: ScanData, T_lidar_cam: np.ndarray, sigma_m: float, scale: BoardErrorScale) -> BoardWhitening:
-    """``BoardWhitening`` of the scan points of ``data`` at the extrinsic ``T_lidar_cam`` (the boards' planes of
-    ``data`` carried into the lidar frame)."""
-    normals = data.normals @ np.asarray(T_lidar_cam, float)[:3, :3].T
-    return BoardWhitening.of(systematic_basis(data, normals), data.board, len(data.normals), sigma_m, scale)

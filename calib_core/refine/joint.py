@@ -30,7 +30,7 @@ from ..errors import JointError, ObservationError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.mounting import MountingPrior
 from ..geometry.transforms import rotvec_to_matrix
-from ..model.board_error import BoardErrorScale, BoardWhitening, systematic_basis, whitening_at
+from ..model.board_error import BoardErrorScale
 from ..model.corners import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 from ..model.intrinsics import IntrinsicsPrior, augmented_blocks
 from ..model.joint_outline import has_outline_rows, outline_cost, with_outline
@@ -38,6 +38,7 @@ from ..model.prior import mounting_cost, with_mounting
 from ..model.residuals import perturb, range_residuals
 from .bend import HeldDirection
 from .refine import F_SCALE_SIGMAS, robust_cost
+from .systematic import with_systematic
 from .uncertainty import Crlb, inverse_information
 
 JOINT_MODEL = CovarianceModel.JOINT
@@ -73,10 +74,8 @@ class JointOptions:
     estimated), the robust loss's scale ``f_scale_sigmas`` in noise stds, at most ``max_iter`` iterations; ``widen``:
     the covariance widened where the boards disagree beyond the model (``refine.dispersion``); ``outline``: the
     lower-bound outlines' terms in the cost (``refine.joint_outline``); ``bend``: the covariance takes the
-    likelihood's bend along its weakest direction (``refine.bend``); ``board_error``: the covariance holds a
-    per-board systematic error (``model.board_error``; its scale stated by the file, estimated or the prior:
-    ``refine.systematic``); ``reweight``: the boards are also weighed by it (generalised least squares) rather than
-    by the per-beam noise alone (the answer then moves; see docs/lidarcam.md)."""
+    likelihood's bend along its weakest direction (``refine.bend``); ``board_error``: with a per-board systematic
+    error (``refine.systematic``)."""
 
     use_corners: bool = True
     corner_sigma_px: float | None = None
@@ -86,36 +85,24 @@ class JointOptions:
     outline: bool = False
     bend: bool = True
     board_error: bool = True
-    reweight: bool = False
 
 
 def _weighted(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sc: float, sr: float, jacobian: bool,
-              prior: IntrinsicsPrior | None = None, k: np.ndarray | None = None, white: BoardWhitening | None = None):
+              prior: IntrinsicsPrior | None = None, k: np.ndarray | None = None):
     """Normalised residuals (corners (2J) then ranges (K)); with ``jacobian`` also the corner rows' board
     Jacobian (2J,6), the range rows' extrinsic (K,6) and board (K,6) Jacobians, at the current poses. With an
     intrinsics ``prior`` the corners go through the camera at its free intrinsics ``k``, and with ``jacobian``
-    the corner rows' intrinsics Jacobian (2J,m) comes last. ``white``: the range rows whitened for the per-board
-    systematic error (``model.board_error``; its noise std is ``sr``) instead of divided by ``sr``."""
+    the corner rows' intrinsics Jacobian (2J,m) comes last."""
     cam = None if prior is None else prior.camera_at(k)
-    rw = (lambda y: y / sr) if white is None else white.apply
     if not jacobian:
         ec = corner_residuals(obs, T_b, camera=cam)
-        return np.r_[ec.ravel() / sc, rw(joint_range_residuals(obs, T_e, T_b))]
+        return np.r_[ec.ravel() / sc, joint_range_residuals(obs, T_e, T_b) / sr]
     er, Je, Jb = joint_range_residuals(obs, T_e, T_b, jacobian=True)
     if prior is None:
         ec, Jc = corner_residuals(obs, T_b, jacobian=True)
-        return np.r_[ec.ravel() / sc, rw(er)], Jc.reshape(-1, 6) / sc, rw(Je), rw(Jb)
+        return np.r_[ec.ravel() / sc, er / sr], Jc.reshape(-1, 6) / sc, Je / sr, Jb / sr
     ec, Jc, Jk = corner_residuals(obs, T_b, jacobian=True, camera=cam, free=prior.free)
-    return np.r_[ec.ravel() / sc, rw(er)], Jc.reshape(-1, 6) / sc, rw(Je), rw(Jb), Jk.reshape(-1, prior.size) / sc
-
-
-def board_whitening(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sr: float,
-                    board_error: BoardErrorScale | None) -> BoardWhitening | None:
-    """The range rows' whitening for the per-board systematic error ``board_error`` at the poses ``T_e``, ``T_b``
-    (range noise ``sr``); None when there is no such term."""
-    if board_error is None or not board_error.active:
-        return None
-    return whitening_at(scan_data_at(obs, np.asarray(T_b, float)), T_e, sr, board_error)
+    return np.r_[ec.ravel() / sc, er / sr], Jc.reshape(-1, 6) / sc, Je / sr, Jb / sr, Jk.reshape(-1, prior.size) / sc
 
 
 _DRHO = {"linear": lambda z: np.ones_like(z), "huber": lambda z: np.where(z <= 1, 1.0, 1 / np.sqrt(np.maximum(z, 1))),
@@ -174,22 +161,22 @@ def _blocks(obs, offsets, weighted, w, prior, k):
 
 
 def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL, prior=None, k=None, outline=False,
-           mounting=None, hold=None, white=None):
+           mounting=None, hold=None):
     """Levenberg-Marquardt on the joint cost, each step by the Schur complement (linear in the boards); robust
     losses by iteratively reweighted least squares (the intrinsics prior's, the mounting prior's and a held
     direction's rows are Gaussian, never reweighted). Returns (T_e, T_b, cost, iterations, converged, k) (``k``
-    the free intrinsics; None without an intrinsics prior). ``white``: the range rows' whitening (``_weighted``)."""
+    the free intrinsics; None without an intrinsics prior)."""
     drho = _DRHO[loss]
     offsets = _row_offsets(obs)
 
     def cost_of(Te, Tb, kk):
-        c = robust_cost(_weighted(obs, Te, Tb, sc, sr, False, prior, kk, white), loss, f_scale_sigmas)
+        c = robust_cost(_weighted(obs, Te, Tb, sc, sr, False, prior, kk), loss, f_scale_sigmas)
         c += (outline_cost(obs, Te, Tb) if outline else 0.0) + mounting_cost(mounting, Te) + mounting_cost(hold, Te)
         return c if prior is None else c + 0.5 * float(np.sum(prior.residuals(kk) ** 2))
 
     cost, lam, it = cost_of(T_e, T_b, k), INITIAL_LAMBDA, 0
     for it in range(1, max_iter + 1):
-        lin = _weighted(obs, T_e, T_b, sc, sr, True, prior, k, white)
+        lin = _weighted(obs, T_e, T_b, sc, sr, True, prior, k)
         w = np.sqrt(drho((lin[0] / f_scale_sigmas) ** 2))
         blocks = _blocks(obs, offsets, lin, w, prior, k)
         blocks = with_outline(blocks, obs, T_e, T_b) if outline else blocks
@@ -226,8 +213,7 @@ class JointResult:
         ``0.5 sum rho`` of the normalised residuals; iterations: of the last solve; converged: whether it met the
         tolerance within ``max_iter``; camera: the camera at the estimated intrinsics when they were unknowns
         (``camera.std_intrinsics``), else None (taken as exact); intrinsics: those free intrinsics (the values
-        of ``refine.joint_intrinsics.IntrinsicsPrior``), else None; board_error: the per-board systematic error's
-        scale the model held (``model.board_error``), None when none.
+        of ``refine.joint_intrinsics.IntrinsicsPrior``), else None.
     """
 
     T_lidar_cam: np.ndarray
@@ -242,7 +228,6 @@ class JointResult:
     converged: bool
     camera: CameraModel | None = None
     intrinsics: np.ndarray | None = None
-    board_error: BoardErrorScale | None = None
 
 
 def estimate_sigmas(obs, T_e, T_b, n_params_boards: int, camera=None):
@@ -258,7 +243,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
                  intrinsics: bool = True, outline: bool = False, mounting: MountingPrior | None = None,
                  hold: HeldDirection | None = None, covariance: bool = True,
                  start: JointResult | None = None, tol: float = COST_RTOL,
-                 board_error: BoardErrorScale | None = None, reweight: bool = False) -> JointResult:
+                 board_error: BoardErrorScale | None = None) -> JointResult:
     """Maximise the joint likelihood from the extrinsic ``T0`` and the observed board poses.
 
     Args:
@@ -277,13 +262,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         covariance: False skips the covariance (``JointResult.covariance`` is None).
         start: an earlier answer whose board poses and intrinsics start the solve (with the extrinsic ``T0``).
         tol: a solve has converged when a step lowers the cost by less than this fraction of it.
-        board_error: the per-board systematic error (``model.board_error``): each board's beams share an offset
-            and a tilt of this scale. The covariance holds it: the sandwich of the per-beam estimator under it
-            (``intrinsics_marginal_covariance``), or with ``reweight`` the boards are weighed by it too
-            (generalised least squares, whitened range rows) and the covariance is that model's inverse
-            information. The range noise is then the scan lines' within-board scatter
-            (``data.lines.range_sigma``) unless ``range_sigma_m``, not re-estimated from the residuals (which would
-            spread the boards' own errors over every point). None or zero scales: no such term.
+        board_error: a per-board systematic error the covariance holds (``intrinsics_marginal_covariance``).
     Raises:
         JointError: no corners or camera; UncertaintyError: the joint information is singular.
     """
@@ -291,19 +270,14 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
     est_c, _ = estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards)
     # start weights from each sensor alone, floored so that neither sensor swamps the other before the solve
     sc = corner_sigma_px if corner_sigma_px is not None else max(est_c, START_CORNER_SIGMA_PX)
-    term = board_error is not None and board_error.active
-    if term and range_sigma_m is None:
-        range_sigma_m = max(range_sigma(obs), RANGE_SIGMA_FLOOR_M)
     sr = range_sigma_m if range_sigma_m is not None else max(range_sigma(obs), START_RANGE_SIGMA_M)
     prior = IntrinsicsPrior.of(obs.camera) if intrinsics else None
     k = None if prior is None else prior.k0.copy() if start is None or start.intrinsics is None else \
         start.intrinsics.copy()
     n_free = 6 * obs.n_boards + (0 if prior is None else prior.size)  # the corners' parameters: poses, intrinsics
     for _ in range(max(1, sigma_iters)):
-        white = board_whitening(obs, T_e, T_b, sr, board_error) if reweight else None
         T_e, T_b, _, nit, converged, k = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol,
-                                                prior=prior, k=k, outline=outline, mounting=mounting, hold=hold,
-                                                white=white)
+                                                prior=prior, k=k, outline=outline, mounting=mounting, hold=hold)
         cam = None if prior is None else prior.camera_at(k)
         new_c, new_r = estimate_sigmas(obs, T_e, T_b, n_free, cam)
         new_c = corner_sigma_px if corner_sigma_px is not None else new_c
@@ -312,73 +286,43 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         sc, sr = new_c, new_r
         if done:
             break
-    white = board_whitening(obs, T_e, T_b, sr, board_error) if reweight else None
     cov = None if not covariance else \
-        intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k, outline, board_error=board_error,
-                                       reweight=reweight)[:6, :6] \
-        if prior is not None or (outline and has_outline_rows(obs)) or term else \
+        intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k, outline, board_error=board_error)[:6, :6] \
+        if prior is not None or (outline and has_outline_rows(obs)) or board_error is not None else \
         marginal_covariance(obs, T_e, T_b, sc, sr)
     ec = corner_residuals(obs, T_b, camera=cam)
     er = joint_range_residuals(obs, T_e, T_b)
-    cost = robust_cost(np.r_[ec.ravel() / sc, er / sr if white is None else white.apply(er)], loss, f_scale_sigmas) + \
+    cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale_sigmas) + \
         (outline_cost(obs, T_e, T_b) if outline else 0.0) + mounting_cost(mounting, T_e) + mounting_cost(hold, T_e)
     if prior is not None:
         cost += 0.5 * float(np.sum(prior.residuals(k) ** 2))
     return JointResult(T_e, T_b, cov, sc, sr, float(np.sqrt(np.mean(np.sum(ec**2, axis=1)))),
-                       float(np.sqrt(np.mean(er**2))), cost, nit, converged, cam, k, board_error if term else None)
+                       float(np.sqrt(np.mean(er**2))), cost, nit, converged, cam, k)
 
 
 def intrinsics_marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray,
                                    corner_sigma_px: float, range_sigma_m: float, prior: IntrinsicsPrior | None,
                                    k: np.ndarray | None, outline: bool = False, rcond: float = 1e-12,
-                                   board_error: BoardErrorScale | None = None, reweight: bool = False) -> np.ndarray:
+                                   board_error: BoardErrorScale | None = None) -> np.ndarray:
     """Covariance (6+m, 6+m) of the extrinsic (rotation rad, translation m) and the free intrinsics ``k`` of
     ``prior`` (their units; none without one), board poses marginalised by the Schur complement: the inverse of
     ``H_gg - sum_i H_gi H_ii^-1 H_ig`` with the prior's information in ``H_gg`` and with ``outline`` the active
-    lower-bound outline rows' (``refine.joint_outline``). ``board_error``: the per-board systematic error
-    (``model.board_error``) held: with ``reweight`` the range rows are whitened for it (the covariance of the
-    generalised least-squares answer); without, the covariance of the per-beam answer under it, the sandwich
-    ``C + C M C`` with ``C`` the inverse above and ``M = sum_i w_i P w_i^T / sigma^2`` (``systematic_meat``).
-    Linear in the boards.
+    lower-bound outline rows' (``refine.joint_outline``), and a per-board systematic error ``board_error``
+    (``refine.systematic.with_systematic``). Linear in the boards.
 
     UncertaintyError when a board's pose or the extrinsic is not determined.
     """
     lin = _weighted(obs, np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float), float(corner_sigma_px),
-                    float(range_sigma_m), True, prior, k,
-                    board_whitening(obs, T_lidar_cam, T_cam_board, float(range_sigma_m), board_error)
-                    if reweight else None)
+                    float(range_sigma_m), True, prior, k)
     blocks = _blocks(obs, _row_offsets(obs), lin, np.ones(len(lin[0])), prior, k)
     _, _, H_gg, H_gb, H_bb = with_outline(blocks, obs, T_lidar_cam, T_cam_board) if outline else blocks
     try:
         X = np.linalg.solve(H_bb, np.swapaxes(H_gb, 1, 2))
     except np.linalg.LinAlgError:
         raise UncertaintyError("a board's pose is not determined by its corners") from None
-    C = inverse_information(H_gg - np.einsum("nab,nbc->ac", H_gb, X), rcond)
-    if reweight or board_error is None or not board_error.active:
-        return C
-    M = systematic_meat(obs, np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float), lin[2], lin[3], H_gb,
-                        H_bb, float(range_sigma_m), board_error)
-    C = C + C @ M @ C
-    return 0.5 * (C + C.T)
-
-
-def systematic_meat(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, Je: np.ndarray, Jb: np.ndarray,
-                    H_gb: np.ndarray, H_bb: np.ndarray, sr: float, board_error: BoardErrorScale) -> np.ndarray:
-    """The per-board systematic error's part (G,G) of the shared parameters' score covariance, board poses
-    profiled: ``sum_i w_i P w_i^T / sr^2`` with ``w_i = V_g,i^T - H_gb,i H_bb,i^-1 V_b,i^T`` (G,2), ``V_i = B_i^T J_i``
-    the term's columns (``model.board_error.systematic_basis``) on the board's normalised range rows (``Je``
-    (K,6) extrinsic, ``Jb`` (K,6) board pose; the intrinsics' columns are zero on range rows) and ``P`` the term's
-    variances. Linear in the boards."""
-    data = scan_data_at(obs, T_b)
-    B = systematic_basis(data, data.normals @ T_e[:3, :3].T)
-    N, G = obs.n_boards, H_gb.shape[1]
-    starts = _row_offsets(obs)[1]
-    Vx = np.add.reduceat(np.einsum("ka,kp->kap", B, Je), starts)                      # (N,2,6)
-    Vb = np.add.reduceat(np.einsum("ka,kp->kap", B, Jb), starts)                      # (N,2,6)
-    Vg = np.zeros((N, G, 2))
-    Vg[:, :6, :] = np.swapaxes(Vx, 1, 2)
-    W = Vg - H_gb @ np.linalg.solve(H_bb, np.swapaxes(Vb, 1, 2))                       # (N,G,2)
-    return np.einsum("nga,a,nha->gh", W, board_error.variances / sr**2, W)
+    return with_systematic(inverse_information(H_gg - np.einsum("nab,nbc->ac", H_gb, X), rcond), board_error,
+                           scan_data_at(obs, T_cam_board), T_lidar_cam, lin, H_gb, H_bb, range_sigma_m,
+                           _row_offsets(obs)[1])
 
 
 def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,

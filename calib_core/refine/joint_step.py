@@ -25,7 +25,7 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
                max_iter: int = MAX_ITER, widen: bool = True, names=None,
                outline: bool = False, mounting: MountingPrior | None = None,
                bend: bool = True, board_error: BoardErrorScale | None = None,
-               spread_held: bool = False, reweight: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
+               spread_held: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
     (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
     ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
@@ -36,18 +36,21 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
     covariance first takes the likelihood's bend along its weakest direction (``refine.bend``: two re-fits),
     reported in ``info["covariance_bend"]``. ``board_error``: the per-board systematic error the model holds
     (``model.board_error``, ``refine.systematic``); the dispersion test is then of the model with it, and with
-    ``spread_held`` (its scale estimated from these boards) the test is reported without widening; ``reweight``:
-    the boards weighed by the term too (``joint.joint_refine``).
+    ``spread_held`` (its scale estimated from these boards) the test is reported without widening. The range
+    noise is then the scan lines' (``data.lines``) unless ``range_sigma_m``, not re-estimated from residuals that
+    hold the boards' own errors.
 
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
+    if board_error is not None and board_error.active:  # the beams' noise: the scatter within each board's line
+        range_sigma_m = range_sigma(obs, range_sigma_m)
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
                      f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline, mounting=mounting,
-                     board_error=board_error, reweight=reweight)
+                     board_error=board_error)
     exact, cov, warnings = j.camera is None, j.covariance, []
     bent = {}
     if bend and mounting is None:
-        cov, bent, why = bent_joint_covariance(obs, j, loss, f_scale_sigmas, max_iter, outline, reweight)
+        cov, bent, why = bent_joint_covariance(obs, j, loss, f_scale_sigmas, max_iter, outline)
         warnings += [why] if why else []
     widen = widen and obs.n_boards > 3  # three boards fit exactly; units: the noise each sensor shows alone
     if widen:
@@ -72,7 +75,7 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
 
 
 def bent_joint_covariance(obs: Observations, j, loss: str, f_scale_sigmas: float, max_iter: int,
-                          outline: bool, reweight: bool = False) -> tuple[np.ndarray, dict, str | None]:
+                          outline: bool) -> tuple[np.ndarray, dict, str | None]:
     """The joint answer ``j``'s (``refine.joint.JointResult``) covariance with the bend of the likelihood along its
     weakest direction (``refine.bend``; rotation scaled by the scan points' median range): each re-fit is the joint
     model at ``j``'s noise stds with that direction held. Returns (covariance, ``bend_summary``, None), or ``j``'s
@@ -85,7 +88,7 @@ def bent_joint_covariance(obs: Observations, j, loss: str, f_scale_sigmas: float
         r = joint_refine(obs, perturb(j.T_lidar_cam, x0), corner_sigma_px=j.corner_sigma_px,
                          range_sigma_m=j.range_sigma_m, loss=loss, f_scale_sigmas=f_scale_sigmas, max_iter=max_iter,
                          sigma_iters=1, intrinsics=j.camera is not None, outline=outline, hold=hold, covariance=False,
-                         start=j, tol=REFIT_COST_RTOL, board_error=j.board_error, reweight=reweight)
+                         start=j, tol=REFIT_COST_RTOL)
         return hold.offset(r.T_lidar_cam)
 
     try:

@@ -32,9 +32,9 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..data.lines import range_sigma, residual_sigma
-from ..data.observations import Observations
+from ..data.observations import Observations, ScanData
 from ..errors import JointError
-from ..model.board_error import BoardErrorScale, _per_board_sum, _sym_power, systematic_basis
+from ..model.board_error import BoardErrorScale, _per_board_sum, systematic_basis
 from ..model.corners import board_poses, corner_residuals, joint_range_residuals
 from ..model.residuals import range_linearised
 
@@ -87,7 +87,7 @@ def board_coefficients(obs: Observations, T: np.ndarray, range_sigma_m: float | 
     data, N = obs.scan_data, obs.n_boards
     e, J = range_linearised(T, data)
     B = systematic_basis(data, data.normals @ T[:3, :3].T)
-    Gi = _sym_power(_per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, N), -1.0)
+    Gi = np.linalg.inv(_per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, N))
     c = np.einsum("nab,nb->na", Gi, _per_board_sum(B * e[:, None], data.board, N))
     C = Gi @ _per_board_sum(np.einsum("ka,kp->kap", B, J), data.board, N)
     K = range_sigma(obs, range_sigma_m) ** 2 * Gi
@@ -176,3 +176,29 @@ def board_error_estimate(obs: Observations, T: np.ndarray, range_sigma_m: float 
     scale, se = estimate_scale(board_coefficients(obs, T, range_sigma_m), prior)
     se = [float(v) if np.isfinite(v) else None for v in se]
     return BoardErrorEstimate(scale, ESTIMATED, dof, se[0], se[1], prior)
+
+
+def with_systematic(C: np.ndarray, scale: BoardErrorScale | None, data: ScanData, T_e: np.ndarray, lin: tuple,
+                    H_gb: np.ndarray, H_bb: np.ndarray, sr: float, starts: np.ndarray) -> np.ndarray:
+    """The joint model's covariance ``C`` (G,G) of its shared parameters (extrinsic, then any free intrinsics;
+    ``calib_core.refine.joint``, board poses marginalised) with the per-board systematic error ``scale`` held (``C``
+    itself without one): the answer is weighed by the per-beam noise, so its covariance under the term is the
+    sandwich ``C + C M C``, ``M = sum_i w_i P w_i^T / sr^2`` the term's part of the profiled score covariance,
+    ``w_i = V_g,i^T - H_gb,i H_bb,i^-1 V_b,i^T`` (G,2) with ``V_i = B_i^T J_i`` the term's columns
+    (``model.board_error.systematic_basis`` on ``data``, the scan points with the current board planes) on the
+    board's normalised range rows (``lin``: ``joint._weighted``'s output, ``Je`` (K,6) extrinsic and ``Jb`` (K,6)
+    board pose columns; the intrinsics' are zero on range rows; rows of board i from ``starts[i]``) and ``P`` the
+    term's variances. Linear in the boards."""
+    if scale is None or not scale.active:
+        return C
+    Je, Jb = lin[2], lin[3]
+    B = systematic_basis(data, data.normals @ np.asarray(T_e, float)[:3, :3].T)
+    N, G = len(data.normals), H_gb.shape[1]
+    Vx = np.add.reduceat(np.einsum("ka,kp->kap", B, Je), starts)                      # (N,2,6)
+    Vb = np.add.reduceat(np.einsum("ka,kp->kap", B, Jb), starts)                      # (N,2,6)
+    Vg = np.zeros((N, G, 2))
+    Vg[:, :6, :] = np.swapaxes(Vx, 1, 2)
+    W = Vg - H_gb @ np.linalg.solve(H_bb, np.swapaxes(Vb, 1, 2))                       # (N,G,2)
+    M = np.einsum("nga,a,nha->gh", W, scale.variances / float(sr) ** 2, W)
+    C = C + C @ M @ C
+    return 0.5 * (C + C.T)
