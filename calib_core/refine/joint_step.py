@@ -4,6 +4,8 @@ answer, its covariance corrected for the likelihood's bend (``refine.bend``) and
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..data.lines import range_sigma
@@ -12,11 +14,19 @@ from ..errors import JointError, UncertaintyError
 from ..geometry.mounting import MountingPrior
 from ..model.board_error import BoardErrorScale
 from ..model.corners import board_poses
-from ..model.intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS
+from ..model.intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS, IntrinsicsPrior
 from ..model.residuals import perturb
 from .bend import HOLD_STD_FRACTION, REFIT_COST_RTOL, HeldDirection, bend_summary, bent_covariance, weakest_direction
 from .dispersion import widened_covariance
-from .joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL, MAX_ITER, board_scores, estimate_sigmas, joint_refine
+from .joint import (
+    JOINT_INTRINSICS_MODEL,
+    JOINT_MODEL,
+    MAX_ITER,
+    board_scores,
+    estimate_sigmas,
+    intrinsics_marginal_covariance,
+    joint_refine,
+)
 from .refine import F_SCALE_SIGMAS
 
 
@@ -50,7 +60,14 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
     exact, cov, warnings = j.camera is None, j.covariance, []
     bent = {}
     if bend and mounting is None:
+        term = 0.0  # the bend is the per-beam likelihood's; the per-board term's part is added to it unchanged
+        if board_error is not None and board_error.active:
+            prior = None if j.intrinsics is None else IntrinsicsPrior.of(obs.camera)
+            per_beam = intrinsics_marginal_covariance(obs, j.T_lidar_cam, j.T_cam_board, j.corner_sigma_px,
+                                                      j.range_sigma_m, prior, j.intrinsics, outline)[:6, :6]
+            term, j = cov - per_beam, replace(j, covariance=per_beam)
         cov, bent, why = bent_joint_covariance(obs, j, loss, f_scale_sigmas, max_iter, outline)
+        cov = cov + term
         warnings += [why] if why else []
     widen = widen and obs.n_boards > 3  # three boards fit exactly; units: the noise each sensor shows alone
     if widen:
