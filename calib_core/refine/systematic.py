@@ -15,9 +15,13 @@ corners, the camera's board-pose error from its corner noise alone (``Sigma_b,i 
     l_R(theta) = -1/2 [ sum log det V_i + log det A + sum c_i^T V_i^-1 c_i - b^T A^-1 b ],
     A = sum C_i^T V_i^-1 C_i,  b = sum C_i^T V_i^-1 c_i,
 
-on ``2N - 6`` degrees of freedom (none at three boards). The prior enters as ``PRIOR_DOF`` pseudo degrees of
-freedom per component that showed its value: ``-1/2 PRIOR_DOF (log theta + s0^2 / theta)`` (its mode is ``s0^2``).
-The estimate maximises the sum (over ``log theta``); its 1-sigma is from the curvature there. With
+on ``2N - 6`` degrees of freedom (none at three boards). The prior enters as a normal density of each
+``log theta`` about the prior's ``log s0^2`` with std ``PRIOR_LOG_SD``: ``-1/2 ((log theta - log s0^2) /
+PRIOR_LOG_SD)^2``. Unlike a scaled inverse chi-square it lets boards that show no systematic error (a renderer's)
+bring the estimate near zero, and it keeps the estimate near the prior where the boards have few degrees of
+freedom.
+The estimate is each scale's posterior mean over a grid of ``log theta`` (``estimate_scale``), its
+1-sigma the posterior std. With
 ``ESTIMATE_MIN_BOARDS`` boards or more the estimate is used; below, the prior (3-4 boards: 0-2 degrees of freedom
 for two components).
 
@@ -29,7 +33,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize
 
 from ..data.lines import range_sigma, residual_sigma
 from ..data.observations import Observations, ScanData
@@ -42,8 +45,10 @@ DEFAULT_PRIOR = BoardErrorScale(offset_m=0.0058, tilt_m=0.0020)
 """The prior scale of the per-board systematic error (metres; offset along the normal, tilt as the RMS
 displacement of the board's scan points), measured on the public rigs: each variance the mean over EdenShin,
 Kazmierczak and Nowicki of their restricted maximum likelihood estimates without a prior (docs/lidarcam.md)."""
-PRIOR_DOF = 4.0
-"""Weight of the prior in the estimate, as degrees of freedom per component (about two boards' worth)."""
+PRIOR_LOG_SD = 2.0
+"""Width of the prior in the estimate: each variance's log is Normal about the prior's with this std (a factor
+``e`` in the scale per std): the boards' own disagreement moves the estimate where they have the degrees of
+freedom, down to near zero on boards that show none, and leaves it near the prior where they have few."""
 ESTIMATE_MIN_BOARDS = 5
 """Fewest boards whose disagreement estimates the scale (4 boards leave 2 degrees of freedom for 2 components)."""
 STATED, ESTIMATED, PRIOR = "stated", "estimated", "prior"
@@ -67,7 +72,7 @@ class BoardErrorEstimate:
         """``info["board_error"]``: scales in metres and where they came from."""
         return {"offset_m": self.scale.offset_m, "tilt_m": self.scale.tilt_m, "source": self.source,
                 "dof": self.dof, "se_offset_m": self.se_offset_m, "se_tilt_m": self.se_tilt_m,
-                "prior_offset_m": self.prior.offset_m, "prior_tilt_m": self.prior.tilt_m, "prior_dof": PRIOR_DOF}
+                "prior_offset_m": self.prior.offset_m, "prior_tilt_m": self.prior.tilt_m, "prior_log_sd": PRIOR_LOG_SD}
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,54 +118,45 @@ def _camera_part(obs: Observations, T: np.ndarray, B: np.ndarray, Gi: np.ndarray
     return Cb @ Sb @ np.swapaxes(Cb, 1, 2)
 
 
-def restricted_loglik(theta: np.ndarray, co: BoardCoefficients) -> float:
-    """``l_R(theta)`` (module docstring) at the variances ``theta`` (2,) (m^2), without the prior."""
-    V = co.K + np.diag(np.asarray(theta, float))[None]
+def restricted_loglik(theta: np.ndarray, co: BoardCoefficients) -> np.ndarray:
+    """``l_R(theta)`` (module docstring) at the variances ``theta`` (..., 2) (m^2), without the prior."""
+    theta = np.asarray(theta, float)
+    shape = theta.shape[:-1]
+    th = theta.reshape(-1, 1, 2)
+    V = co.K[None] + th[..., :, None] * np.eye(2)                                     # (M,N,2,2)
     Vi = np.linalg.inv(V)
-    A = np.einsum("nap,nab,nbq->pq", co.C, Vi, co.C)
-    b = np.einsum("nap,nab,nb->p", co.C, Vi, co.c)
+    A = np.einsum("nap,mnab,nbq->mpq", co.C, Vi, co.C)
+    b = np.einsum("nap,mnab,nb->mp", co.C, Vi, co.c)
     sA, ldA = np.linalg.slogdet(A)
-    if sA <= 0:
-        return -np.inf
-    quad = float(np.einsum("na,nab,nb->", co.c, Vi, co.c) - b @ np.linalg.solve(A, b))
-    return -0.5 * (float(np.sum(np.linalg.slogdet(V)[1])) + ldA + quad)
+    quad = np.einsum("na,mnab,nb->m", co.c, Vi, co.c) - np.einsum("mp,mp->m", b,
+                                                                   np.linalg.solve(A, b[..., None])[..., 0])
+    out = -0.5 * (np.sum(np.linalg.slogdet(V)[1], axis=1) + ldA + quad)
+    return np.where(sA > 0, out, -np.inf).reshape(shape)
 
 
-def _objective(log_theta: np.ndarray, co: BoardCoefficients, prior: BoardErrorScale, prior_dof: float) -> float:
-    theta = np.exp(log_theta)
-    s0 = prior.variances
-    return -restricted_loglik(theta, co) + 0.5 * prior_dof * float(np.sum(log_theta + s0 / theta))
-
-
-def _hessian(f, x: np.ndarray, h: float = 1e-3) -> np.ndarray:
-    """Central finite-difference Hessian of ``f`` at ``x``."""
-    E = np.eye(len(x)) * h
-    H = np.empty((len(x), len(x)))
-    for a in range(len(x)):
-        for b in range(a, len(x)):
-            H[a, b] = H[b, a] = (f(x + E[a] + E[b]) - f(x + E[a] - E[b]) - f(x - E[a] + E[b])
-                                 + f(x - E[a] - E[b])) / (4 * h * h)
-    return H
+GRID_SCALES_M = np.geomspace(5e-5, 0.05, 61)
+"""The scales (metres) over which the estimate integrates, each component: 0.05 mm (none, for a calibration) to
+50 mm (beyond a board's flatness or a lidar's bias)."""
 
 
 def estimate_scale(co: BoardCoefficients, prior: BoardErrorScale = DEFAULT_PRIOR,
-                   prior_dof: float = PRIOR_DOF) -> tuple[BoardErrorScale, np.ndarray]:
-    """The restricted maximum likelihood scale with the prior (module docstring; ``prior_dof`` its weight, 0: the
-    boards alone) and the 1-sigma (2,) of its two scales (metres), from the curvature in ``log theta``."""
-    x0 = np.log(prior.variances)
-    res = minimize(_objective, x0, args=(co, prior, prior_dof), method="Nelder-Mead",
-                   options={"xatol": 1e-4, "fatol": 1e-9, "maxiter": 400})
-    x = res.x
-    H = _hessian(lambda z: _objective(z, co, prior, prior_dof), res.x)
-    s = np.exp(0.5 * x)
-    d = np.diag(H)
-    try:
-        var_log = np.diag(np.linalg.inv(H)) if np.all(np.linalg.eigvalsh(H) > 0) else np.full(2, np.nan)
-    except np.linalg.LinAlgError:
-        var_log = np.full(2, np.nan)
-    # a scale at zero leaves its log flat: then each scale's own curvature, and none where that is flat too
-    var_log = np.where(np.isfinite(var_log), var_log, np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), np.nan))
-    return BoardErrorScale(float(s[0]), float(s[1])), 0.5 * s * np.sqrt(var_log)     # d s = s / 2 d(log theta)
+                   prior_sd: float = PRIOR_LOG_SD) -> tuple[BoardErrorScale, np.ndarray]:
+    """The scale's estimate (module docstring): the posterior mean of each scale under the restricted likelihood
+    and the prior (``prior_sd`` its width in ``log theta``, ``inf``: the boards alone), over ``GRID_SCALES_M``
+    each; and its 1-sigma (2,) (metres), the posterior std. The mean, not the mode: with few degrees of freedom the
+    restricted likelihood is wide and skewed, and its mode falls near zero by chance on a set of boards that agree;
+    the mean keeps that uncertainty in the scale the covariance uses."""
+    g = np.log(GRID_SCALES_M**2)
+    X = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1)                             # (G,G,2) log theta
+    logp = restricted_loglik(np.exp(X), co)
+    if np.isfinite(prior_sd):
+        logp = logp - 0.5 * np.sum(((X - np.log(prior.variances)) / prior_sd) ** 2, axis=-1)
+    w = np.exp(logp - np.max(logp))
+    w /= w.sum()
+    s = np.exp(0.5 * X)
+    mean = np.einsum("ij,ijc->c", w, s)
+    sd = np.sqrt(np.maximum(np.einsum("ij,ijc->c", w, s**2) - mean**2, 0.0))
+    return BoardErrorScale(float(mean[0]), float(mean[1])), sd
 
 
 def board_error_estimate(obs: Observations, T: np.ndarray, range_sigma_m: float | None = None,
