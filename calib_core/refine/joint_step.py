@@ -74,9 +74,8 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
         sc = corner_sigma_px if corner_sigma_px is not None else \
             estimate_sigmas(obs, j.T_lidar_cam, board_poses(obs), 6 * obs.n_boards, j.camera)[0]
         sr = range_sigma(obs, range_sigma_m)
-        n_intrinsics = 0 if j.intrinsics is None else len(j.intrinsics)  # they absorb some of the boards' spread
         cov, disp = widened_covariance(cov, *board_scores(obs, j.T_lidar_cam, j.T_cam_board, sc, sr, j.camera),
-                                       extra_params=n_intrinsics, held=spread_held)
+                                       extra_params=intrinsics_parameters(obs, j, outline), held=spread_held)
         warnings += [disp.warning(names)] if disp.widened else []
     info = {"covariance_model": JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
             "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
@@ -117,3 +116,15 @@ def bent_joint_covariance(obs: Observations, j, loss: str, f_scale_sigmas: float
         return j.covariance, {}, f"the covariance's bend along its weakest direction was not computed ({why}): " \
             "it is the Gaussian approximation at the answer"
     return cov, bend_summary(j.covariance, cov, v, dep), None
+
+
+def intrinsics_parameters(obs: Observations, j, outline: bool) -> int:
+    """How many parameters the free intrinsics of the joint answer ``j`` fit to the boards (0 with none): their
+    effective number under the prior, ``m - tr(C_kk Lambda)`` (``C_kk`` their posterior covariance, ``Lambda`` the
+    prior's information), rounded; each takes a degree of freedom from the boards' dispersion test."""
+    prior = None if j.intrinsics is None else IntrinsicsPrior.of(obs.camera)
+    if prior is None:
+        return 0
+    C = intrinsics_marginal_covariance(obs, j.T_lidar_cam, j.T_cam_board, j.corner_sigma_px, j.range_sigma_m, prior,
+                                       j.intrinsics, outline)[6:, 6:]
+    return int(round(prior.size - float(np.sum(np.diag(C) / prior.std**2))))
