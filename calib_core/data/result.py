@@ -210,9 +210,15 @@ class CalibrationResult:
             if "intrinsics" in self.info:
                 out.append(f"camera intrinsics: {self.info['intrinsics']}")
             if (d := self.info.get("board_dispersion")) is not None:
+                verdict = "the covariance is widened to the boards' spread" if d["widened"] else \
+                    "beyond the per-beam noise, held by the per-board systematic error estimated from them" \
+                    if d.get("held") else "the boards agree with the noise model"
                 out.append(f"boards' dispersion: {d['statistic']:.1f} on {d['dof']} degrees of freedom (p "
-                           f"{d['p_value']:.1e}): " + ("the covariance is widened to the boards' spread"
-                                                        if d["widened"] else "the boards agree with the noise model"))
+                           f"{d['p_value']:.1e}): {verdict}")
+            if (e := self.info.get("board_error")) is not None and (e["offset_m"] > 0 or e["tilt_m"] > 0):
+                out.append(f"per-board systematic error: offset {1000 * e['offset_m']:.1f} mm, tilt "
+                           f"{1000 * e['tilt_m']:.1f} mm ({e['source']}"
+                           + (f" from {e['dof']} degrees of freedom" if e["source"] == "estimated" else "") + ")")
             if (b := self.info.get("covariance_bend")) is not None and b["departure_sigmas"] >= BEND_REPORTED:
                 out.append(f"the likelihood bends along its weakest direction ({b['departure_sigmas']:.1f} sigma off "
                            f"the Gaussian 1.7 sigmas along it): the 1-sigma holds it (Gaussian alone: rotation "

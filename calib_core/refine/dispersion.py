@@ -52,7 +52,8 @@ class Dispersion:
     Attributes:
         statistic: ``D``; dof: its degrees of freedom (0: not testable); p_value: chi-square tail probability (1
         when not testable); ratio: ``D / dof`` (1 when not testable); widened: whether the covariance was widened;
-        shares: (N,) each board's part of ``D``.
+        shares: (N,) each board's part of ``D``; held: the test failed but a per-board systematic term estimated
+        from these boards holds their spread (not widened).
     """
 
     statistic: float
@@ -61,12 +62,14 @@ class Dispersion:
     ratio: float
     widened: bool
     shares: np.ndarray
+    held: bool = False
 
     def to_dict(self, names=None) -> dict:
         """JSON-able form for ``info["board_dispersion"]`` (``shares`` keyed by board name or index)."""
         names = [str(n) for n in names] if names is not None else [str(i) for i in range(len(self.shares))]
         return {"statistic": float(self.statistic), "dof": int(self.dof), "p_value": float(self.p_value),
                 "ratio": float(self.ratio), "alpha": DISPERSION_ALPHA, "widened": bool(self.widened),
+                **({"held": True} if self.held else {}),
                 "shares": {n: float(s) for n, s in zip(names, self.shares, strict=True)}}
 
     def warning(self, names=None) -> str:
@@ -134,7 +137,7 @@ def widened_covariance(cov: np.ndarray, g: np.ndarray, S_i: np.ndarray, extra_pa
     g = centred(g, S_i)
     d = dispersion(g, S_i, extra_params)
     if held and d.widened:
-        d = replace(d, widened=False)
+        d = replace(d, widened=False, held=True)
     if not d.widened:
         return cov, d
     spread = loewner_max(d.ratio * np.linalg.inv(S_i.sum(axis=0)), jackknife_covariance(g, S_i))

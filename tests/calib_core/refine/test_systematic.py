@@ -95,6 +95,8 @@ def test_the_result_names_its_noise_model_and_each_scales_source(rng, tmp_path):
     assert back == res.outcome.noise_model
     assert back.board_error.source == ESTIMATED and back.range_source == "scan lines"
     assert "per-board offset and tilt" in back.name
+    assert any(line.startswith("per-board systematic error: offset") and "(estimated from 6 degrees" in line
+               for line in res.summary_lines())
 
 
 def _with_std(obs, rel: float, px: float):
