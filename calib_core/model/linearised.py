@@ -91,7 +91,8 @@ def _jacobians(obs: Observations, C: np.ndarray, frames: tuple, lazy: tuple, low
     lin_rows = obs.derived("scorers.linearised_rows", _linearised_rows)[1]
     points = obs.derived("scorers.linearised_points", _linearised_points)
     n_edge = 2 * len(exact)
-    J_rng, g_edge, g_out = (f()[rows] for f in lazy)
+    every = len(rows) == len(C) and rows.tolist() == list(range(len(C)))    # every row, in order: no copy
+    J_rng, g_edge, g_out = (f() if every else f()[rows] for f in lazy)
     if len(exact) < obs.n_boards:
         g_edge, g_out = g_edge[:, exact], g_out[:, on_exact]
     range_sigma_m, edge_sigma_m, outline_sigma_m = sigmas
@@ -111,7 +112,8 @@ def _jacobians(obs: Observations, C: np.ndarray, frames: tuple, lazy: tuple, low
         np.divide(J_rng[i], range_sigma_m, out=J[i, :k])
         np.divide(J_ends_out[:n_edge], edge_sigma_m, out=J[i, k:k + n_edge])
         np.divide(J_ends_out[n_edge:], outline_sigma_m, out=J[i, k + n_edge:k + n_rows])
-        J[i, k + n_rows:] = np.concatenate([Jc, Jm, Jp], axis=0)
+        if len(Jc) + len(Jm) + len(Jp):
+            J[i, k + n_rows:] = np.concatenate([Jc, Jm, Jp], axis=0)
     return np.zeros((0, 0, 6)) if J is None else J
 
 
