@@ -100,5 +100,9 @@ def so3_left_jacobian(w: np.ndarray) -> np.ndarray:
     w0, w1, w2 = w.tolist()
     W = np.array([[0.0, -w2, w1], [w2, 0.0, -w0], [-w1, w0, 0.0]])  # skew(w), built at once
     if th < 1e-8:
-        return np.eye(3) + 0.5 * W
-    return np.eye(3) + (1 - math.cos(th)) / th**2 * W + (th - math.sin(th)) / th**3 * (W @ W)
+        return _EYE3 + 0.5 * W
+    return _EYE3 + (1 - math.cos(th)) / th**2 * W + (th - math.sin(th)) / th**3 * (W @ W)
+
+
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)  # ``so3_left_jacobian``'s identity, built once (it runs at every refinement step)

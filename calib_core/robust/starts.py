@@ -56,6 +56,10 @@ def gauss_newton_steps(data, T0: np.ndarray, boards: np.ndarray | None = None, n
         e, J = range_residuals(T, data, jacobian=True)
         Jw = np.swapaxes(J * w[..., None], -1, -2)
         JtJ = Jw @ J
-        damp = BASIN_DAMPING * np.trace(JtJ, axis1=-2, axis2=-1)[..., None, None] / 6 * np.eye(6)
+        damp = BASIN_DAMPING * np.trace(JtJ, axis1=-2, axis2=-1)[..., None, None] / 6 * _EYE6
         T = perturb(T, -np.linalg.solve(JtJ + damp, (Jw @ e[..., None]))[..., 0])
     return T
+
+
+_EYE6 = np.eye(6)
+_EYE6.setflags(write=False)  # ``gauss_newton_steps``' identity, built once
