@@ -68,16 +68,18 @@ def time_ratio(counts: Sequence[int], n_problems: int, repeats: int, method: str
                reference: str = "peng2022", seed: int = RATIO_SEEDS[0]) -> list[dict]:
     """Per board count, the median ms of one ``calibrate`` of ``method`` and of ``reference`` on the same
     ``n_problems`` problems drawn with ``seed`` (exact board poses, the simulator's defaults: the paper's 20 mm),
-    the two timed alternately call by call so that both see the same machine; ``ratio`` is method over reference."""
+    the two timed alternately call by call so that both see the same machine; ``ratio`` is method over reference.
+    Times are the process's CPU time (``time.process_time``; one thread under ``OMP_NUM_THREADS=1``): on a busy
+    machine the wall time of a 2 ms call is bimodal (about half the calls pre-empted), which moves the median."""
     rows = []
     for n in counts:
         t: dict[str, list[float]] = {method: [], reference: []}
         for obs in problems(n, n_problems, seed=seed):
             for _ in range(repeats):
                 for m in (reference, method):
-                    t0 = time.perf_counter()
+                    t0 = time.process_time()
                     calibrate(obs, m)
-                    t[m].append(time.perf_counter() - t0)
+                    t[m].append(time.process_time() - t0)
         ms = {m: 1e3 * float(np.median(v)) for m, v in t.items()}
         rows.append({"boards": n, "method_ms": ms[method], "reference_ms": ms[reference],
                      "ratio": ms[method] / ms[reference], "runs": len(t[method])})
@@ -206,7 +208,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = ap.parse_args(argv)
     ratio_counts = args.ratio_boards
     for seed in args.ratio_seeds if ratio_counts else ():
-        print(f"lidarcam vs peng2022 per call, exact board poses, {args.ratio_problems} problems (seed {seed}) x "
+        print(f"lidarcam vs peng2022 per call (CPU ms), exact board poses, {args.ratio_problems} problems (seed {seed}) x "
               f"{args.ratio_repeats} repetitions each, timed alternately:")
         print(f"  {'boards':>6}{'lidarcam ms':>13}{'peng2022 ms':>13}{'ratio':>8}")
         for r in time_ratio(ratio_counts, args.ratio_problems, args.ratio_repeats, seed=seed):
