@@ -208,8 +208,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = ap.parse_args(argv)
     ratio_counts = args.ratio_boards
     for seed in args.ratio_seeds if ratio_counts else ():
-        print(f"lidarcam vs peng2022 per call (CPU ms), exact board poses, {args.ratio_problems} problems (seed {seed}) x "
-              f"{args.ratio_repeats} repetitions each, timed alternately:")
+        print(f"lidarcam vs peng2022 per call (CPU ms), exact board poses, {args.ratio_problems} problems "
+              f"(seed {seed}) x {args.ratio_repeats} repetitions each, timed alternately:")
         print(f"  {'boards':>6}{'lidarcam ms':>13}{'peng2022 ms':>13}{'ratio':>8}")
         for r in time_ratio(ratio_counts, args.ratio_problems, args.ratio_repeats, seed=seed):
             print(f"  {r['boards']:>6}{r['method_ms']:>13.2f}{r['reference_ms']:>13.2f}{r['ratio']:>8.1f}")
