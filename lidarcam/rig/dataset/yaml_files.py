@@ -1,5 +1,5 @@
-"""The dataset's YAML files (plain or OpenCV FileStorage): camera.yaml, board.yaml, windows.yaml,
-ground_truth.yaml, and the checked numeric matrices they hold."""
+"""The dataset's YAML files (plain or OpenCV FileStorage): camera.yaml, windows.yaml, ground_truth.yaml, and the
+checked numeric matrices they hold (board.yaml: ``lidarcam.rig.dataset.boards``)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from calib_core.geometry.polygon import check_simple_polygon
-
-from .model import BoardSpec, CameraModel, DatasetError
+from .model import CameraModel, DatasetError
 
 
 class _Loader(yaml.SafeLoader):
@@ -117,46 +115,55 @@ def camera_from_dict(data: dict, path: Path) -> CameraModel:
         raise DatasetError("'camera_matrix' must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0",
                            file=path)
     dist = matrix_field(data.get("distortion_coefficients", []), "distortion_coefficients", path, (None,))
-    if dist.size not in (0, 4, 5, 8, 12, 14):
+    lens = _lens_model(data, K, dist, w, h, path)
+    if lens is None and dist.size not in (0, 4, 5, 8, 12, 14):
         raise DatasetError(f"'distortion_coefficients': OpenCV takes 4, 5, 8, 12 or 14, got {dist.size}", file=path)
     K.setflags(write=False)
     dist.setflags(write=False)
-    return CameraModel(w, h, K, dist)
+    return CameraModel(w, h, K, dist, model=lens)
 
 
-def load_board(path) -> BoardSpec:
-    """Read board.yaml: ``cols``, ``rows`` (inner corners), ``square_m``, ``outline_m`` [[x, y], ...] and the
-    optional ``origin_square`` (``dark`` | ``light``; absent: keep the detector's order). Without ``outline_m``
-    the outline is the squares' extent: one square beyond the outer inner corners on every side."""
-    path = Path(path)
-    return board_from_dict(read_yaml(path), path)
+LENS_PARAMS = ("xi", "alpha", "beta")
+"""camera.yaml keys of the models' own parameters (``calib_core.data.cameras``)."""
+PINHOLE_DISTORTIONS = ("radtan", "plumb_bob", "rational_polynomial")
+"""``distortion_model`` names of the OpenCV pinhole (Kalibr's and ROS's)."""
 
 
-def board_from_dict(data: dict, path: Path) -> BoardSpec:
-    """A BoardSpec from board.yaml's keys (already parsed); errors name ``path``."""
+def _lens_model(data: dict, K: np.ndarray, dist: np.ndarray, w: int, h: int, path: Path):
+    """The ``calib_core.data.cameras`` model camera.yaml names with ``camera_model`` (Kalibr's names: ``pinhole``,
+    ``omni``, ``ds``, ``eucm``) and ``distortion_model`` (``radtan``/``plumb_bob``/``rational_polynomial``,
+    ``equidistant``, ``none``) and the model's parameters (``xi``, ``alpha``, ``beta``); None for the OpenCV
+    pinhole (no such keys, or ``pinhole`` with ``radtan``). DatasetError naming the key otherwise."""
+    from calib_core.data.cameras import camera_class
+    from calib_core.errors import ObservationError
+
+    cm, dm = data.get("camera_model"), data.get("distortion_model")
+    if cm is None and dm is None:
+        return None
+    cm = str(cm or "pinhole").strip().lower()
+    dm = None if dm is None else str(dm).strip().lower()
+    if cm in ("pinhole", "omni") and dm in PINHOLE_DISTORTIONS:
+        dm = "radtan"
+    if cm == "pinhole" and dm in (None, "radtan"):
+        return None
     try:
-        cols, rows = int(_require(data, "cols", path)), int(_require(data, "rows", path))
-        square = float(_require(data, "square_m", path))
+        cls = camera_class(cm, dm)
+    except KeyError as exc:
+        raise DatasetError(f"'camera_model'/'distortion_model': {exc.args[0]}", file=path) from None
+    for key in LENS_PARAMS:
+        if key in data and key not in cls.param_names:
+            raise DatasetError(f"'{key}' is not a parameter of the {cm} model ({', '.join(cls.param_names) or 'none'})",
+                               file=path)
+    missing = [n for n in cls.param_names if n not in data]
+    if missing:
+        raise DatasetError(f"missing key '{missing[0]}' (the {cm} model's parameter)", file=path)
+    try:
+        return cls(K, dist, w, h, **{n: float(data[n]) for n in cls.param_names})
     except (TypeError, ValueError):
-        raise DatasetError("cols, rows must be integers and square_m a number", file=path) from None
-    if cols < 2 or rows < 2:
-        raise DatasetError(f"needs at least 2x2 inner corners, got {cols}x{rows}", file=path)
-    if not (square > 0 and math.isfinite(square)):
-        raise DatasetError(f"square_m must be positive, got {square}", file=path)
-    if "outline_m" in data:
-        outline = matrix_field(data["outline_m"], "outline_m", path, (None, 2))
-    else:
-        x0, y0, x1, y1 = -square, -square, cols * square, rows * square
-        outline = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-    why = check_simple_polygon(outline)
-    if why:
-        raise DatasetError(f"'outline_m' {why}", file=path)
-    colour = data.get("origin_square")
-    if colour is not None and str(colour).lower() not in ("dark", "light", "black", "white"):
-        raise DatasetError(f"'origin_square' must be dark or light, got {colour!r}", file=path)
-    outline.setflags(write=False)
-    dark = None if colour is None else str(colour).lower() in ("dark", "black")
-    return BoardSpec(cols, rows, square, outline, dark)
+        raise DatasetError(f"the {cm} model's parameters {', '.join(cls.param_names)} must be numbers",
+                           file=path) from None
+    except ObservationError as exc:
+        raise DatasetError(f"'{exc.field or 'camera'}': {exc.message}", file=path) from None
 
 
 def load_windows(path) -> dict[str, tuple[float, float]]:
