@@ -338,13 +338,13 @@ def _cut_boards(o: SimOptions, scene: Scene, camera, T_sim_ds: np.ndarray, P_sim
     T_cl = invert_T(T_lc)
     bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
     boards = np.array(scene.T_lidar_board, float)
-    steps = np.concatenate([s * np.linspace(0.02, 0.6, 30) for s in (1.0, -1.0)])
+    steps = np.linspace(0.02, 2.5, 125)[:, None] * np.array([1.0, -1.0])   # smallest slide first, either way
     for k in range(0, len(boards), every):
         ch = scan_chords(boards[k], scene.outline)[0]
         if np.isnan(ch).any():
             continue
         d = np.r_[(ch[1] - ch[0]) / np.linalg.norm(ch[1] - ch[0]), 0.0]
-        for s in steps:
+        for s in steps.ravel():
             T = boards[k].copy()
             T[:3, 3] += s * d
             X = P_sim @ (T_cl @ T)[:3, :3].T + (T_cl @ T)[:3, 3]
