@@ -8,7 +8,8 @@ does (``lidarcam.rig.detect``) and compared with the true corners projected thro
     python dev/board_kinds.py OUT_DIR [N_SEEDS] [RIG ...]      (default 3 seeds, every rig)
 
 Prints one markdown row per rig: OpenCV's version, the corners' mean offset (x, y) and RMS against the truth (px),
-their 95th percentile, the poses with a board found and used / rendered, the poses cut by the image edge among them,
+their 95th percentile, the poses with a board found and used / with enough true corners in the image
+(``lidarcam.rig.detect.check_spread``) / rendered, the poses cut by the image edge among them,
 the corners per pose, and the calibration's worst rotation and translation error over the seeds (deg, mm) and in
 units of its own 1-sigma.
 """
@@ -54,13 +55,13 @@ def corner_errors(folder: Path) -> dict:
     """Per pose of a dataset folder: detection errors against the truth (pixels), poses used, cut poses."""
     from calib_core.geometry.transforms import transform_points
     from lidarcam.rig.dataset import load_dataset
-    from lidarcam.rig.detect import detect_board
+    from lidarcam.rig.detect import check_spread, detect_board
     from lidarcam.rig.extract_options import ExtractionError
 
     ds = load_dataset(folder)
     gt = ds.ground_truth["poses"]
     lens = ds.camera.lens
-    errs, used, cut, per_pose = [], 0, 0, []
+    errs, used, cut, per_pose, eligible = [], 0, 0, [], 0
     for pose in ds.poses:
         T = np.asarray(gt[pose.name]["T_cam_board"], float)
         X = transform_points(T, ds.board.corners)
@@ -75,6 +76,12 @@ def corner_errors(folder: Path) -> dict:
         is_cut = not inside.all()
         cut += is_cut
         try:
+            if ds.board.identified:
+                check_spread(ds.board, np.flatnonzero(inside))
+            eligible += 1
+        except ExtractionError:
+            pass
+        try:
             det = detect_board(pose.read_image(), ds.camera, ds.board)
         except ExtractionError:
             continue
@@ -83,7 +90,7 @@ def corner_errors(folder: Path) -> dict:
         errs.append(det.corners - uv[ids])
         per_pose.append(len(ids))
     e = np.concatenate(errs) if errs else np.zeros((0, 2))
-    return {"err": e, "used": used, "poses": len(ds.poses), "cut": cut, "per_pose": per_pose}
+    return {"err": e, "used": used, "poses": len(ds.poses), "cut": cut, "per_pose": per_pose, "eligible": eligible}
 
 
 def calibrate(folder: Path) -> tuple[float, float, float, float]:
@@ -109,22 +116,23 @@ def main(argv: list[str]) -> None:
     n = int(argv[1]) if len(argv) > 1 else 3
     rigs = argv[2:] or list(RIGS)
     print(f"OpenCV {cv2.__version__}")
-    print("| rig | corner offset x, y (px) | RMS (px) | 95% (px) | poses used | cut by the edge | corners/pose "
-          "| worst error deg, mm | worst error / 1-sigma |")
+    print("| rig | corner offset x, y (px) | RMS (px) | 95% (px) | poses used / with enough corners in view / all "
+          "| cut by the edge | corners/pose | worst error deg, mm | worst error / 1-sigma |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name in rigs:
-        e, used, poses, cut, per, cal = [], 0, 0, 0, [], []
+        e, used, poses, cut, per, cal, elig = [], 0, 0, 0, [], [], 0
         for seed in range(1, n + 1):
             folder = rig_dataset(name, seed, out / f"{name}-{seed}")
             r = corner_errors(folder)
             e.append(r["err"])
             used, poses, cut, per = used + r["used"], poses + r["poses"], cut + r["cut"], per + r["per_pose"]
+            elig += r["eligible"]
             cal.append(calibrate(folder))
         err = np.concatenate(e)
         norm = np.linalg.norm(err, axis=1)
         c = np.array(cal)
         print(f"| {name} | {err[:, 0].mean():+.3f}, {err[:, 1].mean():+.3f} | {np.sqrt(np.mean(norm ** 2)):.3f} | "
-              f"{np.percentile(norm, 95):.3f} | {used}/{poses} | {cut} | {min(per)}-{max(per)} | "
+              f"{np.percentile(norm, 95):.3f} | {used}/{elig}/{poses} | {cut} | {min(per)}-{max(per)} | "
               f"{c[:, 0].max():.2f}, {c[:, 1].max():.1f} | {np.max(c[:, 0] / c[:, 2]):.1f}, "
               f"{np.max(c[:, 1] / c[:, 3]):.1f} |", flush=True)
 

@@ -268,25 +268,30 @@ def find_identified(gray: np.ndarray, board: BoardSpec) -> tuple[np.ndarray, np.
     return ids[order], px[order]
 
 
-JUNCTION_WINDOW_SHARE = 0.15
-"""cv2.cornerSubPix's half window at an AprilGrid tag corner, as a share of the tag's side in the image (at most
-``SUBPIX_HALF_WINDOW_PX``, at least 2 px): it must stay within the tag's 2-bit border (a fifth of its side) and the
-corner square (Kalibr's gap: 0.3 of it, often less)."""
+JUNCTION_WINDOWS = ((0.2, 5), (0.12, 3))
+"""The two passes of cv2.cornerSubPix at an AprilGrid tag corner: half window as a share of the tag's side in the
+image, at most the given pixels (at least 2). The first reaches the junction from the tag detector's corner (pixels
+off) within the tag's 2-bit border (a fifth of its side); the second settles there with a window that stays clear
+of the tag's code bits and of the gap's far side (measured: docs/dataset.md)."""
 
 
 def refine_junctions(gray: np.ndarray, quads: np.ndarray, board: BoardSpec) -> np.ndarray:
     """AprilGrid tag corners ``quads`` (T,4,2 pixels, as the tag detector gives them) refined by ``cv2.cornerSubPix``
-    where the tag meets its corner square (an X junction like a checkerboard's): the tag detector's own corners
-    there sit pixels off (measured: docs/dataset.md). A corner the refinement moves by more than its window is kept
-    as detected."""
+    where the tag meets its corner square (an X junction like a checkerboard's), in the passes of
+    ``JUNCTION_WINDOWS``: the tag detector's own corners there sit pixels off. A corner the refinement moves by more
+    than its first window and 2 px is kept as detected."""
     import cv2
 
-    out = quads.copy()
     side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).mean(axis=1)
-    for w in np.unique(np.clip(np.floor(JUNCTION_WINDOW_SHARE * side), 2, SUBPIX_HALF_WINDOW_PX).astype(int)):
-        sel = np.clip(np.floor(JUNCTION_WINDOW_SHARE * side), 2, SUBPIX_HALF_WINDOW_PX).astype(int) == w
-        c = quads[sel].reshape(-1, 1, 2).astype(np.float32)
-        r = cv2.cornerSubPix(gray, c.copy(), (int(w), int(w)), (-1, -1), SUBPIX_CRITERIA).reshape(-1, 4, 2)
-        moved = np.linalg.norm(r - quads[sel], axis=2) > w
-        out[sel] = np.where(moved[..., None], quads[sel], r)
-    return out
+    out = quads.astype(np.float32).copy()
+    limit = np.zeros(len(quads))
+    for k, (share, most) in enumerate(JUNCTION_WINDOWS):
+        w = np.clip(np.floor(share * side), 2, most).astype(int)
+        if k == 0:
+            limit = w + 2.0
+        for wi in np.unique(w):
+            sel = w == wi
+            c = out[sel].reshape(-1, 1, 2)
+            out[sel] = cv2.cornerSubPix(gray, c.copy(), (int(wi), int(wi)), (-1, -1), SUBPIX_CRITERIA).reshape(-1, 4, 2)
+    moved = np.linalg.norm(out - quads, axis=2) > limit[:, None]
+    return np.where(moved[..., None], quads, out).astype(float)
