@@ -180,29 +180,7 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
     P_ds = None if pattern is None else pattern.corners()
 
     images: list[np.ndarray] = []
-    maps = distortion_maps(K, dist, o.cam_width, o.cam_height) if np.any(dist != 0) else None
-
-    def texture(ppm: float):
-        level = 2.0 ** (np.ceil(2 * np.log2(max(ppm, 100.0))) / 2)   # steps of sqrt(2): a few textures, cached
-        return pattern_texture(pattern, spec.size_m, float(min(level, MAX_TEXTURE_PPM)))
-
-    def render(T_cam_board: np.ndarray) -> np.ndarray:
-        def ideal(Kr, W, H):
-            if lens is not None:
-                d = np.linalg.norm(T_cam_board[:3, 3]) - spec.size_m
-                tex = None if pattern is None else texture(lens.K[0, 0] * o.render_supersample / max(d, 0.1) / 0.5)
-                img = render_board_lens(lens, T_cam_board, spec, o.render_supersample, texture=tex)
-            else:
-                img = render_board_image(Kr, T_cam_board, spec, W, H, o.render_supersample,
-                                         texture=None if pattern is None else texture)
-            img = img.astype(np.float32)
-            if blur_sigma_px > 0:
-                img = cv2.GaussianBlur(img, (0, 0), blur_sigma_px)
-            return img
-
-        img = distort_image(ideal(*maps[:3]), maps) if maps is not None else ideal(K, o.cam_width, o.cam_height)
-        img = img + rng_cam.normal(0.0, image_noise_std, img.shape) if image_noise_std > 0 else img
-        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    render = _renderer(o, K, dist, lens, pattern, blur_sigma_px, image_noise_std, rng_cam)
 
     def accept(T_lidar_cam, T_lidar_board) -> bool:
         img = render(invert_T(T_lidar_cam) @ T_lidar_board)
@@ -236,13 +214,51 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
         _lens_camera_yaml(out / "camera.yaml", lens)
     else:
         _write_camera_yaml(out / "camera.yaml", camera_style, o, K, dist)
-    if pattern is None:
-        write_board_yaml(out / "board.yaml", o, scene.outline)
-    else:
-        (out / "board.yaml").write_text(pattern.board_yaml(np.asarray(scene.outline) - c0[:2]))
+    _write_board(out / "board.yaml", o, scene, pattern, c0)
     _write_ground_truth(out / "ground_truth.yaml", o, scene, T_sim_ds, names, owners, seed=seed, trial=trial,
                         sigma=sigma, walls=walls, yaw=yaw)
     return out
+
+
+def _renderer(o: SimOptions, K: np.ndarray, dist: np.ndarray, lens, pattern: Pattern | None, blur_sigma_px: float,
+              image_noise_std: float, rng_cam: np.random.Generator):
+    """``render(T_cam_board) -> uint8 image`` of ``write_dataset``: the checkerboard or ``pattern`` through the pinhole
+    (with OpenCV ``dist``) or through ``lens``, blurred, with grey-level noise."""
+    spec = BoardSpec.of(o)
+    maps = distortion_maps(K, dist, o.cam_width, o.cam_height) if np.any(dist != 0) else None
+
+    def texture(ppm: float):
+        level = 2.0 ** (np.ceil(2 * np.log2(max(ppm, 100.0))) / 2)   # steps of sqrt(2): a few textures, cached
+        return pattern_texture(pattern, spec.size_m, float(min(level, MAX_TEXTURE_PPM)))
+
+    def render(T_cam_board: np.ndarray) -> np.ndarray:
+        def ideal(Kr, W, H):
+            if lens is not None:
+                d = np.linalg.norm(T_cam_board[:3, 3]) - spec.size_m
+                tex = None if pattern is None else texture(lens.K[0, 0] * o.render_supersample / max(d, 0.1) / 0.5)
+                img = render_board_lens(lens, T_cam_board, spec, o.render_supersample, texture=tex)
+            else:
+                img = render_board_image(Kr, T_cam_board, spec, W, H, o.render_supersample,
+                                         texture=None if pattern is None else texture)
+            img = img.astype(np.float32)
+            if blur_sigma_px > 0:
+                img = cv2.GaussianBlur(img, (0, 0), blur_sigma_px)
+            return img
+
+        img = distort_image(ideal(*maps[:3]), maps) if maps is not None else ideal(K, o.cam_width, o.cam_height)
+        img = img + rng_cam.normal(0.0, image_noise_std, img.shape) if image_noise_std > 0 else img
+        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+    return render
+
+
+def _write_board(path: Path, o: SimOptions, scene: Scene, pattern: Pattern | None, c0: np.ndarray) -> None:
+    """board.yaml: the checkerboard's, or ``pattern``'s form with the board's outline in its frame (origin at
+    ``c0`` of the simulator's board frame)."""
+    if pattern is None:
+        write_board_yaml(path, o, scene.outline)
+    else:
+        path.write_text(pattern.board_yaml(np.asarray(scene.outline) - c0[:2]))
 
 
 def _write_scans(out: Path, names, scene, images, bearings: np.ndarray, r_room: np.ndarray, noisy, *,
