@@ -42,6 +42,9 @@ FORMS = {
                 {"outline_m", "legacy_pattern"}),
 }
 """Each board.yaml form: (what it is in words, required keys, optional keys)."""
+FORM_SELECTORS = {"checkerboard": "", "kalibr-aprilgrid": "target_type: aprilgrid",
+                  "kalibr-checkerboard": "target_type: checkerboard", "charuco": "type: charuco"}
+"""The key and value that select each form (the checkerboard: none, or ``type: checkerboard``)."""
 
 
 def load_board(path) -> BoardSpec:
