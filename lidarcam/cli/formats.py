@@ -6,10 +6,6 @@ names (Kalibr's ``camera_model`` / ``distortion_model`` with their parameters), 
 
 from __future__ import annotations
 
-from calib_core.data.cameras import CAMERA_MODELS, MODEL_NAMES
-from lidarcam.rig.dataset.boards import FORM_SELECTORS, FORMS
-from lidarcam.rig.dataset.yaml_files import PINHOLE_DISTORTIONS
-
 DISTORTION_WORDS = {"radtan": "k1, k2, p1, p2[, k3, ...] (OpenCV's order)", "equidistant": "k1, k2, k3, k4",
                     "none": "none"}
 """What ``distortion_coefficients`` holds for each ``distortion_model``."""
@@ -17,6 +13,10 @@ DISTORTION_WORDS = {"radtan": "k1, k2, p1, p2[, k3, ...] (OpenCV's order)", "equ
 
 def formats_text() -> str:
     """The board kinds and camera models, one a line, with the keys that select and describe each."""
+    from calib_core.data.cameras import CAMERA_MODELS, MODEL_NAMES
+    from lidarcam.rig.dataset.boards import FORM_SELECTORS, FORMS
+    from lidarcam.rig.dataset.yaml_files import PINHOLE_DISTORTIONS
+
     lines = ["board.yaml (board kinds; docs/dataset.md):"]
     for form, (what, need, optional) in FORMS.items():
         sel = FORM_SELECTORS[form]
