@@ -156,6 +156,11 @@ def detect_board(gray: np.ndarray, camera: CameraModel, board: BoardSpec, flags:
                         else (corners[:, 2].astype(int), corners[:, :2]))
         check_spread(board, ids)
         T, rms = _solve_pose(board.corners[ids], corners.astype(float), camera)
+        keep = _inliers(T, board.corners[ids], corners.astype(float), camera)
+        if not keep.all():
+            ids, corners = ids[keep], corners[keep]
+            check_spread(board, ids)
+            T, rms = _solve_pose(board.corners[ids], corners.astype(float), camera)
         return BoardDetection(T, corners.astype(float), rms, ids)
     if corners is None:
         corners = find_chessboard(gray, board, flags)
@@ -241,6 +246,26 @@ def _aruco(kind: str, cols: int, rows: int, square: float, marker: float, dictio
 def _detector(board: BoardSpec):
     return _aruco(board.kind, board.cols, board.rows, board.square, board.marker, board.dictionary,
                   board.legacy_pattern)
+
+
+OUTLIER_PX = 1.0
+OUTLIER_FACTOR = 5.0
+"""An identified corner whose reprojection residual exceeds both ``OUTLIER_PX`` and ``OUTLIER_FACTOR`` times the
+corners' median residual is dropped and the pose fitted again (a refinement that settled on the wrong junction; a
+checkerboard's corners stand or fall together)."""
+
+
+def _inliers(T: np.ndarray, obj: np.ndarray, corners: np.ndarray, camera: CameraModel) -> np.ndarray:
+    """Which corners reproject within the ``OUTLIER_PX`` / ``OUTLIER_FACTOR`` bound through pose ``T``."""
+    import cv2
+
+    X = obj @ T[:3, :3].T + T[:3, 3]
+    if camera.lens is not None:
+        proj = camera.lens.project(X)
+    else:
+        proj = cv2.projectPoints(X, np.zeros(3), np.zeros(3), camera.K, camera.dist)[0].reshape(-1, 2)
+    r = np.linalg.norm(proj - corners, axis=1)
+    return ~((r > OUTLIER_PX) & (r > OUTLIER_FACTOR * np.median(r)))
 
 
 def find_identified(gray: np.ndarray, board: BoardSpec) -> tuple[np.ndarray, np.ndarray]:
