@@ -26,13 +26,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 FISHEYE = dict(cam_model="pinhole-equidistant", cam_params="-0.01,0.02,-0.01,0.002", focal_px=300.0, cam_width=800,
                cam_height=600, dist_min_m=0.7, dist_max_m=1.6)
-DS = dict(cam_model="ds", cam_params="-0.2,0.6", focal_px=260.0, cam_width=800, cam_height=640, dist_min_m=0.7,
+DS = dict(cam_model="ds", cam_params="-0.2,0.6", focal_px=300.0, cam_width=800, cam_height=640, dist_min_m=0.7,
           dist_max_m=1.6)
 RIGS = {
     "pinhole-checkerboard": ({}, None),
     "pinhole-charuco": ({}, ("charuco", 7, 5, 0.12, 0.09)),
     "pinhole-aprilgrid": ({}, ("aprilgrid", 6, 5, 0.12, 0.0)),
-    "equidistant-charuco": (FISHEYE, ("charuco", 5, 4, 0.18, 0.13)),
+    "equidistant-charuco": (FISHEYE, ("charuco", 6, 5, 0.15, 0.11)),
     "ds-aprilgrid": (DS, ("aprilgrid", 4, 4, 0.17, 0.0)),
 }
 """Rig name -> (SimOptions lens fields, Pattern arguments or None for the checkerboard)."""

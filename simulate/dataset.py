@@ -20,10 +20,10 @@ from calib_core.geometry.transforms import invert_T, make_T
 from . import trial_rngs
 from .camera import BACKGROUND, BoardSpec, camera_matrix, checkerboard_corners, render_board_image
 from .lens import is_default, true_camera
-from .lens_render import MAX_TEXTURE_PPM, render_board_lens
+from .lens_render import render_board_lens
 from .lidar import beam_bearings, board_ranges, scan_chords
 from .options import SimOptions
-from .patterns import Pattern, pattern_texture
+from .patterns import PATTERN_MAX_PPM, Pattern, pattern_texture
 from .rig import refuse_rig_conditions
 from .scene import Scene, sample_scene
 
@@ -228,14 +228,15 @@ def _renderer(o: SimOptions, K: np.ndarray, dist: np.ndarray, lens, pattern: Pat
     maps = distortion_maps(K, dist, o.cam_width, o.cam_height) if np.any(dist != 0) else None
 
     def texture(ppm: float):
-        level = 2.0 ** (np.ceil(2 * np.log2(max(ppm, 100.0))) / 2)   # steps of sqrt(2): a few textures, cached
-        return pattern_texture(pattern, spec.size_m, float(min(level, MAX_TEXTURE_PPM)))
+        level = 2.0 ** np.ceil(np.log2(max(ppm, 128.0)))   # powers of 2: a few textures, cached
+        return pattern_texture(pattern, spec.size_m, float(min(level, PATTERN_MAX_PPM)))
 
     def render(T_cam_board: np.ndarray) -> np.ndarray:
         def ideal(Kr, W, H):
             if lens is not None:
-                d = np.linalg.norm(T_cam_board[:3, 3]) - spec.size_m
-                tex = None if pattern is None else texture(lens.K[0, 0] * o.render_supersample / max(d, 0.1) / 0.5)
+                corners = np.column_stack([spec.outline(), np.zeros(4)]) @ T_cam_board[:3, :3].T + T_cam_board[:3, 3]
+                d = np.linalg.norm(corners, axis=1).min()   # texels of at most half a supersampled pixel there
+                tex = None if pattern is None else texture(lens.K[0, 0] * o.render_supersample / max(d, 0.05) / 0.5)
                 img = render_board_lens(lens, T_cam_board, spec, o.render_supersample, texture=tex)
             else:
                 img = render_board_image(Kr, T_cam_board, spec, W, H, o.render_supersample,

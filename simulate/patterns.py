@@ -22,6 +22,8 @@ from calib_core.geometry.patterns import aprilgrid_corners, aprilgrid_extent, ch
 from .camera import BLACK, WHITE
 
 PATTERN_KINDS = ("charuco", "aprilgrid")
+PATTERN_MAX_PPM = 4096.0
+"""Finest texture of a pattern, texels per metre (a 1 m board: 16 M texels); nearer boards are rendered from it."""
 
 
 @dataclass(frozen=True)
@@ -162,14 +164,15 @@ def pattern_texture(pattern: Pattern, size_m: float, ppm: float) -> tuple[np.nda
     rectangle's exact area share of ``BLACK``."""
     n = int(np.ceil(size_m * ppm))
     ppm = n / size_m
-    dark = np.zeros((n, n), np.float64)
+    dark = np.zeros((n, n), np.float32)
     off = pattern.offset(size_m)
     for x0, y0, x1, y1 in pattern.dark_rects() + np.r_[off, off]:
         u0, cx = _cover(x0, x1, ppm)
         v0, cy = _cover(y0, y1, ppm)
         if u0 < 0 or v0 < 0 or u0 + len(cx) > n or v0 + len(cy) > n:
             raise ValueError("pattern_texture: the pattern leaves the board")
-        dark[v0:v0 + len(cy), u0:u0 + len(cx)] += np.outer(cy, cx)
-    tex = (WHITE + (BLACK - WHITE) * np.clip(dark, 0.0, 1.0)).astype(np.float32)
+        dark[v0:v0 + len(cy), u0:u0 + len(cx)] += np.outer(cy, cx).astype(np.float32)
+    np.clip(dark, 0.0, 1.0, out=dark)
+    tex = (WHITE + (BLACK - WHITE) * dark).astype(np.float32)
     tex.setflags(write=False)
     return tex, ppm
