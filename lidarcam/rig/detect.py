@@ -51,14 +51,25 @@ def _square_mean(gray: np.ndarray, quad: np.ndarray) -> float:
     return float(vals.mean()) if vals.size else math.nan
 
 
+def undistort_points(px: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """(N,2) pixels ``px`` undistorted (OpenCV's model) into the pinhole ``K``'s pixels, with ``UNDISTORT_CRITERIA``
+    (``cv2.undistortPoints(criteria=)`` in OpenCV 5, ``cv2.undistortPointsIter`` in OpenCV 4, where
+    ``undistortPoints`` takes no criteria)."""
+    import cv2
+
+    pts = np.asarray(px, np.float64).reshape(-1, 1, 2)
+    if hasattr(cv2, "undistortPointsIter"):
+        return cv2.undistortPointsIter(pts, K, dist, None, K, UNDISTORT_CRITERIA).reshape(-1, 2)
+    return cv2.undistortPoints(pts, K, dist, P=K, criteria=UNDISTORT_CRITERIA).reshape(-1, 2)
+
+
 def _solve_pose(obj: np.ndarray, corners: np.ndarray, camera: CameraModel):
     import cv2
 
     if camera.lens is not None:
         return _solve_pose_lens(obj, corners, camera.lens)
 
-    und = cv2.undistortPoints(corners.reshape(-1, 1, 2), camera.K, camera.dist, P=camera.K,
-                              criteria=UNDISTORT_CRITERIA).reshape(-1, 2)
+    und = undistort_points(corners, camera.K, camera.dist)
     ok, rvec, tvec = cv2.solvePnP(obj, und, camera.K, None, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
         raise ExtractionError("solvePnP (IPPE) failed on the detected corners")
