@@ -139,3 +139,38 @@ def test_too_few_or_bunched_corners_make_no_pose():
 def test_a_kalibr_checkerboard_target_is_the_checkerboard():
     a, b = _spec("kalibr-checkerboard"), _spec("checkerboard")
     assert np.allclose(a.corners, b.corners) and np.allclose(a.outline, b.outline) and not a.identified
+
+
+def test_extract_uses_cut_charuco_boards_and_refits_the_pinhole_from_them(tmp_path, capsys):
+    from lidarcam.cli import main
+    from lidarcam.rig.dataset import load_dataset
+    from lidarcam.rig.intrinsics import refit_camera
+    from simulate import SimOptions
+    from simulate.dataset import write_dataset
+
+    sim = SimOptions(n_boards=6, cam_width=400, cam_height=300, focal_px=380.0, dist_min_m=1.0, dist_max_m=1.8,
+                     render_supersample=1, lidar_res_deg=0.5)
+    folder = write_dataset(sim, 2, tmp_path / "ds", pattern=Pattern("charuco", 6, 5, 0.15, 0.11), cut_every=2)
+    ds = load_dataset(folder)
+    gt = ds.ground_truth["poses"]
+    n_in_view = {}
+    for pose in ds.poses:
+        uv = _truth_px(ds, np.asarray(gt[pose.name]["T_cam_board"], float))
+        n_in_view[pose.name] = int(np.sum((uv[:, 0] >= 0) & (uv[:, 0] < 400) & (uv[:, 1] >= 0) & (uv[:, 1] < 300)))
+    cut = [n for n, k in n_in_view.items() if k < len(ds.board.corners)]
+    assert cut
+    assert main(["extract", str(folder), "--out", str(tmp_path / "obs.json")]) == 0
+    table = capsys.readouterr().out.splitlines()
+    assert table[0].split()[:3] == ["pose", "board", "corners"]
+    rows = {ln.split()[0]: ln.split() for ln in table[1:] if ln.split() and ln.split()[0] in n_in_view}
+    used_cut = [n for n in cut if "SKIPPED" not in rows[n]]
+    assert len(used_cut) >= len(cut) - 1 and all(int(rows[n][2]) <= n_in_view[n] for n in used_cut)
+    _, fit = refit_camera(ds)
+    assert abs(fit.camera.K[0, 0] - 380.0) < 5 * fit.sigma["fx"] + 1.0
+
+
+def _truth_px(ds, T: np.ndarray) -> np.ndarray:
+    import cv2
+
+    X = transform_points(T, ds.board.corners)
+    return cv2.projectPoints(X, np.zeros(3), np.zeros(3), ds.camera.K, ds.camera.dist)[0].reshape(-1, 2)
