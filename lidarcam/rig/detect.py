@@ -281,14 +281,15 @@ def _inliers(T: np.ndarray, obj: np.ndarray, corners: np.ndarray, camera: Camera
 
 def find_identified(gray: np.ndarray, board: BoardSpec) -> tuple[np.ndarray, np.ndarray]:
     """(ids (N,), pixels (N,2)) of the identified corners of a ChArUco board or an AprilGrid in ``gray``: rows of
-    ``board.corners``, sorted. ChArUco: ``CharucoDetector.detectBoard`` (its corners refined by OpenCV's
-    ``cornerSubPix`` inside); AprilGrid: ``ArucoDetector.detectMarkers`` (tags of other ids ignored), each tag corner
+    ``board.corners``, sorted. ChArUco: ``CharucoDetector.detectBoard``, its corners refined again
+    (``refine_charuco``); AprilGrid: ``ArucoDetector.detectMarkers`` (tags of other ids ignored), each tag corner
     then refined by ``cv2.cornerSubPix`` at its junction (``refine_junctions``). Empty arrays when none."""
     if board.kind == "charuco":
         cc, ci, _, _ = _detector(board).detectBoard(gray)
         if ci is None or len(ci) == 0:
             return np.zeros(0, int), np.zeros((0, 2))
         ids, px = ci.ravel().astype(int), cc.reshape(-1, 2).astype(float)
+        px = refine_charuco(gray, px, board)
     else:
         mc, mi, _ = _detector(board).detectMarkers(gray)
         if mi is None or len(mi) == 0:
@@ -302,6 +303,34 @@ def find_identified(gray: np.ndarray, board: BoardSpec) -> tuple[np.ndarray, np.
         px = refine_junctions(gray, quads, board).reshape(-1, 2)
     order = np.argsort(ids, kind="stable")
     return ids[order], px[order]
+
+
+CHARUCO_WINDOW_SHARE = 0.8
+"""cv2.cornerSubPix's half window at a ChArUco corner: this share of the white margin between the corner and the
+markers beside it (``(square_m - marker_m) / 2``, in pixels from the corner spacing), at most
+``SUBPIX_HALF_WINDOW_PX``; no refinement below 2 px."""
+
+
+def refine_charuco(gray: np.ndarray, px: np.ndarray, board: BoardSpec) -> np.ndarray:
+    """ChArUco corners ``px`` (N,2) as ``CharucoDetector`` gives them, refined by ``cv2.cornerSubPix`` within the
+    white margin around each (``CHARUCO_WINDOW_SHARE``). OpenCV 4.8.1's detector puts every corner about half a
+    pixel off along both axes; OpenCV 5's does not; refined, both agree with the rendered truth (docs/dataset.md)."""
+    import cv2
+
+    if len(px) < 2:
+        return px
+    d = np.linalg.norm(px[:, None] - px[None], axis=2)
+    np.fill_diagonal(d, np.inf)
+    side = d.min(axis=1)          # at least a square's side in pixels (corners beside it may be missing)
+    margin = side * (board.square - board.marker) / (2 * board.square)
+    w = np.minimum(np.floor(CHARUCO_WINDOW_SHARE * margin), SUBPIX_HALF_WINDOW_PX).astype(int)
+    out = px.astype(np.float32).copy()
+    for wi in np.unique(w[w >= 2]):
+        sel = w == wi
+        c = out[sel].reshape(-1, 1, 2)
+        out[sel] = cv2.cornerSubPix(gray, c.copy(), (int(wi), int(wi)), (-1, -1), SUBPIX_CRITERIA).reshape(-1, 2)
+    moved = np.linalg.norm(out - px, axis=1) > np.maximum(w, 1)
+    return np.where(moved[:, None], px, out).astype(float)
 
 
 JUNCTION_WINDOWS = ((0.2, 5), (0.12, 3))

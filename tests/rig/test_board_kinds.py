@@ -174,3 +174,19 @@ def _truth_px(ds, T: np.ndarray) -> np.ndarray:
 
     X = transform_points(T, ds.board.corners)
     return cv2.projectPoints(X, np.zeros(3), np.zeros(3), ds.camera.K, ds.camera.dist)[0].reshape(-1, 2)
+
+
+def test_every_board_example_of_docs_dataset_md_reads(tmp_path):
+    import re
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "dataset.md").read_text()
+    section = text[text.index("## board.yaml"):text.index("## Scans")]
+    blocks = re.findall(r"```yaml\n(.*?)```", section, flags=re.S)
+    kinds = set()
+    for k, block in enumerate(blocks):
+        path = tmp_path / f"board{k}.yaml"
+        path.write_text(block)
+        spec = load_board(path)
+        kinds.add((spec.kind, spec.source))
+    assert kinds == {("checkerboard", "lidarcam"), ("checkerboard", "kalibr"), ("aprilgrid", "kalibr"),
+                     ("charuco", "charuco")}
