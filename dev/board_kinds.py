@@ -28,14 +28,18 @@ FISHEYE = dict(cam_model="pinhole-equidistant", cam_params="-0.01,0.02,-0.01,0.0
                cam_height=600, dist_min_m=0.7, dist_max_m=1.6)
 DS = dict(cam_model="ds", cam_params="-0.2,0.6", focal_px=300.0, cam_width=800, cam_height=640, dist_min_m=0.7,
           dist_max_m=1.6)
+OMNI = dict(cam_model="omni-radtan", cam_params="0.8,-0.05,0.01,0.0,0.0", focal_px=500.0, cam_width=800,
+            cam_height=600, dist_min_m=1.0, dist_max_m=2.0)
 RIGS = {
     "pinhole-checkerboard": ({}, None),
     "pinhole-charuco": ({}, ("charuco", 7, 5, 0.12, 0.09)),
     "pinhole-aprilgrid": ({}, ("aprilgrid", 6, 5, 0.12, 0.0)),
     "equidistant-charuco": (FISHEYE, ("charuco", 6, 5, 0.15, 0.11)),
     "ds-aprilgrid": (DS, ("aprilgrid", 4, 4, 0.17, 0.0)),
+    "omni-kalibr-checkerboard": (OMNI, "kalibr"),
 }
-"""Rig name -> (SimOptions lens fields, Pattern arguments or None for the checkerboard)."""
+"""Rig name -> (SimOptions lens fields, Pattern arguments, or None for the checkerboard, ``kalibr`` for the
+checkerboard written as a Kalibr target YAML)."""
 SCENE = dict(n_boards=12, cam_width=640, cam_height=480, focal_px=600.0, lidar_res_deg=0.25, noise_mm=5.0,
              render_supersample=2, dist_min_m=1.2, dist_max_m=3.0, max_tilt_deg=50.0)
 
@@ -46,9 +50,18 @@ def rig_dataset(name: str, seed: int, out: Path) -> Path:
     from simulate.patterns import Pattern
 
     lens, pat = RIGS[name]
-    pattern = None if pat is None else Pattern(*pat)
-    return write_dataset(SimOptions(**{**SCENE, **lens}), seed, out, pattern=pattern,
-                         cut_every=3 if pattern is not None else 0)
+    pattern = None if pat in (None, "kalibr") else Pattern(*pat)
+    folder = write_dataset(SimOptions(**{**SCENE, **lens}), seed, out, pattern=pattern,
+                           cut_every=3 if pattern is not None else 0)
+    if pat == "kalibr":   # the same checkerboard as Kalibr's target YAML
+        import yaml
+
+        b = yaml.safe_load((folder / "board.yaml").read_text())
+        (folder / "board.yaml").write_text(yaml.safe_dump({
+            "target_type": "checkerboard", "targetCols": b["cols"], "targetRows": b["rows"],
+            "rowSpacingMeters": b["square_m"], "colSpacingMeters": b["square_m"], "outline_m": b["outline_m"],
+            "origin_square": b["origin_square"]}))
+    return folder
 
 
 def corner_errors(folder: Path) -> dict:
