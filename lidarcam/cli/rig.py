@@ -136,7 +136,8 @@ def cmd_report(args) -> int:
             from lidarcam.rig.dataset import CameraModel
 
             c = obs.camera
-            ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist))
+            lens = None if c.name == "pinhole-radtan" else c    # another model: drawn through it
+            ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist, model=lens))
     fit = result_fit(res, obs, args.result, args.obs or args.dataset)
     summary = write_report(ds, obs, res, args.out, alerts=fit.warnings)
     from .wording import cli_hint
