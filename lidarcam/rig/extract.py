@@ -1,8 +1,10 @@
 """From a dataset folder to ``Observations``: board poses from images, board points from scans, per-pose diagnostics.
 
-Per pose: ``cv2.findChessboardCornersSB`` -> corner order made canonical (right-handed board frame, origin square
-colour from board.yaml) -> undistorted corners -> ``cv2.solvePnP(SOLVEPNP_IPPE)`` + ``cv2.solvePnPRefineLM`` ->
-reprojection RMS (pixels, with distortion). Scan: no-returns dropped, optional background subtraction, breakpoint
+Per pose: the board's corners (``cv2.findChessboardCornersSB`` for a checkerboard, its order made canonical;
+``cv2.aruco`` for a ChArUco board or an AprilGrid, each corner with its identity, a board cut by the image edge
+counting above ``lidarcam.rig.detect.check_spread``) -> the board pose (undistorted corners ->
+``cv2.solvePnP(SOLVEPNP_IPPE)`` + ``cv2.solvePnPRefineLM``, or the rays of camera.yaml's lens model) ->
+reprojection RMS (pixels, through the lens). Scan: no-returns dropped, optional background subtraction, breakpoint
 clustering (adaptive threshold of Borges & Aldon 2004), split-and-merge into line segments, and the segment that
 agrees with the camera's view of the board is kept (hard gates: ranges within the camera-to-board distances
 +- ``max_offset_m``, length at most the board's diagonal; ranking: distance to the board centre and the expected
