@@ -190,3 +190,15 @@ def test_every_board_example_of_docs_dataset_md_reads(tmp_path):
         kinds.add((spec.kind, spec.source))
     assert kinds == {("checkerboard", "lidarcam"), ("checkerboard", "kalibr"), ("aprilgrid", "kalibr"),
                      ("charuco", "charuco")}
+
+
+def test_extract_names_the_bad_board_key_in_one_line(tmp_path, capsys):
+    from lidarcam.cli import main
+
+    (tmp_path / "camera.yaml").write_text("image_width: 400\nimage_height: 300\n"
+                                          "camera_matrix: [[400, 0, 199.5], [0, 400, 149.5], [0, 0, 1]]\n")
+    (tmp_path / "board.yaml").write_text("target_type: 'aprilgrid'\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\n"
+                                         "tagSpacing: 0.3\ntagSpace: 0.3\n")
+    assert main(["extract", str(tmp_path), "--out", str(tmp_path / "obs.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "board.yaml" in err and "'tagSpace'" in err
