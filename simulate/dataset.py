@@ -23,7 +23,7 @@ from .lens import is_default, true_camera
 from .lens_render import render_board_lens
 from .lidar import beam_bearings, board_ranges, scan_chords
 from .options import SimOptions
-from .patterns import PATTERN_MAX_PPM, Pattern, pattern_texture
+from .patterns import Pattern, texture_source
 from .rig import refuse_rig_conditions
 from .scene import Scene, sample_scene
 
@@ -227,9 +227,7 @@ def _renderer(o: SimOptions, K: np.ndarray, dist: np.ndarray, lens, pattern: Pat
     spec = BoardSpec.of(o)
     maps = distortion_maps(K, dist, o.cam_width, o.cam_height) if np.any(dist != 0) else None
 
-    def texture(ppm: float):
-        level = 2.0 ** np.ceil(np.log2(max(ppm, 128.0)))   # powers of 2: a few textures, cached
-        return pattern_texture(pattern, spec.size_m, float(min(level, PATTERN_MAX_PPM)))
+    texture = None if pattern is None else texture_source(pattern, spec.size_m)
 
     def render(T_cam_board: np.ndarray) -> np.ndarray:
         def ideal(Kr, W, H):

@@ -176,3 +176,14 @@ def pattern_texture(pattern: Pattern, size_m: float, ppm: float) -> tuple[np.nda
     tex = (WHITE + (BLACK - WHITE) * dark).astype(np.float32)
     tex.setflags(write=False)
     return tex, ppm
+
+
+def texture_source(pattern: Pattern, size_m: float):
+    """``texture(ppm) -> (texture, ppm)`` for the renderers (``simulate.camera.render_board_image``'s ``texture``):
+    ``pattern_texture`` at the power of 2 at or above ``ppm`` (at most ``PATTERN_MAX_PPM``), so that a few textures
+    serve a whole dataset (cached)."""
+    def texture(ppm: float):
+        level = 2.0 ** np.ceil(np.log2(max(ppm, 128.0)))
+        return pattern_texture(pattern, size_m, float(min(level, PATTERN_MAX_PPM)))
+
+    return texture
