@@ -37,7 +37,7 @@ test-slurm: $(STAMP) ## Sweeps through a real SLURM scheduler: a one-node cluste
 lint: $(STAMP) ## ruff check (~5 s)
 	$(VENV)/bin/ruff check .
 
-bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughput (~1 min)
+bench: $(STAMP) ## Time calibrate() per method and the minimal solver's throughput (~1 min; 1.5-2 min on busy cores)
 	$(PY) -m experiments bench
 
 PRESET ?=
@@ -59,10 +59,10 @@ corner-noise: $(STAMP) ## Camera-noise sweeps (joint model over corners and rang
 	$(PY) -m experiments corner-noise --trials 25 --boards-trials 25
 
 REAL_DATA ?= ../shared/real-data
-real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; ~0.5-3 min: 22 s idle, 173 s on shared cores)
+real-data: $(STAMP) ## The five public rigs end to end and the paper's real experiment, write results/real/ (REAL_DATA=path; ~0.5-2 min with the stored subset rows: 22 s idle, 113 s on busy cores; ~3-13 min when a library change recomputes them: 173 s, 774 s)
 	$(PY) -m experiments real-data --data $(REAL_DATA)
 
-leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v2.yaml -> results/leaderboard/ (~5 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
+leaderboard: $(STAMP) ## Every registered method on conf/leaderboard/v3.yaml -> results/leaderboard/ (~5 min; FULL=1: full counts; ARGS='methods.plugins=[my_lab.x]')
 	$(PY) -m experiments leaderboard $(if $(FULL),--full) $(ARGS)
 
 verify-results: $(STAMP) ## Check every stored trial chunk under results/ parses in full; list reports stale against the code (~3 s)

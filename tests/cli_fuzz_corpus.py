@@ -3,8 +3,10 @@ intrinsics' sigmas, ``demo``, ``simulate``): each a ``CliCase`` whose argv may n
 that ``make_sources`` writes (a RADLOCC log with its images, a camera file, an observation file with corners, a
 rig description, a board file, a ROS 2 bag).
 
-Every case must end in exit 2 with one line ``lidarcam VERB: error: ...`` naming ``names`` (a file, flag or field),
-never a traceback, a hang or a RuntimeWarning on stderr. ``tests/cli/test_cli_fuzz.py`` runs them."""
+Every case of ``expect="error"`` must end in exit 2 with one line ``lidarcam VERB: error: ...`` naming ``names`` (a
+file, flag or field); a case of ``expect="answer"`` (hostile values the verb can use) in exit 0 or 1, with no
+``nan`` in what it prints. Never a traceback, a hang or a RuntimeWarning on stderr. ``tests/cli/test_cli_fuzz.py``
+runs them."""
 
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ class CliCase:
     argv: tuple[str, ...]     # "{S}" stands for the source folder
     names: str                # what the error line must name
     prepare: str = ""         # a key of PREPARE: writes the hostile file into the source folder
+    expect: str = "error"     # "error": exit 2, one line; "answer": exit 0 or 1, no nan printed
 
 
 def _laser_line(head: str = LASER_HEAD) -> str:
@@ -32,10 +35,11 @@ def _laser_line(head: str = LASER_HEAD) -> str:
 
 def make_sources(root: Path) -> Path:
     """A small source tree under ``root``: ``laser.txt`` (3 lines) + ``img/RGB{1,2,3}.png``, ``camera.yaml``,
-    ``obs.json`` (simulated, with corners and camera), ``rig.yaml`` (a copy of the plan template), ``board.yaml``."""
+    ``obs.json`` (simulated, with corners and camera) and ``res.json`` (its calibration), ``rig.yaml`` (a copy of
+    the plan template), ``board.yaml``."""
     import cv2
 
-    from calib_core import observations_to_dict
+    from calib_core import calibrate, observations_to_dict
     from simulate import SimOptions, generate
 
     root.mkdir(parents=True, exist_ok=True)
@@ -48,6 +52,7 @@ def make_sources(root: Path) -> Path:
                                       "{rows: 1, cols: 5, data: [0, 0, 0, 0, 0]}\n")
     obs = generate(SimOptions(n_boards=5, pose_mode="pixel"), seed=2, trial=0)
     (root / "obs.json").write_text(json.dumps(observations_to_dict(obs)))
+    calibrate(obs).save(root / "res.json")
     (root / "board.yaml").write_text("cols: 7\nrows: 6\nsquare_m: 0.1\n")
     _bouguet(root / "calib.mat")
     (root / "points.csv").write_text("pose,x_m,y_m\n" + "".join(f"{k},{2.0 + 0.01 * i},{-0.2 + 0.02 * i}\n"
@@ -99,6 +104,36 @@ def _rig_edit(old: str, new: str):
     return prep
 
 
+def _json_edit(name: str, edit, out: str | None = None):
+    """Edit the JSON file ``name`` of the source folder (``edit(d)`` returns the new document or None: ``d``
+    edited in place), written to ``out`` (default: in place)."""
+    def prep(root: Path) -> None:
+        d = json.loads((root / name).read_text())
+        new = edit(d)
+        (root / (out or name)).write_text(json.dumps(d if new is None else new))
+    return prep
+
+
+def _at(path: tuple, value):
+    def edit(d):
+        node = d
+        for k in path[:-1]:
+            node = node[k]
+        node[path[-1]] = value
+    return edit
+
+
+def _board_at_zero(d: dict) -> None:
+    for row in d["boards"][1]["T_cam_board"][:3]:
+        row[3] = 0.0
+
+
+def _other_rig(root: Path) -> None:
+    (root / "rig").mkdir()
+    (root / "rig" / "007.png").write_bytes(b"x")
+    (root / "rig" / "007.csv").write_text("bearing_rad,range_m\n")
+
+
 PREPARE = {
     "mat_nx_nan": _mat(nx=[[np.nan]]),
     "mat_ny_inf": _mat(ny=[[np.inf]]),
@@ -127,6 +162,16 @@ PREPARE = {
     "binary_rig": _write("bin.yaml", bytes(range(256)) * 4),
     "binary_board": _write("binboard.yaml", b"\x00\xff" * 300),
     "bad_db3": _write("badbag/badbag.db3", b"SQLite format 3\x00" + b"\x00" * 200),
+    "res_list": _json_edit("res.json", lambda d: [d], "bad_res.json"),
+    "res_nan": _json_edit("res.json", _at(("T_lidar_cam", 1, 2), float("nan")), "bad_res.json"),
+    "res_3x3": _json_edit("res.json", _at(("T_lidar_cam",), np.eye(3).tolist()), "bad_res.json"),
+    "res_board_x": _json_edit("res.json", _at(("boards_rejected",), [{"index": "x", "reason": "r"}]),
+                              "bad_res.json"),
+    "obs_std_intrinsics_tiny": _json_edit("obs.json", _at(("camera", "std_intrinsics"), [1e-300] * 4)),
+    "obs_board_at_zero": _json_edit("obs.json", _board_at_zero),
+    "obs_pose_1e300": _json_edit("obs.json", _at(("boards", 1, "T_cam_board", 0, 3), 1e300)),
+    "obs_scan_1e300": _json_edit("obs.json", _at(("boards", 2, "scan", 0), [1e300, 1e300])),
+    "other_rig": _other_rig,
 }
 
 
@@ -192,6 +237,16 @@ CASES = [
     CliCase("fix_x_1e9", _cal("--fix", "x=1e9"), "x_m"),
     CliCase("fix_nan", _cal("--fix", "pitch=nan"), "pitch"),
     CliCase("calibrate_out_is_input", _cal("--out", "{S}/obs.json"), "obs.json"),
+    CliCase("std_intrinsics_1e-300", _cal("--std-intrinsics", "1e-300,1e-300,1e-300,1e-300"), "", expect="answer"),
+    CliCase("file_std_intrinsics_1e-300", _cal(), "", "obs_std_intrinsics_tiny", expect="answer"),
+    # calibrate: a board at the camera centre, a pose or a scan point at 1e300 m (peng2022 too)
+    CliCase("calibrate_board_at_zero", _cal(), "", "obs_board_at_zero", expect="answer"),
+    CliCase("calibrate_pose_1e300", _cal(), "T_cam_board", "obs_pose_1e300"),
+    CliCase("calibrate_scan_1e300_peng2022", _cal("--method", "peng2022"), "scan", "obs_scan_1e300"),
+    # report: a result that is a list, holds NaN, a 3x3 T, or names board 'x'
+    *[CliCase(f"report_{k}", ("report", "{S}/obs.json", "{S}/bad_res.json", "--out", "{S}/rep"), field, f"res_{k}")
+      for k, field in (("list", "expected a JSON object"), ("nan", "T_lidar_cam"), ("3x3", "T_lidar_cam"),
+                       ("board_x", "boards_rejected[0].index"))],
     # extract, report, bag, simulate: numbers that are no value of their option
     *[CliCase(f"{verb}_{flag[2:]}_{value}", (verb, *args, flag, value), flag)
       for verb, args in (("extract", ("{S}/ds", "--out", "{S}/o.json")),
@@ -205,6 +260,8 @@ CASES = [
                                 "--step-deg", "nan", "--out", "{S}/ds"), "--step-deg"),
     # demo, simulate
     CliCase("demo_seed_negative", ("demo", "{S}/demo", "--seed", "-1"), "--seed"),
+    CliCase("demo_into_another_rigs_folder", ("demo", "{S}/rig"), "007.csv", "other_rig"),
     CliCase("simulate_noise_negative", ("simulate", "--noise-mm", "-5", "--out", "{S}/sim.json"), "--noise-mm"),
 ]
-"""Each case: exit 2, one line ``lidarcam VERB: error: ...`` naming ``names``."""
+"""Each case: exit 2, one line ``lidarcam VERB: error: ...`` naming ``names``; or, ``expect="answer"``, exit 0 or 1
+with no ``nan`` printed."""

@@ -123,6 +123,8 @@ def type_cases(d: dict) -> list[Case]:
         ("scan_string_number", leaf("scan", "1.5"), "scan"),
         ("scan_null", leaf("scan", None), "scan"),
         ("scan_object", leaf("scan", {"x": 1}), "scan"),
+        ("pose_translation_1e300", lambda x: x["boards"][1]["T_cam_board"][0].__setitem__(3, 1e300), "T_cam_board"),
+        ("scan_point_1e300", lambda x: x["boards"][2]["scan"].__setitem__(0, [1e300, 1e300]), "scan"),
         ("scan_three_columns", lambda x: [p.append(0.0) for p in x["boards"][2]["scan"]], "scan"),
         ("scan_one_point", lambda x: x["boards"][2].__setitem__("scan", x["boards"][2]["scan"][:1]), "scan"),
         ("scan_empty", b1("scan", []), "scan"),

@@ -49,7 +49,8 @@ def scan_board(T_lidar_board, res_deg=0.25):
 
 
 def make_observations(rng, n_boards=6, range_sigma_m=0.02, T_lidar_cam=None, poses=None, min_points=15) -> Observations:
-    """Observations with ground truth; ``poses`` (list of T_lidar_board) overrides the random boards."""
+    """Observations with ground truth; ``poses`` (list of T_lidar_board) overrides the random boards. A clean
+    simulation: no per-board systematic error, stated as ``board_range_sigma_m = 0`` as the simulator states it."""
     T = random_extrinsic(rng) if T_lidar_cam is None else T_lidar_cam
     T_cam_lidar = invert_T(T)
     boards = []
@@ -63,7 +64,7 @@ def make_observations(rng, n_boards=6, range_sigma_m=0.02, T_lidar_cam=None, pos
             continue
         P = (r + rng.normal(scale=range_sigma_m, size=len(r)))[:, None] * u
         boards.append(BoardObservation(T_cam_board, OUTLINE, P[:, :2]))
-    return Observations(tuple(boards), T)
+    return Observations(tuple(boards), T, board_range_sigma_m=0.0)
 
 
 def vertical_board_poses(n):

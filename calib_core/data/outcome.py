@@ -53,6 +53,66 @@ class Noise:
 
 
 @dataclass(frozen=True)
+class BoardErrorPart:
+    """The per-board systematic error the model held (``calib_core.model.board_error``; metres): ``offset_m`` along
+    the board normal, ``tilt_m`` as the RMS displacement of a board's scan points, where they came from
+    (``source``: ``"stated"`` by the observation file, ``"estimated"`` from the boards by restricted maximum
+    likelihood, or ``"prior"``), the boards' degrees of freedom for them, the estimate's 1-sigma (None unless
+    estimated) and the prior's values."""
+
+    offset_m: float
+    tilt_m: float
+    source: str
+    dof: int | None = None
+    se_offset_m: float | None = None
+    se_tilt_m: float | None = None
+    prior_offset_m: float | None = None
+    prior_tilt_m: float | None = None
+
+    @classmethod
+    def from_info(cls, info: dict) -> BoardErrorPart | None:
+        d = info.get("board_error")
+        if d is None:
+            return None
+        return cls(float(d["offset_m"]), float(d["tilt_m"]), str(d["source"]), d.get("dof"),
+                   _float(d.get("se_offset_m")), _float(d.get("se_tilt_m")), _float(d.get("prior_offset_m")),
+                   _float(d.get("prior_tilt_m")))
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """The noise model a result's covariance holds, each scale with its value and where it came from:
+    ``range_sigma_m`` the per-beam range noise (``range_source``: ``"stated"``, ``"scan lines"`` (the scatter
+    about each board's own line) or ``"range residuals"`` (about the answer's planes, boards' own errors
+    included)), ``corner_sigma_px`` the corner noise (``corner_source``: ``"stated"`` or ``"estimated"``; None
+    without corners), ``intrinsics`` how the camera's intrinsics entered, and ``board_error`` the per-board
+    systematic error (None where the model holds none). ``name`` says it in words."""
+
+    name: str
+    range_sigma_m: float | None = None
+    range_source: str | None = None
+    corner_sigma_px: float | None = None
+    corner_source: str | None = None
+    intrinsics: str | None = None
+    board_error: BoardErrorPart | None = None
+
+    @classmethod
+    def from_info(cls, info: dict) -> NoiseModel | None:
+        d = info.get("noise_model")
+        if d is None:
+            return None
+        return cls(str(d.get("name")), _float(d.get("range_sigma_m")), d.get("range_source"),
+                   _float(d.get("corner_sigma_px")), d.get("corner_source"), d.get("intrinsics"),
+                   BoardErrorPart.from_info(info))
+
+    def to_dict(self) -> dict:
+        """The file's optional ``noise_model`` field (the board error is its own field, ``board_error``)."""
+        d = asdict(self)
+        d.pop("board_error")
+        return d
+
+
+@dataclass(frozen=True)
 class Consensus:
     """The boards the answer rests on and those left out (``{"index", "reason", "statistic"}``), the points
     trimmed, and how many hypotheses the search drew (None where the method has no search)."""
@@ -136,9 +196,11 @@ class Outcome:
     verdict: VerdictPart | None
     warnings: tuple[str, ...]
     residual_rms: dict[str, Any] | None = None
+    noise_model: NoiseModel | None = None
 
     @classmethod
     def from_info(cls, info: dict) -> Outcome:
         return cls(Noise.from_info(info), Consensus.from_info(info), Selection.from_info(info),
                    Covariance.from_info(info), VerdictPart.from_info(info),
-                   tuple(str(w) for w in info.get("warnings", [])), info.get("residual_rms"))
+                   tuple(str(w) for w in info.get("warnings", [])), info.get("residual_rms"),
+                   NoiseModel.from_info(info))

@@ -17,7 +17,8 @@ from .outcome import Outcome
 RESULT_SCHEMA = "lidarcam.result/1"
 
 JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior",
-             "intrinsics", "board_dispersion", "covariance_bend", "residual_rms", "observations")
+             "intrinsics", "board_dispersion", "covariance_bend", "residual_rms", "observations", "noise_model",
+             "board_error")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
@@ -29,7 +30,9 @@ the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.re
 residuals' RMS over the boards used at the method's start and at its answer (``residual_rms``: ``start_m``,
 ``answer_m``, metres), and which observations the answer was computed from (``observations``:
 ``observations_fingerprint``). The file's ``noise`` field names each range-noise figure by its source
-(``data.outcome.Noise``, metres)."""
+(``data.outcome.Noise``, metres); ``noise_model`` names the noise model the covariance holds, each scale with
+its value and source, and ``board_error`` the per-board systematic error's scale and source
+(``data.outcome.NoiseModel``, ``data.outcome.BoardErrorPart``)."""
 BEND_REPORTED = 0.5
 """The summary names the covariance's bend (``covariance_bend``) when a re-fit departed from the Gaussian by this
 many sigmas or more."""
@@ -207,9 +210,15 @@ class CalibrationResult:
             if "intrinsics" in self.info:
                 out.append(f"camera intrinsics: {self.info['intrinsics']}")
             if (d := self.info.get("board_dispersion")) is not None:
+                verdict = "the covariance is widened to the boards' spread" if d["widened"] else \
+                    "beyond the per-beam noise, held by the per-board systematic error estimated from them" \
+                    if d.get("held") else "the boards agree with the noise model"
                 out.append(f"boards' dispersion: {d['statistic']:.1f} on {d['dof']} degrees of freedom (p "
-                           f"{d['p_value']:.1e}): " + ("the covariance is widened to the boards' spread"
-                                                        if d["widened"] else "the boards agree with the noise model"))
+                           f"{d['p_value']:.1e}): {verdict}")
+            if (e := self.info.get("board_error")) is not None and (e["offset_m"] > 0 or e["tilt_m"] > 0):
+                out.append(f"per-board systematic error: offset {1000 * e['offset_m']:.1f} mm, tilt "
+                           f"{1000 * e['tilt_m']:.1f} mm ({e['source']}"
+                           + (f" from {e['dof']} degrees of freedom" if e["source"] == "estimated" else "") + ")")
             if (b := self.info.get("covariance_bend")) is not None and b["departure_sigmas"] >= BEND_REPORTED:
                 out.append(f"the likelihood bends along its weakest direction ({b['departure_sigmas']:.1f} sigma off "
                            f"the Gaussian 1.7 sigmas along it): the 1-sigma holds it (Gaussian alone: rotation "

@@ -25,11 +25,11 @@ COVARIANCE_TOL = 1e-9
 TEXT_FIELDS = ("method", "reason", "covariance_model", "note", "intrinsics")
 NUMBER_FIELDS = ("seconds", "conditioning", "sigma_rot_deg", "sigma_trans_mm")
 DICT_FIELDS = ("verdict", "degeneracy", "prior", "board_dispersion", "covariance_bend", "observations", "noise",
-               "residual_rms")
+               "residual_rms", "noise_model", "board_error")
 NUMBER_DICTS = ("mounting", "mounting_sigma", "fixed")
 NESTED_NUMBERS = {"board_dispersion": ("statistic", "dof", "p_value"),
                   "covariance_bend": ("departure_sigmas", "sigma_rot_deg_laplace", "sigma_trans_mm_laplace"),
-                  "residual_rms": ("answer_m",)}
+                  "residual_rms": ("answer_m",), "board_error": ("offset_m", "tilt_m")}
 """Numbers inside an object field that the readers format (required where the object is given)."""
 OPTIONAL_NUMBERS = {"residual_rms": ("start_m",), "noise": ("scan_lines_m", "trimmed_m", "joint_m", "verdict_spread_m")}
 """Numbers inside an object field that may be null."""

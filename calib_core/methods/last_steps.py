@@ -16,6 +16,7 @@ from ..data.observations import Observations
 from ..errors import JointError, SolveFailure, UncertaintyError
 from ..geometry.mounting import MountingPrior, params_from_T, parse_fixed, with_units
 from ..geometry.transforms import skew
+from ..model.board_error import BoardErrorScale
 from ..model.residuals import range_linearised
 from ..refine.dispersion import widened_covariance
 from ..refine.joint import JointOptions
@@ -69,11 +70,15 @@ NO_CORNERS = "no image corners"
 
 def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, loss: str,
               options: JointOptions | None = None, names=None,
-              mounting: MountingPrior | None = None) -> tuple[tuple | None, str | None]:
+              mounting: MountingPrior | None = None,
+              board_error: BoardErrorScale | None = None,
+              spread_held: bool = False) -> tuple[tuple | None, str | None]:
     """The joint step (``refine.joint_step.joint_step``) from ``T``: ((T, covariance, info), None) when it applies and
     succeeds; (None, why) otherwise (``why`` None when the corners are switched off). ``names``: the boards' names
     in its warnings (default their index in ``obs``); ``mounting``: a mounting prior in its cost (the covariance
-    stays the data's: ``with_prior`` adds the prior's information)."""
+    stays the data's: ``with_prior`` adds the prior's information); ``board_error``: the per-board systematic error
+    the joint model holds (``model.board_error``), ``spread_held``: its scale estimated from these boards (the
+    dispersion test reported, the covariance not widened)."""
     options = options or JointOptions()
     if not options.use_corners:
         return None, None
@@ -82,30 +87,38 @@ def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, 
     try:
         return joint_step(obs, T, corner_sigma_px=options.corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
                           f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter, widen=options.widen,
-                          names=names, outline=options.outline, mounting=mounting, bend=options.bend), None
+                          names=names, outline=options.outline, mounting=mounting, bend=options.bend,
+                          board_error=board_error, spread_held=spread_held), None
     except (JointError, UncertaintyError) as err:
         return None, f"joint refinement failed ({err})"
 
 
 def range_covariance(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str, residual: str = "range",
-                     range_sigma_m: float | None = None) -> np.ndarray:
+                     range_sigma_m: float | None = None, board_error: BoardErrorScale | None = None) -> np.ndarray:
     """The range model's covariance at ``T`` (``refine.uncertainty.refinement_covariance``; board poses taken as
-    exact); a SolveFailure with the reason when it cannot be computed."""
+    exact), holding the per-board systematic error ``board_error`` where given (the beams' noise then the scan
+    lines' unless ``range_sigma_m``); a SolveFailure with the reason when it cannot be computed."""
+    if board_error is not None and board_error.active:
+        range_sigma_m = range_sigma(obs, range_sigma_m)
     try:
-        return refinement_covariance(obs.scan_data, T, residual, range_sigma_m)
+        return refinement_covariance(obs.scan_data, T, residual, range_sigma_m, board_error=board_error)
     except UncertaintyError as err:
         raise SolveFailure(f"{who}: {err}", candidates) from None
 
 
 def widened_range_covariance(obs: Observations, T: np.ndarray, cov: np.ndarray, range_sigma_m: float | None,
-                             names=None) -> tuple[np.ndarray, dict]:
+                             names=None, board_error: BoardErrorScale | None = None,
+                             spread_held: bool = False) -> tuple[np.ndarray, dict]:
     """The range model's covariance ``cov`` at ``T`` through the boards' dispersion test (``refine.dispersion``,
     ranges in units of the scan lines' scatter): (covariance, info with ``board_dispersion`` and, where it was
-    widened, the warning). Three boards or fewer leave nothing to test: ``cov`` and no entry."""
+    widened, the warning); ``board_error``: the per-board systematic error the model holds, ``spread_held``: its
+    scale estimated from these boards (reported, not widened). Three boards or fewer leave nothing to test: ``cov``
+    and no entry."""
     if obs.n_boards <= 3:
         return cov, {}
     try:
-        cov, disp = widened_covariance(cov, *range_board_scores(obs, T, range_sigma(obs, range_sigma_m)))
+        cov, disp = widened_covariance(cov, *range_board_scores(obs, T, range_sigma(obs, range_sigma_m)),
+                                       held=spread_held)
     except np.linalg.LinAlgError:
         return cov, {}
     return cov, {"board_dispersion": disp.to_dict(names), "warnings": [disp.warning(names)] if disp.widened else []}

@@ -15,12 +15,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..checks.degeneracy import Degeneracy, degeneracy_warnings, explain_failure
+from ..data.lines import range_sigma, residual_sigma
 from ..data.observations import Observations
+from ..data.outcome import BoardErrorPart, NoiseModel
 from ..errors import CalibrationError, SolveFailure
 from ..geometry.mounting import params_from_T, with_units
-from ..model.intrinsics import RANGE_ONLY_INTRINSICS
+from ..model.intrinsics import ESTIMATED_INTRINSICS, RANGE_ONLY_INTRINSICS
+from ..model.residuals import range_linearised
 from ..model.score import evidence_cost
 from ..refine.joint import RANGE_ONLY_MODEL
+from ..refine.systematic import ESTIMATED, BoardErrorEstimate, board_error_estimate
 from ..refine.uncertainty import conditioning
 from ..registry import Method
 from ..robust.choose import TIE_LOG_LIKELIHOOD, WEAK_LOG_LIKELIHOOD, Choice, choose_and_refine
@@ -171,8 +175,11 @@ def finish(found: Found, opts: LidarcamOptions):
                               opts.degeneracy, refuse=prior is None)
     if not deg.determined:              # a mounting prior given: it decides the axes the boards leave free
         return prior_decides(found, opts, deg)
+    est = board_error_estimate(obs_u, best.T, sigma_given) if opts.joint.board_error else None
+    term = None if est is None else est.scale
+    held = est is not None and est.source == ESTIMATED  # the boards' spread is in the term: no widening on top
     joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.choose.loss, options=opts.joint,
-                           names=tests.info.get("boards_used"), mounting=prior)
+                           names=tests.info.get("boards_used"), mounting=prior, board_error=term, spread_held=held)
     if joint is not None:
         T, cov, jinfo = joint
         if prior is not None:  # the joint model's answer is the posterior's mode; its covariance the data's
@@ -180,10 +187,11 @@ def finish(found: Found, opts: LidarcamOptions):
             cov = with_prior(T, cov, prior)
     else:
         T, cov = best.T, fold_covariance(obs_u, best.T, deg) if deg.profile.any() else \
-            range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given)
+            range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given, board_error=term)
         jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS, "warnings": []}
         if opts.joint.widen:
-            cov, disp = widened_range_covariance(obs_u, T, cov, sigma_given, tests.info.get("boards_used"))
+            cov, disp = widened_range_covariance(obs_u, T, cov, sigma_given, tests.info.get("boards_used"), term,
+                                                 held)
             jinfo.update(disp)
         if prior is not None:  # the refinement held the prior already: its information only
             jinfo["warnings"].extend(filter(None, [prior_contradiction(T, cov, prior)]))
@@ -198,7 +206,33 @@ def finish(found: Found, opts: LidarcamOptions):
                   "start_T_lidar_cam": best.start, **({"prior": prior_info(prior)} if prior is not None else {}),
                   "sigma_m_selection": found.search.sigma_m,
                   "refine_cost": best.refined.cost, "refine_nfev": best.refined.nfev, **tests.info, "covariance": cov,
-                  "conditioning": conditioning(obs_u, T), "warnings": warnings, **jinfo, **alts}
+                  "conditioning": conditioning(obs_u, T), "warnings": warnings, **jinfo, **alts,
+                  **({"board_error": est.to_dict()} if est is not None else {}),
+                  "noise_model": noise_model(obs_u, T, jinfo, sigma_given, opts.joint.corner_sigma_px, est,
+                                             fold=joint is None and bool(deg.profile.any())).to_dict()}
+
+
+def noise_model(obs: Observations, T: np.ndarray, jinfo: dict, sigma_given: float | None,
+                corner_given: float | None, est: BoardErrorEstimate | None, fold: bool = False) -> NoiseModel:
+    """``info["noise_model"]`` of ``finish``: the covariance's noise model, each scale with its value and source."""
+    term = est is not None and est.scale.active and not fold
+    joint = jinfo.get("corner_sigma_px") is not None
+    if sigma_given is not None:
+        r, r_src = float(sigma_given), "stated"
+    elif term or fold:
+        r, r_src = range_sigma(obs), "scan lines"
+    elif joint:
+        r, r_src = float(jinfo["range_sigma_m"]), "range residuals"
+    else:
+        r, r_src = residual_sigma(range_linearised(T, obs.scan_data)[0], 6), "range residuals"
+    parts = ["per-beam range noise"] + (["a per-board offset and tilt of the lidar's plane"] if term else []) + \
+        (["image-corner noise (board poses estimated)"] if joint else ["board poses taken as exact"])
+    if joint and jinfo.get("intrinsics") == ESTIMATED_INTRINSICS:
+        parts.append("the intrinsics' stated 1-sigma")
+    return NoiseModel(", ".join(parts), r, r_src, jinfo.get("corner_sigma_px"),
+                      None if not joint else "stated" if corner_given is not None else "estimated",
+                      jinfo.get("intrinsics"),
+                      BoardErrorPart.from_info({"board_error": est.to_dict()}) if term else None)
 
 
 def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy):

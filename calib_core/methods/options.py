@@ -84,6 +84,7 @@ FLAT_KEYWORDS: dict[str, tuple[str | None, str]] = {
     "use_corners": ("joint", "use_corners"), "corner_sigma_px": ("joint", "corner_sigma_px"),
     "joint_f_scale_sigmas": ("joint", "f_scale_sigmas"), "joint_max_iter": ("joint", "max_iter"),
     "widen": ("joint", "widen"), "joint_outline": ("joint", "outline"), "bend": ("joint", "bend"),
+    "board_error": ("joint", "board_error"),
 }
 """Flat keywords of ``calibrate(obs, "lidarcam", ...)`` and the (part, field) each sets (part None: the top)."""
 SOLVER_KEYWORDS = solver_keywords("vasconcelos")

@@ -273,7 +273,7 @@ def plan_to_dict(plan: Plan) -> dict:
                                                                  strict=True))]
     return {"schema": "lidarcam.plan/1", "criterion": plan.criterion,
             "target": {"rot_sigma_deg": plan.target[0], "trans_sigma_mm": plan.target[1]},
-            "boards_to_target": plan.to_target, "verdict": verdict(plan),
+            "boards_to_target": plan.to_target, "verdict": plan_summary(plan),
             "current": {**_pred_dict(plan.current), "undetermined": list(plan.undetermined)},
             "current_boards": plan.current_n, "current_message": plan.message,
             "next": nxt, "after_next": {"undetermined": list(plan.plan_undetermined), "message": plan.plan_message}}
@@ -338,7 +338,7 @@ def _summary_lines(plan: Plan, rig: PlanRig) -> list[str]:
     out += [f"  [ ] {i + 1}. board {describe_pose(q)}; check: the whole board in the image with "
             f"{rig.image_margin_px:g} px to spare, the scan line across it (about {int(np.isfinite(r).sum())} points)"
             for i, (q, r) in enumerate(zip(plan.poses, ranges, strict=True))]
-    return out + ["", f"verdict: {verdict(plan)}"]
+    return out + ["", f"verdict: {plan_summary(plan)}"]
 
 
 MANY_BOARDS = 30
@@ -368,7 +368,7 @@ def boards_to_add(plan: Plan) -> int | None:
     return None if plan.to_target is None else plan.to_target - plan.current_n
 
 
-def verdict(plan: Plan) -> str:
+def plan_summary(plan: Plan) -> str:
     """One sentence on what the current boards give and what to add: as many boards as reach the target (the
     plan's first poses named), or the proposed poses where the target is out of reach."""
     if plan.undetermined:
@@ -394,5 +394,5 @@ def verdict(plan: Plan) -> str:
 
 
 __all__ = ["CRITERIA", "POSE_FIELDS", "Plan", "PlanError", "PlanRig", "Prediction", "SIGMA_NAMES", "boards_to_add",
-           "describe_pose", "greedy", "name_undetermined", "plan_capture", "plan_to_dict", "pool", "predict",
-           "set_informations", "verdict"]
+           "describe_pose", "greedy", "name_undetermined", "plan_capture", "plan_summary", "plan_to_dict", "pool",
+           "predict", "set_informations"]

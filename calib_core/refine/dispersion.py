@@ -31,7 +31,7 @@ a simulated rig), the covariance is the model's, unchanged.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.special import chdtrc
@@ -52,7 +52,8 @@ class Dispersion:
     Attributes:
         statistic: ``D``; dof: its degrees of freedom (0: not testable); p_value: chi-square tail probability (1
         when not testable); ratio: ``D / dof`` (1 when not testable); widened: whether the covariance was widened;
-        shares: (N,) each board's part of ``D``.
+        shares: (N,) each board's part of ``D``; held: the test failed but a per-board systematic term estimated
+        from these boards holds their spread (not widened).
     """
 
     statistic: float
@@ -61,12 +62,14 @@ class Dispersion:
     ratio: float
     widened: bool
     shares: np.ndarray
+    held: bool = False
 
     def to_dict(self, names=None) -> dict:
         """JSON-able form for ``info["board_dispersion"]`` (``shares`` keyed by board name or index)."""
         names = [str(n) for n in names] if names is not None else [str(i) for i in range(len(self.shares))]
         return {"statistic": float(self.statistic), "dof": int(self.dof), "p_value": float(self.p_value),
                 "ratio": float(self.ratio), "alpha": DISPERSION_ALPHA, "widened": bool(self.widened),
+                **({"held": True} if self.held else {}),
                 "shares": {n: float(s) for n, s in zip(names, self.shares, strict=True)}}
 
     def warning(self, names=None) -> str:
@@ -80,14 +83,15 @@ class Dispersion:
                 f"boards' spread (ratio {self.ratio:.2f}); largest shares: {worst}")
 
 
-def dispersion(g: np.ndarray, S_i: np.ndarray) -> Dispersion:
+def dispersion(g: np.ndarray, S_i: np.ndarray, extra_params: int = 0) -> Dispersion:
     """The dispersion test of the board scores ``g`` (N,6) with their informations ``S_i`` (N,6,6); ``widened``
-    is whether it fails at ``DISPERSION_ALPHA``."""
+    is whether it fails at ``DISPERSION_ALPHA``. ``extra_params``: parameters besides the extrinsic fitted to the
+    same boards (free intrinsics), each taking a degree of freedom from the test."""
     w, V = np.linalg.eigh(0.5 * (S_i + np.swapaxes(S_i, 1, 2)))                # (N,6), (N,6,6)
     keep = w > RANK_RTOL * w[:, -1:]
     proj = np.einsum("nab,na->nb", V, g)                                        # g in each board's eigenbasis
     shares = np.sum(np.where(keep, proj**2 / np.where(keep, w, 1.0), 0.0), axis=1)
-    dof = int(keep.sum()) - 6
+    dof = int(keep.sum()) - 6 - int(extra_params)
     D = float(shares.sum())
     if dof <= 0:
         return Dispersion(D, 0, 1.0, 1.0, False, shares)
@@ -121,13 +125,19 @@ def centred(g: np.ndarray, S_i: np.ndarray) -> np.ndarray:
     return g - np.einsum("nab,b->na", S_i, np.linalg.solve(S_i.sum(axis=0), g.sum(axis=0)))
 
 
-def widened_covariance(cov: np.ndarray, g: np.ndarray, S_i: np.ndarray) -> tuple[np.ndarray, Dispersion]:
+def widened_covariance(cov: np.ndarray, g: np.ndarray, S_i: np.ndarray, extra_params: int = 0,
+                       held: bool = False) -> tuple[np.ndarray, Dispersion]:
     """``cov`` (6,6) and the dispersion test of the scores ``g`` (N,6) with informations ``S_i`` (N,6,6), in units
     of the noise each sensor shows alone; where the test fails, ``cov`` widened to cover the larger of the model's
     covariance in those units times the dispersion ratio, ``ratio S^-1``, and the boards' jackknife (module
-    docstring); ``cov`` itself where it is larger still."""
+    docstring); ``cov`` itself where it is larger still. ``extra_params``: as ``dispersion``'s. ``held``: the
+    model holds the boards' spread already (a per-board systematic term whose scale was estimated from these
+    boards, ``refine.systematic``): the test is reported, ``cov`` is not widened (no switch on top of an estimate).
+    """
     g = centred(g, S_i)
-    d = dispersion(g, S_i)
+    d = dispersion(g, S_i, extra_params)
+    if held and d.widened:
+        d = replace(d, widened=False, held=True)
     if not d.widened:
         return cov, d
     spread = loewner_max(d.ratio * np.linalg.inv(S_i.sum(axis=0)), jackknife_covariance(g, S_i))

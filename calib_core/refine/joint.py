@@ -30,6 +30,7 @@ from ..errors import JointError, ObservationError, UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.mounting import MountingPrior
 from ..geometry.transforms import rotvec_to_matrix
+from ..model.board_error import BoardErrorScale
 from ..model.corners import board_poses, corner_residuals, joint_range_residuals, scan_data_at
 from ..model.intrinsics import IntrinsicsPrior, augmented_blocks
 from ..model.joint_outline import has_outline_rows, outline_cost, with_outline
@@ -37,6 +38,7 @@ from ..model.prior import mounting_cost, with_mounting
 from ..model.residuals import perturb, range_residuals
 from .bend import HeldDirection
 from .refine import F_SCALE_SIGMAS, robust_cost
+from .systematic import with_systematic
 from .uncertainty import Crlb, inverse_information
 
 JOINT_MODEL = CovarianceModel.JOINT
@@ -72,7 +74,8 @@ class JointOptions:
     estimated), the robust loss's scale ``f_scale_sigmas`` in noise stds, at most ``max_iter`` iterations; ``widen``:
     the covariance widened where the boards disagree beyond the model (``refine.dispersion``); ``outline``: the
     lower-bound outlines' terms in the cost (``refine.joint_outline``); ``bend``: the covariance takes the
-    likelihood's bend along its weakest direction (``refine.bend``)."""
+    likelihood's bend along its weakest direction (``refine.bend``); ``board_error``: with a per-board systematic
+    error (``refine.systematic``)."""
 
     use_corners: bool = True
     corner_sigma_px: float | None = None
@@ -81,6 +84,7 @@ class JointOptions:
     widen: bool = True
     outline: bool = False
     bend: bool = True
+    board_error: bool = True
 
 
 def _weighted(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sc: float, sr: float, jacobian: bool,
@@ -238,7 +242,8 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
                  max_iter: int = MAX_ITER, sigma_iters: int = 3, sigma_rtol: float = 0.05,
                  intrinsics: bool = True, outline: bool = False, mounting: MountingPrior | None = None,
                  hold: HeldDirection | None = None, covariance: bool = True,
-                 start: JointResult | None = None, tol: float = COST_RTOL) -> JointResult:
+                 start: JointResult | None = None, tol: float = COST_RTOL,
+                 board_error: BoardErrorScale | None = None) -> JointResult:
     """Maximise the joint likelihood from the extrinsic ``T0`` and the observed board poses.
 
     Args:
@@ -257,6 +262,7 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         covariance: False skips the covariance (``JointResult.covariance`` is None).
         start: an earlier answer whose board poses and intrinsics start the solve (with the extrinsic ``T0``).
         tol: a solve has converged when a step lowers the cost by less than this fraction of it.
+        board_error: a per-board systematic error the covariance holds (``intrinsics_marginal_covariance``).
     Raises:
         JointError: no corners or camera; UncertaintyError: the joint information is singular.
     """
@@ -268,11 +274,12 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
     prior = IntrinsicsPrior.of(obs.camera) if intrinsics else None
     k = None if prior is None else prior.k0.copy() if start is None or start.intrinsics is None else \
         start.intrinsics.copy()
+    n_free = 6 * obs.n_boards + (0 if prior is None else prior.size)  # the corners' parameters: poses, intrinsics
     for _ in range(max(1, sigma_iters)):
         T_e, T_b, _, nit, converged, k = _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol,
                                                 prior=prior, k=k, outline=outline, mounting=mounting, hold=hold)
         cam = None if prior is None else prior.camera_at(k)
-        new_c, new_r = estimate_sigmas(obs, T_e, T_b, 6 * obs.n_boards, cam)
+        new_c, new_r = estimate_sigmas(obs, T_e, T_b, n_free, cam)
         new_c = corner_sigma_px if corner_sigma_px is not None else new_c
         new_r = range_sigma_m if range_sigma_m is not None else new_r
         done = abs(new_c / sc - 1) < sigma_rtol and abs(new_r / sr - 1) < sigma_rtol
@@ -280,8 +287,9 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
         if done:
             break
     cov = None if not covariance else \
-        intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k, outline)[:6, :6] \
-        if prior is not None or (outline and has_outline_rows(obs)) else marginal_covariance(obs, T_e, T_b, sc, sr)
+        intrinsics_marginal_covariance(obs, T_e, T_b, sc, sr, prior, k, outline, board_error=board_error)[:6, :6] \
+        if prior is not None or (outline and has_outline_rows(obs)) or board_error is not None else \
+        marginal_covariance(obs, T_e, T_b, sc, sr)
     ec = corner_residuals(obs, T_b, camera=cam)
     er = joint_range_residuals(obs, T_e, T_b)
     cost = robust_cost(np.r_[ec.ravel() / sc, er / sr], loss, f_scale_sigmas) + \
@@ -294,11 +302,13 @@ def joint_refine(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | 
 
 def intrinsics_marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray,
                                    corner_sigma_px: float, range_sigma_m: float, prior: IntrinsicsPrior | None,
-                                   k: np.ndarray | None, outline: bool = False, rcond: float = 1e-12) -> np.ndarray:
+                                   k: np.ndarray | None, outline: bool = False, rcond: float = 1e-12,
+                                   board_error: BoardErrorScale | None = None) -> np.ndarray:
     """Covariance (6+m, 6+m) of the extrinsic (rotation rad, translation m) and the free intrinsics ``k`` of
     ``prior`` (their units; none without one), board poses marginalised by the Schur complement: the inverse of
     ``H_gg - sum_i H_gi H_ii^-1 H_ig`` with the prior's information in ``H_gg`` and with ``outline`` the active
-    lower-bound outline rows' (``refine.joint_outline``). Linear in the boards.
+    lower-bound outline rows' (``refine.joint_outline``), and a per-board systematic error ``board_error``
+    (``refine.systematic.with_systematic``). Linear in the boards.
 
     UncertaintyError when a board's pose or the extrinsic is not determined.
     """
@@ -310,7 +320,9 @@ def intrinsics_marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T
         X = np.linalg.solve(H_bb, np.swapaxes(H_gb, 1, 2))
     except np.linalg.LinAlgError:
         raise UncertaintyError("a board's pose is not determined by its corners") from None
-    return inverse_information(H_gg - np.einsum("nab,nbc->ac", H_gb, X), rcond)
+    return with_systematic(inverse_information(H_gg - np.einsum("nab,nbc->ac", H_gb, X), rcond), board_error,
+                           scan_data_at(obs, T_cam_board), T_lidar_cam, lin, H_gb, H_bb, range_sigma_m,
+                           _row_offsets(obs)[1])
 
 
 def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,

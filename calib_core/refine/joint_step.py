@@ -4,18 +4,29 @@ answer, its covariance corrected for the likelihood's bend (``refine.bend``) and
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..data.lines import range_sigma
 from ..data.observations import Observations
 from ..errors import JointError, UncertaintyError
 from ..geometry.mounting import MountingPrior
+from ..model.board_error import BoardErrorScale
 from ..model.corners import board_poses
-from ..model.intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS
+from ..model.intrinsics import ESTIMATED_INTRINSICS, EXACT_INTRINSICS, IntrinsicsPrior
 from ..model.residuals import perturb
 from .bend import HOLD_STD_FRACTION, REFIT_COST_RTOL, HeldDirection, bend_summary, bent_covariance, weakest_direction
 from .dispersion import widened_covariance
-from .joint import JOINT_INTRINSICS_MODEL, JOINT_MODEL, MAX_ITER, board_scores, estimate_sigmas, joint_refine
+from .joint import (
+    JOINT_INTRINSICS_MODEL,
+    JOINT_MODEL,
+    MAX_ITER,
+    board_scores,
+    estimate_sigmas,
+    intrinsics_marginal_covariance,
+    joint_refine,
+)
 from .refine import F_SCALE_SIGMAS
 
 
@@ -23,7 +34,8 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
                range_sigma_m: float | None = None, loss: str = "linear", f_scale_sigmas: float = F_SCALE_SIGMAS,
                max_iter: int = MAX_ITER, widen: bool = True, names=None,
                outline: bool = False, mounting: MountingPrior | None = None,
-               bend: bool = True) -> tuple[np.ndarray, np.ndarray, dict]:
+               bend: bool = True, board_error: BoardErrorScale | None = None,
+               spread_held: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0``; returns
     (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
     ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
@@ -32,23 +44,38 @@ def joint_step(obs: Observations, T0: np.ndarray, *, corner_sigma_px: float | No
     ``names``, default their index) and where it fails the covariance is widened to the boards' spread, with a
     warning that says so. With ``bend`` (and no mounting prior, whose rows cut the ridge to the prior's width) the
     covariance first takes the likelihood's bend along its weakest direction (``refine.bend``: two re-fits),
-    reported in ``info["covariance_bend"]``.
+    reported in ``info["covariance_bend"]``. ``board_error``: the per-board systematic error the model holds
+    (``model.board_error``, ``refine.systematic``); the dispersion test is then of the model with it, and with
+    ``spread_held`` (its scale estimated from these boards) the test is reported without widening. The range
+    noise is then the scan lines' (``data.lines``) unless ``range_sigma_m``, not re-estimated from residuals that
+    hold the boards' own errors.
 
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
+    if board_error is not None and board_error.active:  # the beams' noise: the scatter within each board's line
+        range_sigma_m = range_sigma(obs, range_sigma_m)
     j = joint_refine(obs, T0, corner_sigma_px=corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
-                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline, mounting=mounting)
+                     f_scale_sigmas=f_scale_sigmas, max_iter=max_iter, outline=outline, mounting=mounting,
+                     board_error=board_error)
     exact, cov, warnings = j.camera is None, j.covariance, []
     bent = {}
     if bend and mounting is None:
+        term = 0.0  # the bend is the per-beam likelihood's; the per-board term's part is added to it unchanged
+        if board_error is not None and board_error.active:
+            prior = None if j.intrinsics is None else IntrinsicsPrior.of(obs.camera)
+            per_beam = intrinsics_marginal_covariance(obs, j.T_lidar_cam, j.T_cam_board, j.corner_sigma_px,
+                                                      j.range_sigma_m, prior, j.intrinsics, outline)[:6, :6]
+            term, j = cov - per_beam, replace(j, covariance=per_beam)
         cov, bent, why = bent_joint_covariance(obs, j, loss, f_scale_sigmas, max_iter, outline)
+        cov = cov + term
         warnings += [why] if why else []
     widen = widen and obs.n_boards > 3  # three boards fit exactly; units: the noise each sensor shows alone
     if widen:
         sc = corner_sigma_px if corner_sigma_px is not None else \
             estimate_sigmas(obs, j.T_lidar_cam, board_poses(obs), 6 * obs.n_boards, j.camera)[0]
         sr = range_sigma(obs, range_sigma_m)
-        cov, disp = widened_covariance(cov, *board_scores(obs, j.T_lidar_cam, j.T_cam_board, sc, sr, j.camera))
+        cov, disp = widened_covariance(cov, *board_scores(obs, j.T_lidar_cam, j.T_cam_board, sc, sr, j.camera),
+                                       extra_params=intrinsics_parameters(obs, j, outline), held=spread_held)
         warnings += [disp.warning(names)] if disp.widened else []
     info = {"covariance_model": JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
             "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
@@ -89,3 +116,15 @@ def bent_joint_covariance(obs: Observations, j, loss: str, f_scale_sigmas: float
         return j.covariance, {}, f"the covariance's bend along its weakest direction was not computed ({why}): " \
             "it is the Gaussian approximation at the answer"
     return cov, bend_summary(j.covariance, cov, v, dep), None
+
+
+def intrinsics_parameters(obs: Observations, j, outline: bool) -> int:
+    """How many parameters the free intrinsics of the joint answer ``j`` fit to the boards (0 with none): their
+    effective number under the prior, ``m - tr(C_kk Lambda)`` (``C_kk`` their posterior covariance, ``Lambda`` the
+    prior's information), rounded; each takes a degree of freedom from the boards' dispersion test."""
+    prior = None if j.intrinsics is None else IntrinsicsPrior.of(obs.camera)
+    if prior is None:
+        return 0
+    C = intrinsics_marginal_covariance(obs, j.T_lidar_cam, j.T_cam_board, j.corner_sigma_px, j.range_sigma_m, prior,
+                                       j.intrinsics, outline)[6:, 6:]
+    return int(round(prior.size - float(np.sum(np.diag(C) / prior.std**2))))

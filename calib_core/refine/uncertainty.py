@@ -18,6 +18,7 @@ from ..data.lines import residual_sigma
 from ..data.observations import Observations, ScanData
 from ..errors import UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
+from ..model.board_error import BoardErrorScale, _per_board_sum, systematic_basis
 from ..model.residuals import range_linearised, range_residuals
 
 
@@ -149,7 +150,8 @@ def normal_spread_deg(obs: Observations) -> float:
 
 
 def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str = "range",
-                          range_sigma_m: float | None = None, basis: np.ndarray | None = None) -> np.ndarray:
+                          range_sigma_m: float | None = None, basis: np.ndarray | None = None,
+                          board_error: BoardErrorScale | None = None) -> np.ndarray:
     """Covariance (6x6; kxk with ``basis``) of the minimiser of the ``residual`` least squares at ``T_lidar_cam``,
     under range noise.
 
@@ -158,12 +160,24 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
     ``A^-1 J^T diag(sigma^2 w^2) J A^-1`` with ``A = J^T J`` of the plane residuals. ``range_sigma_m=None``: estimated
     from the range residuals at ``T_lidar_cam`` (``K - 6`` degrees of freedom). ``basis``: (6,k), the covariance of
     k parameters that move ``(w, dt)`` by ``basis`` (e.g. the free mounting parameters, ``calib_core.refine.partial``;
-    then ``K - k`` degrees of freedom); default the six of ``calib_core.model.residuals``.
+    then ``K - k`` degrees of freedom); default the six of ``calib_core.model.residuals``. ``board_error``: the
+    per-board systematic error (``model.board_error``) held (range residual only; ``range_sigma_m`` is then the
+    beams' noise and must be given): the sandwich ``A^-1 + A^-1 M A^-1`` of the per-beam estimator, ``A = J^T J /
+    sigma^2`` and ``M = sum_i V_i^T P V_i / sigma^4`` with ``V_i = B_i^T J_i`` (``model.board_error``).
     """
     T = np.asarray(T_lidar_cam, float)
     e_r, J_r = range_linearised(T, data)
     B = np.eye(6) if basis is None else np.asarray(basis, float)
     J_r = J_r @ B
+    if board_error is not None and board_error.active and residual == "range":
+        if range_sigma_m is None:
+            raise UncertaintyError("the per-board systematic term needs the beams' range noise std")
+        s2 = float(range_sigma_m) ** 2
+        Ai = inverse_information(J_r.T @ J_r / s2, 1e-12)
+        V = _per_board_sum(np.einsum("ka,kp->kap", systematic_basis(data, data.normals @ T[:3, :3].T), J_r),
+                           data.board, len(data.normals))                                   # (N,2,k)
+        C = Ai + Ai @ np.einsum("nap,a,naq->pq", V, board_error.variances, V) @ Ai / s2**2
+        return 0.5 * (C + C.T)
     if residual == "range":
         return covariance(J_r, e_r, range_sigma_m)
     if residual != "plane":

@@ -9,6 +9,7 @@ range-only answer) and whole ``calibrate`` calls that end in it.
     python -m experiments bench [--boards 8] [--problems 10] [--repeats 20] [--triples 10000] [--joint-boards 8 40]
                                 [--scaling 8,20,40,100] [--scaling-problems 3]
                                 [--ratio-boards 3,4,5,6,7,8] [--ratio-problems 10] [--ratio-repeats 3]
+                                [--ratio-seeds 4321,8642]
 
 Single process, run it with ``OMP_NUM_THREADS=1`` (the Makefile exports it) for one-core numbers.
 """
@@ -59,15 +60,19 @@ def time_methods(obs_list: list, repeats: int) -> list[dict]:
     return rows
 
 
+RATIO_SEEDS = (4321, 8642)
+"""The seeds of the ratio table's problem sets: the bench's own, and a second set of the paper's 20 mm scenes."""
+
+
 def time_ratio(counts: Sequence[int], n_problems: int, repeats: int, method: str = "lidarcam",
-               reference: str = "peng2022") -> list[dict]:
+               reference: str = "peng2022", seed: int = RATIO_SEEDS[0]) -> list[dict]:
     """Per board count, the median ms of one ``calibrate`` of ``method`` and of ``reference`` on the same
-    ``n_problems`` problems (exact board poses, the simulator's defaults), the two timed alternately call by call
-    so that both see the same machine; ``ratio`` is method over reference."""
+    ``n_problems`` problems drawn with ``seed`` (exact board poses, the simulator's defaults: the paper's 20 mm),
+    the two timed alternately call by call so that both see the same machine; ``ratio`` is method over reference."""
     rows = []
     for n in counts:
         t: dict[str, list[float]] = {method: [], reference: []}
-        for obs in problems(n, n_problems, seed=4321):
+        for obs in problems(n, n_problems, seed=seed):
             for _ in range(repeats):
                 for m in (reference, method):
                     t0 = time.perf_counter()
@@ -196,13 +201,15 @@ def main(argv: Sequence[str] | None = None) -> None:
                     help="board counts of the lidarcam / peng2022 table ('': none)")
     ap.add_argument("--ratio-problems", type=positive_int, default=10)
     ap.add_argument("--ratio-repeats", type=positive_int, default=3)
+    ap.add_argument("--ratio-seeds", type=int_list(0, empty=True), default=",".join(map(str, RATIO_SEEDS)),
+                    help="seeds of the ratio table's problem sets, one table each (default: %(default)s)")
     args = ap.parse_args(argv)
     ratio_counts = args.ratio_boards
-    if ratio_counts:
-        print(f"lidarcam vs peng2022 per call, exact board poses, {args.ratio_problems} problems x "
+    for seed in args.ratio_seeds if ratio_counts else ():
+        print(f"lidarcam vs peng2022 per call, exact board poses, {args.ratio_problems} problems (seed {seed}) x "
               f"{args.ratio_repeats} repetitions each, timed alternately:")
         print(f"  {'boards':>6}{'lidarcam ms':>13}{'peng2022 ms':>13}{'ratio':>8}")
-        for r in time_ratio(ratio_counts, args.ratio_problems, args.ratio_repeats):
+        for r in time_ratio(ratio_counts, args.ratio_problems, args.ratio_repeats, seed=seed):
             print(f"  {r['boards']:>6}{r['method_ms']:>13.2f}{r['reference_ms']:>13.2f}{r['ratio']:>8.1f}")
     counts = args.scaling
     if counts:

@@ -1,13 +1,19 @@
 """The command line of every study: a parser whose errors are one line (``<prog>: error: ...``, exit status 2, no
 usage block) and argument types that refuse a value the study cannot run with (a count below its minimum, a
-non-finite or non-positive scale, a list that is not integers) before anything is computed."""
+non-finite or non-positive scale, a list that is not integers) before anything is computed. The number types are
+``lidarcam.rig.argtypes``' (shared with the ``lidarcam`` verbs; the layer rule keeps the studies from importing
+``lidarcam.cli``)."""
 
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from typing import NoReturn
+
+from lidarcam.rig.argtypes import finite_float, int_at_least, nonnegative_float, positive_float
+
+__all__ = ["StudyParser", "finite_float", "int_at_least", "int_list", "n_jobs", "nonnegative_float",
+           "nonnegative_int", "positive_float", "positive_int", "study_parser"]
 
 
 class StudyParser(argparse.ArgumentParser):
@@ -23,20 +29,6 @@ def study_parser(doc: str | None, **kwargs) -> StudyParser:
     return StudyParser(description=" ".join((doc or "").split("\n\n")[0].split()), **kwargs)
 
 
-def int_at_least(low: int):
-    """An argparse type: an integer ``>= low``."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"{value} is below {low}")
-        return value
-    parse.__name__ = f"integer >= {low}"
-    return parse
-
-
 positive_int = int_at_least(1)
 nonnegative_int = int_at_least(0)
 
@@ -46,41 +38,10 @@ def n_jobs(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
     if value == 0:
         raise argparse.ArgumentTypeError("0 workers: give 1 or more, or -1 for every core")
     return value
-
-
-def _float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
-
-
-def positive_float(text: str) -> float:
-    """An argparse type: a finite number ``> 0``."""
-    value = _float(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"{value:g} is not positive")
-    return value
-
-
-def nonnegative_float(text: str) -> float:
-    """An argparse type: a finite number ``>= 0``."""
-    value = _float(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{value:g} is negative")
-    return value
-
-
-def finite_float(text: str) -> float:
-    """An argparse type: a finite number."""
-    return _float(text)
 
 
 def int_list(low: int, empty: bool = False):

@@ -1,4 +1,4 @@
-"""The paper's claims measured on trial rows, with paired bootstrap intervals (judged by ``claims.claim_verdict``).
+"""The paper's claims measured on trial rows, with paired bootstrap intervals (judged by ``claims.claim_holds``).
 
     values = claim_values(trials, claim, x, n_boot=2000)   # one row per setting: value, lo95, hi95
 

@@ -93,7 +93,7 @@ def reading_fit(verdict_description: str, verdict_code: str) -> str:
     return "both" if len(fits) == 2 else fits[0] if fits else "neither"
 
 
-def claim_verdict(claim: Claim, value, lo=None, hi=None) -> str:
+def claim_holds(claim: Claim, value, lo=None, hi=None) -> str:
     """The verdict of ``claim`` on our per-setting ``value`` (its unit: see ``Claim``) and, where known, its 95%
     interval ``lo``..``hi`` (None: point values, every interval of zero width). Rules: the module docstring."""
     value = np.asarray(value, float)

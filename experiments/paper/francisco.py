@@ -6,7 +6,7 @@ differ) and ``--more-boards-trials`` at 5-8; tables and ``REPORT.md`` in ``<resu
     python -m experiments francisco [--trials 500] [--more-boards-trials 100] [--results results] [--n-jobs -1]
 
 Seeded as ``make reproduce-paper`` (the same simulated trials: its first 100 are the default report's); re-running
-resumes. Intervals: paired bootstrap over trials (``paper.claim_stats``), verdicts by ``claims.claim_verdict``.
+resumes. Intervals: paired bootstrap over trials (``paper.claim_stats``), verdicts by ``claims.claim_holds``.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from ..engine.store import load_cell
 from ..summary.aggregate import load_summary, load_trials, write_tables
 from ..summary.tables import method_table, valid_cell
 from .claim_stats import claim_values, sweep_arrays
-from .claims import FRANCISCO, FRANCISCO_CODE, READINGS, claim_value_text, claim_verdict, francisco_twins
+from .claims import FRANCISCO, FRANCISCO_CODE, READINGS, claim_holds, claim_value_text, francisco_twins
 
 N_BOOT = 2000
 FEW_BOARDS = (3, 4)
@@ -67,7 +67,7 @@ def claim_one_rows(trials: pd.DataFrame) -> list[str]:
                             for k, b in enumerate(v["n_boards"]))
             reading = READINGS.get(m, "the authors' code, refined output")
             rows.append([i, claim.text, f"`{m}` ({reading})", per,
-                         f"**{claim_verdict(c, v['value'], v['lo95'], v['hi95'])}**"])
+                         f"**{claim_holds(c, v['value'], v['lo95'], v['hi95'])}**"])
     return md_table(["#", "Paper's claim", "vs (reading)", "Peng 2022 - it, per board count [95% CI]", "verdict"], rows)
 
 

@@ -31,8 +31,8 @@ from .claims import (
     FRANCISCO_CODE,
     READINGS,
     Claim,
+    claim_holds,
     claim_value_text,
-    claim_verdict,
     francisco_twins,
     paper_claims,
     reading_fit,
@@ -59,7 +59,7 @@ def claims_table(tables: dict[str, Path], numbered: list[tuple[int, Claim]] | No
                 continue
             x = PAPER_SWEEPS[claim.sweep].x
             v = claim_values(None, claim, x, n_boot=N_BOOT, arrays=trials[claim.sweep])
-            verdict = claim_verdict(claim, v["value"], v["lo95"], v["hi95"])
+            verdict = claim_holds(claim, v["value"], v["lo95"], v["hi95"])
             rows += [{"preset": preset, "claim": i, "term": term_name(claim), "x": r[x], "n_trials": r["n_trials"],
                       "value": r["value"], "lo95": r["lo95"], "hi95": r["hi95"], "verdict": verdict}
                      for _, r in v.iterrows()]

@@ -4,7 +4,7 @@ paragraph on where and why they differ, templated on the numbers.
     python -m experiments report [--tables results/paper]
 
 The claims are data (``experiments.paper.claims``), judged on the point values of the summary tables by
-``claims.claim_verdict`` (the same rule the matched report applies with intervals).
+``claims.claim_holds`` (the same rule the matched report applies with intervals).
 """
 
 from __future__ import annotations
@@ -34,8 +34,8 @@ from .claims import (
     READINGS,
     ZHANGS,
     Claim,
+    claim_holds,
     claim_value_text,
-    claim_verdict,
     francisco_twins,
     paper_claims,
     reading_fit,
@@ -82,7 +82,7 @@ def check_claim(claim: Claim, sweeps: dict[str, pd.DataFrame]) -> ClaimCheck:
     if claim.at is not None:
         imp = imp[np.isclose(imp.index.to_numpy(float), claim.at)]
     vals = imp.to_numpy(float)
-    return ClaimCheck(claim, tuple(imp.index), tuple(vals), claim_verdict(claim, vals))
+    return ClaimCheck(claim, tuple(imp.index), tuple(vals), claim_holds(claim, vals))
 
 
 def check_claims(tables: Path, sweeps: dict[str, pd.DataFrame]) -> list[ClaimCheck]:

@@ -34,7 +34,7 @@ from ..summary.aggregate import write_tables
 from ..summary.figures import save_figure
 from ..summary.intervals import wilson_interval
 from .claim_stats import claim_values, sweep_arrays
-from .claims import claim_value_text, claim_verdict, paper_claims
+from .claims import claim_holds, claim_value_text, paper_claims
 
 EXPERIMENT = "rig_like"
 ACCURATE_ROT_DEG = 1.0
@@ -102,7 +102,7 @@ def leaders(r: pd.DataFrame, col: str, method: str = "lidarcam") -> list[int]:
 
 
 def claims_lines(df: pd.DataFrame) -> list[str]:
-    """The paper's board-sweep claims judged on these trials (paired bootstrap intervals, ``claims.claim_verdict``)."""
+    """The paper's board-sweep claims judged on these trials (paired bootstrap intervals, ``claims.claim_holds``)."""
     arrays = sweep_arrays(df, "n_boards")
     rows = []
     for i, claim in enumerate(paper_claims(), 1):
@@ -112,7 +112,7 @@ def claims_lines(df: pd.DataFrame) -> list[str]:
         per = "; ".join(f"{int(x)}: {claim_value_text(a, claim.kind)}" for x, a in zip(v["n_boards"], v["value"],
                                                                                          strict=True))
         rows.append([i, claim.text, method_label(claim.other) if claim.other else "-", per,
-                     claim_verdict(claim, v["value"], v["lo95"], v["hi95"])])
+                     claim_holds(claim, v["value"], v["lo95"], v["hi95"])])
     return md_table(["#", "paper's claim (Peng 2022 over the named method)", "vs", "per board count", "verdict"],
                     rows, "lllll")
 

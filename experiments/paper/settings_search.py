@@ -38,7 +38,7 @@ from ..engine.runner import run_cells
 from ..engine.store import load_cell
 from ..summary.figures import PAPER_SWEEPS
 from .claim_stats import claim_values, sweep_arrays
-from .claims import claim_verdict, paper_claims
+from .claims import claim_holds, paper_claims
 from .objective import load_search_conf, score
 from .reproduce import PAPER_EXPERIMENTS
 
@@ -149,8 +149,8 @@ def evaluate_points(points: list[dict], per_point: list[dict], conf, stage: str,
         arrays = {e: sweep_arrays(t, PAPER_SWEEPS[e].x) for e, t in trials.items()}
         for i, claim in enumerate(claims, 1):
             vals = claim_values(None, claim, PAPER_SWEEPS[claim.sweep].x, n_boot=n_boot, arrays=arrays[claim.sweep])
-            verdict = (claim_verdict(claim, vals["value"], vals["lo95"], vals["hi95"]) if n_boot else
-                       claim_verdict(claim, vals["value"].to_numpy()))
+            verdict = (claim_holds(claim, vals["value"], vals["lo95"], vals["hi95"]) if n_boot else
+                       claim_holds(claim, vals["value"].to_numpy()))
             verdicts.append({"stage": stage, "point": p["point"], **{k: p[k] for k in SPACE_KEYS}, "claim": i,
                              "verdict": verdict})
     table = pd.DataFrame(rows).sort_values("objective").reset_index(drop=True)

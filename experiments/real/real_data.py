@@ -36,7 +36,7 @@ from lidarcam.rig.dataset import DatasetError
 from lidarcam.rig.extract import direction_line, extract, format_diagnostics, noise_line
 from lidarcam.rig.intrinsics import format_intrinsics, refit_camera
 from lidarcam.rig.markdown import md_table
-from lidarcam.rig.report import capture_verdict, save_overlay
+from lidarcam.rig.report import capture_advice, save_overlay
 
 from ..engine.cli import nonnegative_int, positive_int, study_parser
 from ..engine.fingerprint import write_stamped
@@ -44,7 +44,7 @@ from ..engine.keep import write_json_unless_timings
 from ..engine.paths import repo_relative
 from . import real_subsets as sub
 from .real_eval import (
-    degeneracy_verdict,
+    degeneracy_note,
     leaderboard,
     leaderboard_md,
     planar_calibration,
@@ -268,11 +268,11 @@ def run_set(name: str, folder: Path, out: Path, n_subsets: int, n_jobs: int) -> 
     md = [f"## {name}", "", *[f"- {n}" for n in rs.notes], ""] + intrinsics_md + extraction_md
     summary: dict = {"rows": rows, "range_sigma_mm": 1000 * sigma, "n_boards": obs.n_boards,
                      "poses": obs.meta.get("poses")}
-    verdict = degeneracy_verdict(obs, T, sigma) if T is not None else ("no method solved", None)
+    verdict = degeneracy_note(obs, T, sigma) if T is not None else ("no method solved", None)
     md += ["### Leaderboard", ""] + leaderboard_md(rows, sigma, rs.published is not None) + [""]
     md += _covariance_md(rows) + uncertainty_md(rows) + [""]
     md += ["### Degeneracy", "", verdict[0], ""]
-    md += ["### Capture plan", "", capture_verdict(obs), ""]
+    md += ["### Capture plan", "", capture_advice(obs), ""]
     axes = _undetermined(obs, T, sigma) if verdict[1] is False else ()
     if axes:
         planar, T_planar = planar_calibration(obs, axes)

@@ -64,8 +64,11 @@ def leaderboard(obs: Observations, methods, sigma_m: float, published: np.ndarra
                 row.update(loo_spread(res, folds))
                 row.update(explained_sigma(obs, res, row["cv"], sigma_m))
         rows.append(row)
-        print(f"  {m}: ok={res.ok} {res.seconds:.2f} s" + (f", held-out {row['cv']['rms_mm']:.1f} mm"
-                                                            if cv else ""), flush=True)
+        if cv:
+            c = row["cv"]
+            held = (f", held-out {num(c['rms_mm'], '.1f')} mm" if math.isfinite(c["rms_mm"])
+                    else f", held-out none ({c.get('n_ok', 0)} of {c.get('n', '?')} folds solved)")
+        print(f"  {m}: ok={res.ok} {res.seconds:.2f} s" + (held if cv else ""), flush=True)
     return rows
 
 
@@ -181,7 +184,7 @@ def why_off(r: dict) -> str:
                           "leave-one-out spread needs: the excess is not explained by the held-out residuals.")
 
 
-def degeneracy_verdict(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: float) -> tuple[str, bool | None]:
+def degeneracy_note(obs: Observations, T_lidar_cam: np.ndarray, sigma_m: float) -> tuple[str, bool | None]:
     """(one sentence, determined?) from the library's information-matrix analysis."""
     d = undetermined_directions(obs, T_lidar_cam, sigma_m)
     return d.message(), d.determined

@@ -1,10 +1,10 @@
 """``make leaderboard``: every registered method (plugins included) on one fixed, versioned suite, one table.
 
-    python -m experiments leaderboard [--suite conf/leaderboard/v2.yaml] [--full] [--trials N]
+    python -m experiments leaderboard [--suite conf/leaderboard/v3.yaml] [--full] [--trials N]
                                       [--methods a,b,...] [--results results] [--out results/leaderboard]
                                       [--n-jobs -1] [OVERRIDE ...]
 
-The suite file names the suites and their trial counts (see ``conf/leaderboard/v2.yaml``): Hydra experiments
+The suite file names the suites and their trial counts (see ``conf/leaderboard/v3.yaml``): Hydra experiments
 (``conf/experiment/<name>.yaml``, run with their own sweeps) and real observation files; a suite whose
 config or files are absent is skipped with a line in the report. Every setting runs through the ordinary
 runner in one process pool, into the same resumable store as the other experiments (``<results>/<sweep>/
@@ -50,7 +50,7 @@ from ..engine.trial import evaluate
 from ..summary.aggregate import summarise, write_summary
 from .leaderboard_table import figure, leaderboard_table, markdown_table, real_table
 
-DEFAULT_SUITE = CONF_DIR / "leaderboard" / "v2.yaml"
+DEFAULT_SUITE = CONF_DIR / "leaderboard" / "v3.yaml"
 REAL_SWEEP = "leaderboard-real"
 
 

@@ -18,7 +18,7 @@ def _ci(v) -> str:
     return f"{v[0]:.3g} [{v[1]:.3g}, {v[2]:.3g}]"
 
 
-def _verdict(ratio: float) -> str:
+def _within_tolerance(ratio: float) -> str:
     return "within 20%" if abs(ratio - 1) <= TOLERANCE else "**outside 20%**"
 
 
@@ -86,9 +86,9 @@ def write_plan_report(out: Path, summary: dict) -> Path:
                     "translation: predicted mm", "empirical RMS mm", "ratio"],
                    [["none" if r["mode"] == "exact" else "0.5 px", r["boards"], f"{r['n']} / {r['failed']}",
                      f"{r['pred_rot_deg']:.3f}", _ci(r["emp_rot_deg"]),
-                     f"{r['ratio_rot']:.2f} ({_verdict(r['ratio_rot'])})",
+                     f"{r['ratio_rot']:.2f} ({_within_tolerance(r['ratio_rot'])})",
                      f"{r['pred_trans_mm']:.1f}", _ci(r["emp_trans_mm"]),
-                     f"{r['ratio_trans']:.2f} ({_verdict(r['ratio_trans'])})"] for r in summary["prediction"]],
+                     f"{r['ratio_trans']:.2f} ({_within_tolerance(r['ratio_trans'])})"] for r in summary["prediction"]],
                    "lrrrrrrrr")
     md += ["", "## Planned against random feasible poses", "",
            f"Corner noise 0.5 px. At each K: the planner's K poses and {summary['random_sets']} sets of K random "

@@ -126,9 +126,10 @@ def trial_table(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def constant_settings(df: pd.DataFrame) -> dict:
-    """The settings that are the same in every row of ``df`` (the sweep's fixed assumptions)."""
+    """The settings that are the same in every row of ``df`` (the sweep's fixed assumptions); a missing value (an
+    empty text setting read back from the store is NaN) is None, so ``settings_<sweep>.json`` is strict JSON."""
     cols = [c for c in df.columns if c not in NON_SETTING and df[c].nunique(dropna=False) == 1]
-    return {c: (v.item() if hasattr(v, "item") else v) for c, v in df[cols].iloc[0].items()}
+    return {c: None if pd.isna(v) else (v.item() if hasattr(v, "item") else v) for c, v in df[cols].iloc[0].items()}
 
 
 SUMMARY_TIMING_COLUMNS = ("median_seconds",)

@@ -54,18 +54,18 @@ def cmd_bag(args) -> int:
     if not conv.poses:
         print("no still frame passed: see the reasons in picking.json")
         return 1
-    print(f"capture plan: {cli_hint(_capture_verdict(conv.out, eo))}")
+    print(f"capture plan: {cli_hint(_capture_advice(conv.out, eo))}")
     return 0
 
 
-def _capture_verdict(folder, eo) -> str:
+def _capture_advice(folder, eo) -> str:
     """The capture planner's verdict on the poses written to ``folder``, extracted as ``lidarcam extract`` would."""
     from lidarcam.rig.dataset import load_dataset
     from lidarcam.rig.extract import extract
-    from lidarcam.rig.report import capture_verdict
+    from lidarcam.rig.report import capture_advice
 
     obs, _ = extract(load_dataset(folder), eo)
-    return capture_verdict(obs) if obs.n_boards else "no plan: no pose of the folder gives a board"
+    return capture_advice(obs) if obs.n_boards else "no plan: no pose of the folder gives a board"
 
 
 def add_parsers(subparsers) -> None:
@@ -84,7 +84,8 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--image-topic", help="sensor_msgs/Image or CompressedImage topic")
     p.add_argument("--scan-topic", help="sensor_msgs/LaserScan topic")
     p.add_argument("--camera-info-topic", help="sensor_msgs/CameraInfo topic (else --camera)")
-    p.add_argument("--camera", help="camera.yaml, when the bag has no usable CameraInfo")
+    p.add_argument("--camera", help="camera file (OpenCV keys, ROS camera_info or Kalibr camchain), when the bag has "
+                   "no usable CameraInfo")
     p.add_argument("--board", help="board.yaml of the checkerboard (docs/dataset.md)")
     p.add_argument("--out", help="dataset folder to write")
     g = p.add_argument_group("picking")

@@ -259,8 +259,8 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--step-deg", type=finite_float, help="ranges: bearing step between beams (deg)")
     p.add_argument("--unit", default="mm", choices=tuple(UNIT_M), help="ranges: range unit (default: %(default)s)")
     p.add_argument("--suffix", default=".log", help="ranges: scan file suffix (default: %(default)s)")
-    p.add_argument("--camera", help="camera file: ROS / OpenCV YAML or XML, Kalibr, or MATLAB text "
-                   "(K = [...]; kc = [...])")
+    p.add_argument("--camera", help="camera file: OpenCV keys (YAML or XML), ROS camera_info YAML, Kalibr camchain "
+                   "(FILE:camN for a camera other than cam0), or MATLAB text (K = [...]; kc = [...]); docs/dataset.md")
     p.add_argument("--intrinsics", metavar="FX,FY,CX,CY", help="the camera matrix instead of --camera (pixels)")
     p.add_argument("--dist", metavar="K1,K2,P1,P2[,K3]", help="distortion with --intrinsics (OpenCV order)")
     p.add_argument("--board-grid", metavar="COLSxROWS", help="inner corners of the checkerboard, e.g. 9x6")

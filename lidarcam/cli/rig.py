@@ -81,7 +81,7 @@ def cmd_extract(args) -> int:
 
     from calib_core.data.io import save_observations
     from lidarcam.rig.extract import direction_line, extract, format_diagnostics, noise_line
-    from lidarcam.rig.report import capture_verdict
+    from lidarcam.rig.report import capture_advice
 
     from .hints import square_hint
     from .outputs import writable_file
@@ -94,19 +94,21 @@ def cmd_extract(args) -> int:
     print(format_diagnostics(diags))
     print(direction_line(obs.meta))
     print(noise_line(obs.meta))
+    if obs.meta.get("camera_file_note"):
+        print(f"note: {obs.meta['camera_file_note']}")
     if args.diagnostics:
         Path(args.diagnostics).write_text(json.dumps([d.to_dict() for d in diags], indent=1) + "\n")
         print(f"wrote {args.diagnostics}")
     hint = square_hint(ds, diags)
     if hint:
         print(hint)
-    if obs.n_boards == 0:  # no answer, as calibrate's: exit 1 (README, lidarcam --help)
+    if obs.n_boards == 0:  # no answer, as calibrate's: exit 1 (docs/usage.md, lidarcam --help)
         print(f"lidarcam extract: {args.dataset}: no usable pose (see the skip reasons above); nothing written",
               file=sys.stderr)
         return 1
     save_observations(obs, args.out)
     print(f"wrote {args.out} ({obs.n_boards} boards)")
-    print(f"capture plan: {cli_hint(capture_verdict(obs))}")
+    print(f"capture plan: {cli_hint(capture_advice(obs))}")
     return 0
 
 
@@ -135,9 +137,7 @@ def cmd_report(args) -> int:
 
             from lidarcam.rig.dataset import CameraModel
 
-            c = obs.camera
-            lens = None if c.name == "pinhole-radtan" else c    # another model: drawn through it
-            ds = replace(ds, camera=CameraModel(c.width, c.height, c.K, c.dist, model=lens))
+            ds = replace(ds, camera=CameraModel.from_core(obs.camera))
     fit = result_fit(res, obs, args.result, args.obs or args.dataset)
     summary = write_report(ds, obs, res, args.out, alerts=fit.warnings)
     from .wording import cli_hint

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .dataset import CameraModel, DatasetError
+from .dataset import CameraModel, DatasetError, camera_files
+from .dataset.camera_files import ROS_MODELS, camera_from_mapping
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 SCAN_TYPES = ("sensor_msgs/msg/LaserScan",)
@@ -182,31 +183,35 @@ def iter_scans(src: BagSource, topic: str) -> Iterator[LaserScanMsg]:
 
 
 def read_camera_info(src: BagSource, topic: str) -> CameraModel:
-    """The first CameraInfo of ``topic`` as a CameraModel (K, OpenCV distortion D); BagError for a missing
-    message, a zero K or a distortion model OpenCV's pinhole model does not take (e.g. ``equidistant``)."""
+    """The first CameraInfo of ``topic`` as a CameraModel, read as its ROS camera_info YAML would be
+    (``lidarcam.rig.dataset.camera_files``: ``plumb_bob`` / ``rational_polynomial`` pinhole + OpenCV distortion,
+    ``equidistant`` pinhole + Kannala-Brandt k1..k4); BagError for a missing message, a zero K or a distortion model
+    or length the project does not take."""
     conns = src.connections(topic, INFO_TYPES, "camera-info")
     for _, _, msg in src.messages(conns):
         K = np.asarray(getattr(msg, "K", getattr(msg, "k", None)), float).reshape(3, 3)
         D = np.asarray(getattr(msg, "D", getattr(msg, "d", [])), float).ravel()
         model = str(msg.distortion_model)
-        if model not in OPENCV_MODELS:
-            raise BagError(f"camera-info topic {topic!r}: distortion model {model!r} is not OpenCV's pinhole model "
-                           "(plumb_bob or rational_polynomial); give --camera camera.yaml", file=src.path)
+        if model not in OPENCV_MODELS and model not in ROS_MODELS:
+            raise BagError(f"camera-info topic {topic!r}: distortion model {model!r} is not one the project knows "
+                           f"({', '.join(ROS_MODELS)}); give --camera camera.yaml", file=src.path)
         if not (K[0, 0] > 0 and K[1, 1] > 0):
             raise BagError(f"camera-info topic {topic!r}: K is zero (uncalibrated camera); give --camera "
                            "camera.yaml", file=src.path)
         if not np.any(D):
             D = np.zeros(0)
-        elif D.size not in (4, 5, 8, 12, 14):
-            raise BagError(f"camera-info topic {topic!r}: {D.size} distortion coefficients; OpenCV takes 4, 5, 8, "
-                           "12 or 14; give --camera camera.yaml", file=src.path)
-        return CameraModel(int(msg.width), int(msg.height), K, D)
+        info = {"image_width": int(msg.width), "image_height": int(msg.height), "camera_matrix": K.tolist(),
+                "distortion_model": model or "plumb_bob", "distortion_coefficients": D.tolist()}
+        try:
+            return camera_from_mapping(info, src.path)
+        except DatasetError as err:
+            raise BagError(f"camera-info topic {topic!r}: {err.message.replace('key ', 'field ')}; give --camera "
+                           "camera.yaml", file=src.path) from None
     raise BagError(f"camera-info topic {topic!r} has no message", file=src.path)
 
 
 def camera_yaml(camera: CameraModel) -> str:
-    """camera.yaml text (docs/dataset.md, plain form) of a camera model."""
-    rows = ", ".join("[" + ", ".join(repr(float(v)) for v in r) + "]" for r in camera.K)
-    return (f"# from the bag's CameraInfo (pinhole, OpenCV distortion)\nimage_width: {camera.width}\n"
-            f"image_height: {camera.height}\ncamera_matrix: [{rows}]\n"
-            f"distortion_coefficients: [{', '.join(repr(float(v)) for v in camera.dist)}]\n")
+    """camera.yaml text (docs/dataset.md) of a camera model: OpenCV keys for pinhole + OpenCV distortion, ROS's
+    ``equidistant``, Kalibr's camchain for the others (``lidarcam.rig.dataset.camera_files.camera_yaml``)."""
+    what = "pinhole, OpenCV distortion" if camera.is_opencv_pinhole else camera.name
+    return camera_files.camera_yaml(camera, f"from the bag's CameraInfo ({what})")

@@ -21,14 +21,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from calib_core.data.camera import Camera
+from calib_core.data.camera import CameraModel as Lens
 from calib_core.data.observations import BoardObservation, Observations
 from calib_core.errors import ObservationError
 from calib_core.geometry.transforms import transform_points
 
 from .dataset import Dataset, DatasetError, Pose, Scan
-from .detect import BoardDetection, detect_board
+from .detect import BoardDetection
 from .extract_options import CURVATURE_CHI2, AmbiguousSegment, ExtractionError, ExtractOptions, PoseDiagnostics
+from .lens_detect import detect_board_lens
 from .scan_noise import NoiseEstimate, estimate_noise
 from .segment import describe_segment, find_board_segment
 
@@ -52,7 +53,7 @@ def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = Non
         if pose.error is not None:
             raise pose.error
         if det is None:
-            det = detect_board(pose.read_image(), dataset.camera, dataset.board, opts.detector_flags, pose.corners)
+            det = detect_board_lens(pose.read_image(), dataset.camera, dataset.board, opts.detector_flags, pose.corners)
         diag.n_corners = len(det.corners)
         diag.reproj_rms_px = det.reproj_rms_px
         diag.cam_distance_m = float(np.linalg.norm(
@@ -103,7 +104,7 @@ def _detect_all(dataset: Dataset, opts: ExtractOptions) -> dict[str, BoardDetect
         try:
             if pose.error is not None:
                 raise pose.error
-            out[pose.name] = detect_board(pose.read_image(), dataset.camera, dataset.board, opts.detector_flags,
+            out[pose.name] = detect_board_lens(pose.read_image(), dataset.camera, dataset.board, opts.detector_flags,
                                           pose.corners)
         except (ExtractionError, DatasetError) as err:
             out[pose.name] = err
@@ -200,7 +201,7 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
     options' None values are estimated before the segment search). Every board carries its detected corners (distorted
     pixels, canonical order) and their board-frame positions, and the observations the camera intrinsics, so the
     joint model over corners and ranges applies (``meta["camera_note"]`` says why not when the intrinsics do not
-    fit ``calib_core.data.camera.Camera``). The ground truth of a simulated dataset
+    fit its ``calib_core`` camera model). The ground truth of a simulated dataset
     (ground_truth.yaml ``T_lidar_cam``) becomes ``T_lidar_cam_true``.
     """
     from .multipose import duplicate_groups, static_masks
@@ -242,6 +243,8 @@ def extract(dataset: Dataset, opts: ExtractOptions | None = None) -> tuple[Obser
             "reproj_rms_px": [reps[i].reproj_rms_px for i in range(len(boards))],
             "extraction_noise": noise.to_dict(),
             "scan_direction": dataset.scan_direction, "scan_direction_source": dataset.scan_direction_source}
+    if dataset.camera.note:
+        meta["camera_file_note"] = dataset.camera.note
     if camera is None:
         boards = [replace(b, corners_px=None, corners_board=None) for b in boards]
         meta["camera_note"] = camera_note
@@ -281,14 +284,11 @@ def _board_segments(dataset: Dataset, dets: dict, statics: list, opts: ExtractOp
     return segments
 
 
-def _camera(dataset: Dataset) -> tuple[Camera | None, str]:
+def _camera(dataset: Dataset) -> tuple[Lens | None, str]:
     """The dataset's intrinsics for the observations (the boards then carry their detected corners), or None and
     why the joint model cannot use them."""
-    c = dataset.camera
-    if c.lens is not None:
-        return c.lens, ""
     try:
-        return Camera(c.K, c.dist, c.width, c.height, c.std_intrinsics), ""
+        return dataset.camera.core(), ""
     except ObservationError as err:
         return None, f"image corners left out, the joint model cannot use the camera: {err}"
 

@@ -25,8 +25,8 @@ from calib_core.data.observations import BoardObservation
 from . import stills, timesync
 from .bag import BagError, BagSource, iter_images, iter_scans, read_camera_info
 from .dataset import BoardSpec, CameraModel, load_board, load_camera, make_scan
-from .detect import detect_board
 from .extract_options import ExtractionError, ExtractOptions
+from .lens_detect import detect_board_lens
 from .segment import find_board_segment
 
 
@@ -193,7 +193,7 @@ def check_candidate(ctx: _Ctx, run: tuple[int, int], c: int, frames: dict[int, n
     a, b = run
     gray = frames[c]
     try:
-        det = detect_board(gray, ctx.camera, ctx.board, ctx.eo.detector_flags)
+        det = detect_board_lens(gray, ctx.camera, ctx.board, ctx.eo.detector_flags)
     except ExtractionError as err:
         raise ExtractionError(f"no board: {err}") from None
     if det.reproj_rms_px > ctx.eo.max_reproj_px:

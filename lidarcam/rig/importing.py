@@ -127,12 +127,11 @@ def write_dataset_folder(out, poses: list[SourcePose], camera: CameraModel, boar
     (copied, its suffix kept) and ``<name>.csv`` (``bearing_rad,range_m``, as the source counts them), and
     ``lidar.yaml`` when a ``scan_direction`` is declared (``why``: where the declaration comes from; an earlier
     lidar.yaml is removed when none is). Returns the folder."""
-    from .bag import camera_yaml
-    from .dataset import lidar_yaml
+    from .dataset import camera_yaml, lidar_yaml
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "camera.yaml").write_text(camera_yaml(camera))
+    (out / "camera.yaml").write_text(camera_yaml(camera, f"the imported camera ({camera.name})"))
     (out / "board.yaml").write_text(board_yaml(board))
     if scan_direction is not None:
         (out / "lidar.yaml").write_text(lidar_yaml(scan_direction, why))

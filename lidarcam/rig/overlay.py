@@ -50,20 +50,19 @@ def board_plane_distances(T_cam_lidar: np.ndarray, T_cam_board: np.ndarray, scan
 
 def project_scan(camera: CameraModel, T_cam_lidar: np.ndarray, scan: np.ndarray, min_depth_m: float = 0.05
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (K,2) of lidar points ``scan`` (K,2) through the distorted camera, and a mask of the points that
+    """Pixels (K,2) of lidar points ``scan`` (K,2) through the camera's lens, and a mask of the points that
     are in front of the camera (depth > ``min_depth_m``), inside the image and within the field of view where
     the distortion model holds (undistorted image bounds + 20 %)."""
     import cv2
 
     P = transform_points(T_cam_lidar, np.column_stack([scan, np.zeros(len(scan))]))
     uv = np.full((len(P), 2), np.nan)
-    if camera.lens is not None:      # another lens model: the points it projects, through it
-        ok = camera.lens.valid(P) & (np.linalg.norm(P, axis=1) > min_depth_m)
-        if ok.any():
-            uv[ok] = camera.lens.project(P[ok])
-        ok &= (uv[:, 0] >= -0.5) & (uv[:, 0] <= camera.width - 0.5) & (uv[:, 1] >= -0.5) & \
+    if not camera.is_opencv_pinhole:  # any other lens: through its model, where the model projects one-to-one
+        lens = camera.core()
+        ok = lens.valid(P) & (np.linalg.norm(P, axis=1) > min_depth_m)
+        uv[ok] = lens.project(P[ok])
+        return uv, ok & (uv[:, 0] >= -0.5) & (uv[:, 0] <= camera.width - 0.5) & (uv[:, 1] >= -0.5) & \
             (uv[:, 1] <= camera.height - 0.5)
-        return uv, ok
     ok = P[:, 2] > min_depth_m
     if ok.any():
         w, h = camera.width, camera.height
@@ -105,14 +104,14 @@ def draw_overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar,
 
     ring = np.zeros((0, 3)) if outline is None else np.column_stack([outline, np.zeros(len(outline))])
     ring = transform_points(T_cam_board, np.vstack([ring, ring[:1]]))
-    if camera.lens is not None and len(ring):   # the outline's edges bend through the lens
+    if len(ring) and not camera.is_opencv_pinhole:   # the outline's edges bend through the lens
         t = np.linspace(0.0, 1.0, 33)[:-1]
         ring = np.vstack([a + t[:, None] * (b - a) for a, b in zip(ring[:-1], ring[1:], strict=True)] + [ring[:1]])
-    if len(ring) and (np.all(ring[:, 2] > 0) if camera.lens is None else camera.lens.valid(ring).all()):
-        if camera.lens is not None:
-            uvb = camera.lens.project(ring)
-        else:                                     # no outline (outline_kind 'none'): nothing to draw
-            uvb, _ = cv2.projectPoints(ring, np.zeros(3), np.zeros(3), camera.K, camera.dist)
+    if len(ring) and not camera.is_opencv_pinhole and camera.core().valid(ring).all():
+        uvb = camera.core().project(ring)
+        ax.plot(uvb[:, 0], uvb[:, 1], "-", color="yellow", lw=1.0, alpha=0.8)
+    elif len(ring) and camera.is_opencv_pinhole and np.all(ring[:, 2] > 0):  # no outline: nothing to draw
+        uvb, _ = cv2.projectPoints(ring, np.zeros(3), np.zeros(3), camera.K, camera.dist)
         uvb = uvb.reshape(-1, 2)
         ax.plot(uvb[:, 0], uvb[:, 1], "-", color="yellow", lw=1.0, alpha=0.8)
     norm = Normalize(-clim_mm, clim_mm)

@@ -2,8 +2,10 @@
 
 Sections (units in the key names; docs/planning.md shows a whole file):
 
-- ``camera``: camera.yaml's keys (``image_width``, ``image_height``, ``camera_matrix``, ``distortion_coefficients``)
-  and ``corner_sigma_px`` (corner noise std per coordinate; 0: board poses taken as exact).
+- ``camera``: camera.yaml's keys in any form of ``lidarcam.rig.dataset.camera_files`` (OpenCV keys ``image_width``,
+  ``image_height``, ``camera_matrix``, ``distortion_coefficients``; ROS's ``distortion_model``; a Kalibr
+  ``cam0: {...}``) or ``file: camera file`` (relative to the rig file), and ``corner_sigma_px`` (corner noise std per
+  coordinate; 0: board poses taken as exact).
 - ``lidar``: ``fov_deg``, ``resolution_deg``, ``max_range_m``, ``range_sigma_mm``.
 - ``mounting``: the rough camera pose in the lidar frame, ``roll_deg``, ``pitch_deg``, ``yaw_deg``, ``x_m``,
   ``y_m``, ``z_m`` (``calib_core.geometry.mounting``: all zero, the camera looks along the lidar x axis).
@@ -20,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_core.data.camera import Camera
 from calib_core.errors import ObservationError
 from calib_core.geometry.mounting import UNIT_NAMES, T_from_params
 from calib_core.planning.views import POSE_FIELDS, PlanRig, Workspace
 
-from .dataset import DatasetError, board_from_dict, camera_from_dict, read_yaml
+from .dataset import DatasetError, board_from_dict, read_yaml
+from .dataset.camera_files import camera_from_mapping, read_camera
 
 TEMPLATE = "plan_template.yaml"
 """The rig description template, a file of this package (``lidarcam plan --template``)."""
@@ -102,15 +104,27 @@ def _check_size(workspace: Workspace, lid: dict, path: Path) -> None:
                            file=path)
 
 
+def _camera(cam_sec: dict, path: Path):
+    """The ``camera`` section's camera: its keys in any camera file form (``camera_files``), or ``file`` naming a
+    camera file (relative to the rig file; ``FILE:camN`` for a camchain's camera), beside ``corner_sigma_px``."""
+    keys = {k: v for k, v in cam_sec.items() if k != "corner_sigma_px"}
+    if "file" not in keys:
+        return camera_from_mapping(keys, path, prefix="camera.")
+    if set(keys) != {"file"}:
+        raise DatasetError(f"'camera': 'file' names the camera file; drop {', '.join(sorted(set(keys) - {'file'}))}",
+                           file=path)
+    return read_camera(path.parent / str(keys["file"]))
+
+
 def rig_from_dict(data: dict, path: Path) -> PlanRig:
     """A PlanRig from the parsed YAML ``data``; DatasetError naming ``path`` and the section and key."""
     unknown = sorted(set(data) - set(SECTIONS))
     if unknown:
         raise DatasetError(f"unknown section(s) {', '.join(unknown)}; known: {', '.join(SECTIONS)}", file=path)
     cam_sec = _section(data, "camera", path)
-    cam = camera_from_dict(cam_sec, path)
+    cam = _camera(cam_sec, path)
     try:
-        camera = Camera(cam.K, cam.dist, cam.width, cam.height)
+        camera = cam.core()
     except ObservationError as err:
         raise DatasetError(f"'camera': {err}", file=path) from None
     corner_sigma = _number(cam_sec, "corner_sigma_px", "camera", path, 0.5, 0.0)

@@ -82,13 +82,13 @@ def report_warnings(observations: Observations, rms_mm: list[float], T_lidar_cam
     return out
 
 
-def capture_verdict(observations: Observations, result=None) -> str:
+def capture_advice(observations: Observations, result=None) -> str:
     """The capture planner's verdict on the boards captured (``calib_core.planning.observed.plan_from_observations``)
     from their calibration ``result`` (a CalibrationResult or a result dict: its extrinsic, covariance and noise
     estimates; None: the ``lidarcam`` calibration of the boards, as ``lidarcam plan --from`` makes it), with the
     noise it assumed."""
     from calib_core import calibrate
-    from calib_core.planning.capture import verdict
+    from calib_core.planning.capture import plan_summary
     from calib_core.planning.observed import plan_from_observations
 
     try:
@@ -104,7 +104,7 @@ def capture_verdict(observations: Observations, result=None) -> str:
         p = plan_from_observations(observations, np.asarray(T, float), 2, covariance=cov, info=info)
     except (LidarcamError, ValueError) as err:
         return f"no plan: {err}"
-    return (f"{verdict(p.plan)}. (Assumed noise: range {1000 * p.range_sigma_m:.1f} mm, corners "
+    return (f"{plan_summary(p.plan)}. (Assumed noise: range {1000 * p.range_sigma_m:.1f} mm, corners "
             f"{p.corner_sigma_px:.2g} px ({p.noise_source}); `lidarcam plan --from OBS.json` gives the whole plan.)")
 
 
@@ -308,7 +308,7 @@ def write_report(dataset: Dataset | None, observations: Observations, result, ou
     every = summary.warnings + report_warnings(observations, rms_mm, T) + list(res.get("warnings") or [])
     summary.warnings = list(dict.fromkeys(every))  # alerts first; the method's board-set warnings are the library's too
     md += ["## Warnings", ""] + ([f"- {w}" for w in summary.warnings] or ["None."]) + [""]
-    page.capture = capture_verdict(observations, result if isinstance(result, CalibrationResult) else res)
+    page.capture = capture_advice(observations, result if isinstance(result, CalibrationResult) else res)
     page.yaml = (out / "extrinsic.yaml").read_text().rstrip()
     md += ["## Capture plan", "", page.capture, ""]
     md += ["## Extrinsic as YAML", "", "```yaml", page.yaml, "```", ""]
@@ -368,5 +368,5 @@ def _fill_page(page: HtmlReport, observations: Observations, res: dict, T: np.nd
                        f"normals {normal_spread_deg(observations):.1f} deg from one plane (spread)."]
 
 
-__all__ = ["ReportSummary", "board_plane_distances", "capture_verdict", "project_scan", "report_warnings",
+__all__ = ["ReportSummary", "board_plane_distances", "capture_advice", "project_scan", "report_warnings",
            "save_overlay", "write_report"]

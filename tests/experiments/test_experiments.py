@@ -197,14 +197,14 @@ def test_aggregation_of_a_known_table():
 def test_claim_verdicts_on_point_values():
     """The summary report's reading: point values, no intervals (the same rule as the matched report's)."""
     c = claims.Claim("boards", "t", "s", "points", "x", 2, 20)
-    assert claims.claim_verdict(c, np.array([5.0, 0.0, 12.0])) == "holds"
-    assert claims.claim_verdict(c, np.array([30.0, 40.0])) == "direction only"
-    assert claims.claim_verdict(c, np.array([5.0, -3.0])) == "mixed"
-    assert claims.claim_verdict(c, np.array([0.0, -3.0])) == "does not hold"
+    assert claims.claim_holds(c, np.array([5.0, 0.0, 12.0])) == "holds"
+    assert claims.claim_holds(c, np.array([30.0, 40.0])) == "direction only"
+    assert claims.claim_holds(c, np.array([5.0, -3.0])) == "mixed"
+    assert claims.claim_holds(c, np.array([0.0, -3.0])) == "does not hold"
     one = claims.Claim("noise", "t", "s", "relative", "x", 150, 150, at=30)
-    assert claims.claim_verdict(one, np.array([100.0])) == "holds"
-    assert claims.claim_verdict(one, np.array([20.0])) == "direction only"
-    assert claims.claim_verdict(claims.Claim("noise", "t", "s", "at_least", None, 90, 100), np.array([95, 89])) == \
+    assert claims.claim_holds(one, np.array([100.0])) == "holds"
+    assert claims.claim_holds(one, np.array([20.0])) == "direction only"
+    assert claims.claim_holds(claims.Claim("noise", "t", "s", "at_least", None, 90, 100), np.array([95, 89])) == \
         "does not hold"
 
 

@@ -75,6 +75,28 @@ def test_suite_file_is_versioned_and_names_the_paper_sweeps():
                                                    "real"} <= set(names)
     assert not names["rig_like"].crlb          # the bound takes the intrinsics as exact
     assert names["boards"].crlb and names["boards"].trials < names["boards"].full_trials
+    assert {"rig_like_fisheye", "rig_like_ds"} <= set(names)
+
+
+def test_the_lens_rig_like_suites_run_through_their_lens(tmp_path):
+    """The fisheye and double-sphere rig-like rows: one trial each of ``lidarcam`` through the lens of the suite
+    (the trial's camera model recorded in its row), valid under rig conditions."""
+    import yaml
+
+    from experiments.suites.leaderboard import DEFAULT_SUITE
+
+    suites = yaml.safe_load(DEFAULT_SUITE.read_text())["suites"]
+    lens = {k: dict(suites[k], trials=1) for k in ("rig_like_fisheye", "rig_like_ds")}
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(yaml.safe_dump({"version": "test", "suites": lens}))
+    r = run_leaderboard(suite, overrides=["methods.names=[lidarcam]"], results_dir=str(tmp_path / "res"), n_jobs=1,
+                        progress=False)
+    assert r["rows_computed"] == 2
+    table = pd.read_csv(r["report"].parent / "leaderboard.csv")
+    assert table["valid_rig_like_fisheye"].iloc[0] == 1 and table["valid_rig_like_ds"].iloc[0] == 1
+    for name, model in (("rig_like_fisheye", "pinhole-equidistant"), ("rig_like_ds", "ds")):
+        cells = [p for p in (tmp_path / "res").rglob("*.json") if model in p.read_text()]
+        assert cells, f"no stored cell of {name} names the {model} lens"
 
 
 def _obs_files(folder, n, reference=True):

@@ -7,6 +7,7 @@ from __future__ import annotations
 import subprocess
 
 import matplotlib
+import pytest
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -37,6 +38,17 @@ def test_tables_of_the_same_rows_with_other_wall_times_are_the_same_files(tmp_pa
     assert (a / "timings_trials_fake.csv").read_bytes() != (b / "timings_trials_fake.csv").read_bytes()
     assert "seconds" in (a / "timings_trials_fake.csv").read_text().splitlines()[0]
     assert "median_seconds" in (a / "timings_summary_fake.csv").read_text().splitlines()[0]
+
+
+def test_the_settings_file_is_strict_json_when_a_setting_is_empty_text(tmp_path):
+    import json
+    import math
+
+    rows = _rows(1.0).assign(cam_params=math.nan)  # an empty text setting, read back from the store, is NaN
+    write_tables(rows, "fake", tmp_path)
+    settings = json.loads((tmp_path / "settings_fake.json").read_text(),
+                          parse_constant=lambda c: pytest.fail(f"settings_fake.json holds {c}"))
+    assert settings["cam_params"] is None and settings["noise_mm"] == 20.0
 
 
 def test_timings_files_are_not_tracked():

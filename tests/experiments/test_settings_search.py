@@ -9,7 +9,7 @@ import pytest
 
 from experiments.engine.cell import Cell
 from experiments.paper.claim_stats import claim_values, term_name
-from experiments.paper.claims import Claim, claim_verdict, paper_claims
+from experiments.paper.claims import Claim, claim_holds, paper_claims
 from experiments.paper.objective import load_search_conf, miss, score
 from simulate import SimOptions, generate
 
@@ -57,16 +57,16 @@ def test_miss_reads_the_band_in_scale_units():
 
 def test_interval_verdicts():
     c = Claim("boards", "t", "s", "points", "vasconcelos", 2, 20)
-    assert claim_verdict(c, [10, 0], [5, -1], [15, 1]) == "holds"          # a tie does not spoil it
-    assert claim_verdict(c, [40, 30], [35, 25], [45, 35]) == "direction only"
-    assert claim_verdict(c, [40, 0], [35, -1], [45, 1]) == "holds"  # our range 0..40 overlaps 2..20
-    assert claim_verdict(c, [10, -3], [5, -5], [15, -1]) == "mixed"
-    assert claim_verdict(c, [1, -1], [-1, -3], [3, 1]) == "does not hold"  # better nowhere for sure
-    assert claim_verdict(c, [10, np.nan], [5, np.nan], [15, np.nan]) == "mixed"
+    assert claim_holds(c, [10, 0], [5, -1], [15, 1]) == "holds"          # a tie does not spoil it
+    assert claim_holds(c, [40, 30], [35, 25], [45, 35]) == "direction only"
+    assert claim_holds(c, [40, 0], [35, -1], [45, 1]) == "holds"  # our range 0..40 overlaps 2..20
+    assert claim_holds(c, [10, -3], [5, -5], [15, -1]) == "mixed"
+    assert claim_holds(c, [1, -1], [-1, -3], [3, 1]) == "does not hold"  # better nowhere for sure
+    assert claim_holds(c, [10, np.nan], [5, np.nan], [15, np.nan]) == "mixed"
     floor = Claim("noise", "t", "s", "at_least", None, 90, 100)
-    assert claim_verdict(floor, [89], [85], [93]) == "holds"
-    assert claim_verdict(floor, [80], [75], [85]) == "does not hold"
-    assert claim_verdict(c, [10, 5]) == "holds"
+    assert claim_holds(floor, [89], [85], [93]) == "holds"
+    assert claim_holds(floor, [80], [75], [85]) == "does not hold"
+    assert claim_holds(c, [10, 5]) == "holds"
 
 
 def _trials(n=400, p_other=0.5, seed=0):

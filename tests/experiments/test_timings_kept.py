@@ -89,3 +89,15 @@ def test_the_bench_table_stays_aligned_for_long_method_names():
     ends = {ln.index("  valid") if i == 0 else ln.rindex("  10/10") for i, ln in enumerate(lines)}
     assert len(ends) == 1, "\n".join(lines)
     assert all(ln.split()[0] == r["method"] for ln, r in zip(lines[1:], rows, strict=True))
+
+
+def test_a_held_out_residual_that_no_fold_gives_is_no_nan_on_the_console(capsys):
+    from experiments.real.real_eval import leaderboard
+    from simulate import SimOptions, generate
+
+    obs = generate(SimOptions(n_boards=4), seed=3)
+    rows = leaderboard(obs, ["zhang_pless", "lidarcam"], sigma_m=0.02)
+    out = capsys.readouterr().out
+    assert "nan" not in out.lower(), out
+    assert "zhang_pless: ok=False" in out and "held-out none (0 of 4 folds solved)" in out, out
+    assert rows[1]["ok"] and f"held-out {rows[1]['cv']['rms_mm']:.1f} mm" in out

@@ -1,6 +1,6 @@
 """``lidarcam extract`` on a small simulated dataset folder: a board.yaml square off by a unit factor ends with a
 hint naming square_m and the factor, an all-NaN scan is skipped as "no returns", no usable pose is exit 1 (no
-answer, as README and --help say), and the capture plan speaks the command line's ``--fix`` words."""
+answer, as docs/usage.md and --help say), and the capture plan speaks the command line's ``--fix`` words."""
 
 from __future__ import annotations
 
@@ -78,7 +78,7 @@ def test_no_usable_pose_is_exit_1(dataset, tmp_path, capsys):
 def test_the_capture_plan_of_extract_speaks_fix(dataset, tmp_path, capsys, monkeypatch):
     import lidarcam.rig.report
 
-    monkeypatch.setattr(lidarcam.rig.report, "capture_verdict", lambda obs: "vertical boards: calibrate the rest with "
+    monkeypatch.setattr(lidarcam.rig.report, "capture_advice", lambda obs: "vertical boards: calibrate the rest with "
                         "fixed={'roll_deg': ..., 'z_m': ...}")
     assert main(["extract", str(dataset), "--out", str(tmp_path / "o.json")]) == 0
     plan = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("capture plan:"))

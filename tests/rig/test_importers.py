@@ -181,10 +181,10 @@ def test_camera_files_ros_opencv_kalibr(tmp_path):
         np.testing.assert_allclose(c.K, K)
         np.testing.assert_allclose(c.dist[:2], [0.1, -0.2])
         assert (c.width, c.height) == (640, 480)
-    kal.write_text(kal.read_text().replace("radtan", "equidistant"))
+    kal.write_text(kal.read_text().replace("radtan", "fov"))
     with pytest.raises(DatasetError) as err:
         read_camera_file(kal)
-    assert "camchain.yaml: field cam0.distortion_model: 'equidistant' is not supported" in _one_line(err)
+    assert "camchain.yaml: key 'cam0.distortion_model': 'fov' is not a model the project knows" in _one_line(err)
     with pytest.raises(DatasetError, match="no camera 'cam1'"):
         read_camera_file(kal, cam="cam1")
 

@@ -2,7 +2,7 @@
 
 Layout of a dataset folder::
 
-    camera.yaml        intrinsics, OpenCV/ROS style (image_width, image_height, camera_matrix, distortion_coefficients)
+    camera.yaml        intrinsics: OpenCV keys, a ROS camera_info or a Kalibr camchain (``camera_files``)
     board.yaml         the board: a checkerboard, a Kalibr target (AprilGrid, checkerboard) or a ChArUco board
     NNN.png | NNN.jpg  one image per pose
     NNN.csv            one scan per pose: header ``bearing_rad,range_m`` or ``x,y`` (lidar frame, metres)
@@ -18,13 +18,13 @@ naming the file and line, and the other poses go on.
 """
 
 from .boards import board_from_dict, load_board
+from .camera_files import camera_formats, camera_yaml, load_camera, read_camera
 from .direction import SCAN_DIRECTIONS, check_scan_direction, lidar_yaml, load_lidar, mirror_scan
 from .load import IMAGE_SUFFIXES, RESERVED_STEMS, load_dataset
 from .model import BOARD_KINDS, BoardSpec, CameraModel, Dataset, DatasetError, Pose, Scan
 from .scans import csv_rows, make_scan, read_keyed_scans, read_scan_csv, same_pose
 from .yaml_files import (
     camera_from_dict,
-    load_camera,
     load_ground_truth,
     load_windows,
     matrix_field,
@@ -33,8 +33,8 @@ from .yaml_files import (
 
 __all__ = [
     "BOARD_KINDS", "IMAGE_SUFFIXES", "RESERVED_STEMS", "SCAN_DIRECTIONS", "BoardSpec", "CameraModel", "Dataset",
-    "DatasetError",
-    "Pose", "Scan", "board_from_dict", "camera_from_dict", "check_scan_direction", "csv_rows", "lidar_yaml",
-    "load_board", "load_camera", "load_dataset", "load_ground_truth", "load_lidar", "load_windows", "make_scan",
-    "matrix_field", "mirror_scan", "read_keyed_scans", "read_scan_csv", "read_yaml", "same_pose",
+    "DatasetError", "Pose", "Scan", "board_from_dict", "camera_formats", "camera_from_dict", "camera_yaml",
+    "check_scan_direction", "csv_rows", "lidar_yaml", "load_board", "load_camera", "load_dataset", "load_ground_truth",
+    "load_lidar", "load_windows", "make_scan", "matrix_field", "mirror_scan", "read_camera", "read_keyed_scans",
+    "read_scan_csv", "read_yaml", "same_pose",
 ]

@@ -28,14 +28,16 @@ class DatasetError(LidarcamError, ValueError):
 
 @dataclass(frozen=True, eq=False)
 class CameraModel:
-    """The dataset's camera: a pinhole with OpenCV distortion, or (``model``) any ``calib_core.data.cameras`` model.
+    """The dataset's camera as its file states it (``lidarcam.rig.dataset.camera_files``): a pinhole with OpenCV
+    distortion, or (``model``) any ``calib_core.data.cameras`` model.
 
-    Attributes: ``width``, ``height`` (pixels); ``K`` 3x3 camera matrix; ``dist`` (D,) OpenCV distortion
-    coefficients (k1, k2, p1, p2[, k3, ...]); may be empty; ``std_intrinsics`` the optional 1-sigma of fx, fy, cx,
-    cy (pixels) and then of ``dist`` (OpenCV's ``stdDeviationsIntrinsics`` order, ``calib_core.data.camera.Camera``),
-    None when the source states none; ``model``: the ``calib_core.data.cameras`` model when camera.yaml names
-    another (``camera_model`` / ``distortion_model``; ``K`` then holds its fx, fy, cx, cy and ``dist`` its
-    distortion), else None.
+    Attributes: ``width``, ``height`` (pixels); ``K`` 3x3 camera matrix; ``dist`` (D,) distortion coefficients
+    (pinhole: OpenCV's k1, k2, p1, p2[, k3, ...]; another model: its own, e.g. k1..k4 of ``pinhole-equidistant``);
+    may be empty; ``std_intrinsics`` the optional 1-sigma of the intrinsics in ``calib_core``'s order (fx, fy, cx,
+    cy in pixels, the model's parameters, then ``dist``; OpenCV's ``stdDeviationsIntrinsics`` for the pinhole), None
+    when the source states none; ``model``: the ``calib_core.data.cameras`` model when the file names one other than
+    the pinhole with OpenCV distortion (``K`` then holds its fx, fy, cx, cy and ``dist`` its distortion), else None;
+    ``note``: what the reader chose for the user (the camera of a several-camera camchain), else empty.
     """
 
     width: int
@@ -44,12 +46,56 @@ class CameraModel:
     dist: np.ndarray
     std_intrinsics: np.ndarray | None = None
     model: object | None = None
+    note: str = ""
 
     @property
     def lens(self):
-        """The camera as a ``calib_core.data.cameras`` model: ``model`` when camera.yaml names one other than the
+        """The camera as a ``calib_core.data.cameras`` model: ``model`` when the file names one other than the
         pinhole with OpenCV distortion, else None (the OpenCV pinhole path: ``K`` and ``dist``)."""
         return self.model
+
+    @property
+    def is_opencv_pinhole(self) -> bool:
+        """True for pinhole + OpenCV distortion, the model ``cv2.projectPoints`` and ``cv2.undistortPoints`` take."""
+        return self.model is None
+
+    @property
+    def name(self) -> str:
+        """The model's one-word name (``pinhole-radtan``, ``pinhole-equidistant``, ``omni-radtan``, ``ds``,
+        ``eucm``)."""
+        return "pinhole-radtan" if self.model is None else self.model.name
+
+    @property
+    def camera_model(self) -> str:
+        """Kalibr's ``camera_model`` (``pinhole``, ``omni``, ``ds``, ``eucm``)."""
+        return "pinhole" if self.model is None else self.model.camera_model
+
+    @property
+    def distortion_model(self) -> str:
+        """Kalibr's ``distortion_model`` (``radtan``, ``equidistant``, ``none``)."""
+        return "radtan" if self.model is None else self.model.distortion_model
+
+    @property
+    def params(self) -> tuple[float, ...]:
+        """The model's own parameters (its ``param_names``: xi; xi, alpha; alpha, beta), unitless."""
+        return () if self.model is None else tuple(float(v) for v in self.model.params)
+
+    @classmethod
+    def from_core(cls, camera) -> CameraModel:
+        """The CameraModel of a ``calib_core`` camera (no 1-sigma)."""
+        from calib_core.data.camera import Camera
+
+        model = None if isinstance(camera, Camera) else camera
+        return cls(camera.width, camera.height, camera.K, camera.dist, None, model)
+
+    def core(self):
+        """The ``calib_core`` camera: ``model``, or ``calib_core.data.camera.Camera`` of ``K``, ``dist`` and
+        ``std_intrinsics``; ``ObservationError`` naming the field it refuses."""
+        if self.model is not None:
+            return self.model
+        from calib_core.data.camera import Camera
+
+        return Camera(self.K, self.dist, self.width, self.height, self.std_intrinsics)
 
 
 BOARD_KINDS = ("checkerboard", "charuco", "aprilgrid")

@@ -1,5 +1,6 @@
-"""The dataset's YAML files (plain or OpenCV FileStorage): camera.yaml, windows.yaml, ground_truth.yaml, and the
-checked numeric matrices they hold (board.yaml: ``lidarcam.rig.dataset.boards``)."""
+"""The dataset's YAML files (plain or OpenCV FileStorage): camera.yaml's OpenCV keys (``camera_files`` reads the
+file), windows.yaml, ground_truth.yaml, and the checked numeric matrices they hold (board.yaml:
+``lidarcam.rig.dataset.boards``)."""
 
 from __future__ import annotations
 
@@ -96,14 +97,9 @@ def _require(data: dict, key: str, path: Path):
     return data[key]
 
 
-def load_camera(path) -> CameraModel:
-    """Read camera.yaml: ``image_width``, ``image_height``, ``camera_matrix`` (3x3), ``distortion_coefficients``."""
-    path = Path(path)
-    return camera_from_dict(read_yaml(path), path)
-
-
 def camera_from_dict(data: dict, path: Path) -> CameraModel:
-    """A CameraModel from camera.yaml's keys (already parsed); errors name ``path``."""
+    """A pinhole CameraModel from the OpenCV keys (already parsed; the checks of every form that has them, the lens
+    model left to ``lidarcam.rig.dataset.camera_files``, which reads camera files); errors name ``path``."""
     try:
         w, h = int(_require(data, "image_width", path)), int(_require(data, "image_height", path))
     except (TypeError, ValueError):
@@ -115,55 +111,11 @@ def camera_from_dict(data: dict, path: Path) -> CameraModel:
         raise DatasetError("'camera_matrix' must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0",
                            file=path)
     dist = matrix_field(data.get("distortion_coefficients", []), "distortion_coefficients", path, (None,))
-    lens = _lens_model(data, K, dist, w, h, path)
-    if lens is None and dist.size not in (0, 4, 5, 8, 12, 14):
+    if dist.size not in (0, 4, 5, 8, 12, 14):
         raise DatasetError(f"'distortion_coefficients': OpenCV takes 4, 5, 8, 12 or 14, got {dist.size}", file=path)
     K.setflags(write=False)
     dist.setflags(write=False)
-    return CameraModel(w, h, K, dist, model=lens)
-
-
-LENS_PARAMS = ("xi", "alpha", "beta")
-"""camera.yaml keys of the models' own parameters (``calib_core.data.cameras``)."""
-PINHOLE_DISTORTIONS = ("radtan", "plumb_bob", "rational_polynomial")
-"""``distortion_model`` names of the OpenCV pinhole (Kalibr's and ROS's)."""
-
-
-def _lens_model(data: dict, K: np.ndarray, dist: np.ndarray, w: int, h: int, path: Path):
-    """The ``calib_core.data.cameras`` model camera.yaml names with ``camera_model`` (Kalibr's names: ``pinhole``,
-    ``omni``, ``ds``, ``eucm``) and ``distortion_model`` (``radtan``/``plumb_bob``/``rational_polynomial``,
-    ``equidistant``, ``none``) and the model's parameters (``xi``, ``alpha``, ``beta``); None for the OpenCV
-    pinhole (no such keys, or ``pinhole`` with ``radtan``). DatasetError naming the key otherwise."""
-    from calib_core.data.cameras import camera_class
-    from calib_core.errors import ObservationError
-
-    cm, dm = data.get("camera_model"), data.get("distortion_model")
-    if cm is None and dm is None:
-        return None
-    cm = str(cm or "pinhole").strip().lower()
-    dm = None if dm is None else str(dm).strip().lower()
-    if cm in ("pinhole", "omni") and dm in PINHOLE_DISTORTIONS:
-        dm = "radtan"
-    if cm == "pinhole" and dm in (None, "radtan"):
-        return None
-    try:
-        cls = camera_class(cm, dm)
-    except KeyError as exc:
-        raise DatasetError(f"'camera_model'/'distortion_model': {exc.args[0]}", file=path) from None
-    for key in LENS_PARAMS:
-        if key in data and key not in cls.param_names:
-            raise DatasetError(f"'{key}' is not a parameter of the {cm} model ({', '.join(cls.param_names) or 'none'})",
-                               file=path)
-    missing = [n for n in cls.param_names if n not in data]
-    if missing:
-        raise DatasetError(f"missing key '{missing[0]}' (the {cm} model's parameter)", file=path)
-    try:
-        return cls(K, dist, w, h, **{n: float(data[n]) for n in cls.param_names})
-    except (TypeError, ValueError):
-        raise DatasetError(f"the {cm} model's parameters {', '.join(cls.param_names)} must be numbers",
-                           file=path) from None
-    except ObservationError as exc:
-        raise DatasetError(f"'{exc.field or 'camera'}': {exc.message}", file=path) from None
+    return CameraModel(w, h, K, dist)
 
 
 def load_windows(path) -> dict[str, tuple[float, float]]:

@@ -23,7 +23,7 @@ def with_kind(obs: Observations, kind: str, outline=None, keep_outline: bool = F
     omitted, unless ``keep_outline``)."""
     boards = tuple(BoardObservation(b.T_cam_board, b.outline if keep_outline else outline, b.scan, b.corners_px,
                                     b.corners_board, outline_kind=kind) for b in obs.boards)
-    return Observations(boards, obs.T_lidar_cam_true, dict(obs.meta), obs.camera)
+    return Observations(boards, obs.T_lidar_cam_true, dict(obs.meta), obs.camera, obs.board_range_sigma_m)
 
 
 def shrunk(outline: np.ndarray, factor: float) -> np.ndarray:

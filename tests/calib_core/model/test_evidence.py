@@ -39,7 +39,7 @@ def lower_bound(obs: Observations, factor) -> Observations:
         c = b.outline.mean(axis=0)
         boards.append(BoardObservation(b.T_cam_board, c + k * (b.outline - c), b.scan, b.corners_px,
                                        b.corners_board, outline_kind="lower_bound"))
-    return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta), obs.camera)
+    return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta), obs.camera, obs.board_range_sigma_m)
 
 
 def random_polygon(rng: np.random.Generator) -> np.ndarray:

@@ -24,7 +24,7 @@ RIG = {"pose_mode": "pixel", "n_boards": 6, "dist_min_m": 1.0, "dist_max_m": 4.0
 
 
 def with_camera(obs, camera):
-    return Observations(obs.boards, obs.T_lidar_cam_true, obs.meta, camera)
+    return Observations(obs.boards, obs.T_lidar_cam_true, obs.meta, camera, obs.board_range_sigma_m)
 
 
 def error_vector(T, T_true):

@@ -19,7 +19,7 @@ from calib_core.geometry.beams import points_in_polygon
 from calib_core.geometry.mounting import T_from_params
 from calib_core.geometry.transforms import invert_T
 from calib_core.model.residuals import range_residuals
-from calib_core.planning.capture import PlanError, greedy, plan_capture, plan_to_dict, pool, predict, verdict
+from calib_core.planning.capture import PlanError, greedy, plan_capture, plan_summary, plan_to_dict, pool, predict
 from calib_core.planning.views import PlanRig, Workspace, board_poses_lidar, feasibility, noise_free_views
 from calib_core.refine.joint import _weighted, board_informations, joint_crlb
 from calib_core.refine.uncertainty import fisher_information
@@ -169,7 +169,7 @@ def test_plan_predicts_the_joint_bound_of_the_simulated_boards():
     d = plan_to_dict(plan)
     assert set(d["current"]) == {"rot_sigma_deg", "trans_sigma_mm", "sigma", "undetermined"}
     assert len(d["next"]) == 5 and d["next"][-1]["rot_sigma_deg"] == pytest.approx(plan.after[-1].rot_sigma_deg)
-    assert f"add {n} boards" in verdict(plan)  # no boards yet: the count to the target is n
+    assert f"add {n} boards" in plan_summary(plan)  # no boards yet: the count to the target is n
 
 
 def test_rig_yaml_reads_and_bad_fields_are_one_line_errors(tmp_path):
@@ -275,7 +275,7 @@ def test_the_verdict_adds_as_many_boards_as_the_plan_needs(k, given, target):
     plan = plan_capture(rig, k, current=current, current_info=info, target=target)
     if plan.current.meets(target):
         pytest.skip("the given boards meet this target")
-    text = verdict(plan)
+    text = plan_summary(plan)
     need = boards_to_add(plan)
     if need is None:  # out of reach: the sentence says so and names the proposed poses, adding no count
         assert "is not reached within" in text and "add " not in text, text
@@ -314,7 +314,7 @@ def test_one_noise_rule_for_the_cli_plan_and_the_capture_verdict(tmp_path, capsy
     from calib_core import calibrate
     from calib_core.planning.observed import DEFAULT_CORNER_SIGMA_PX, observation_noise
     from lidarcam.cli import main
-    from lidarcam.rig.report import capture_verdict
+    from lidarcam.rig.report import capture_advice
 
     obs = generate(SimOptions(n_boards=6, pose_mode="pixel"), 1, 0)
     res = calibrate(obs)
@@ -325,9 +325,9 @@ def test_one_noise_rule_for_the_cli_plan_and_the_capture_verdict(tmp_path, capsy
     assert main(["plan", "--from", str(tmp_path / "obs.json"), "--next", "2"]) == 0
     text = capsys.readouterr().out
     cli = re.search(r"range noise ([\d.]+) mm, corner noise ([\d.]+) px", text)
-    rig = re.search(r"Assumed noise: range ([\d.]+) mm, corners ([\d.]+) px", capture_verdict(obs))
+    rig = re.search(r"Assumed noise: range ([\d.]+) mm, corners ([\d.]+) px", capture_advice(obs))
     assert cli and rig and cli.groups() == rig.groups(), (cli.groups(), rig.groups())
-    assert capture_verdict(obs).split(". (Assumed")[0] in text  # the same verdict
+    assert capture_advice(obs).split(". (Assumed")[0] in text  # the same verdict
     bare = type(obs)(obs.boards, obs.T_lidar_cam_true, {}, obs.camera)  # no calibration, no reprojection RMS
     assert observation_noise(bare)[1] == DEFAULT_CORNER_SIGMA_PX
 
@@ -340,5 +340,5 @@ def test_summary_lines_have_a_row_per_proposed_pose_and_the_verdict():
     lines = plan.summary_lines(rig)
     rows = [ln for ln in lines if re.match(r"^\s*\d+\s+[\d.]+\s+-?[\d.]+", ln)]
     assert len(rows) == 3
-    assert lines[-1] == f"verdict: {verdict(plan)}"
+    assert lines[-1] == f"verdict: {plan_summary(plan)}"
     assert all(any(describe_pose(q) in ln for ln in lines) for q in plan.poses)

@@ -23,7 +23,7 @@ def _turned(obs: Observations) -> Observations:
     boards = [BoardObservation(b.T_cam_board @ QUARTER, b.outline @ QUARTER[:2, :2], b.scan, b.corners_px,
                                np.column_stack([b.corners_board[:, :2], np.zeros(len(b.corners_board))])
                                @ QUARTER[:3, :3], outline_kind=b.outline_kind) for b in obs.boards]
-    return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta), obs.camera)
+    return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta), obs.camera, obs.board_range_sigma_m)
 
 
 @pytest.mark.parametrize("seed", [3, 4])

@@ -54,15 +54,15 @@ def test_widening_is_one_for_the_models_own_covariance_and_scales_as_the_noise(r
 
 def test_every_verb_quotes_one_number(widened, tmp_path, capsys):
     from lidarcam.cli import main
-    from lidarcam.rig.report import capture_verdict
+    from lidarcam.rig.report import capture_advice
 
     obs, res = widened
     save_observations(obs, tmp_path / "obs.json")
     assert main(["plan", "--from", str(tmp_path / "obs.json"), "--next", "2"]) == 0
     text = capsys.readouterr().out
     cli = re.search(r"1-sigma: rotation ([\d.]+) deg, translation ([\d.]+) mm", text)
-    extract_line = capture_verdict(obs)                          # what extract and bag print
-    report_line = capture_verdict(obs, res.to_dict())            # what the report writes from a result file
+    extract_line = capture_advice(obs)                          # what extract and bag print
+    report_line = capture_advice(obs, res.to_dict())            # what the report writes from a result file
     quoted = [re.search(r"give 1-sigma ([\d.]+) deg, (\d+) mm", t) for t in (extract_line, report_line)]
     assert cli and all(quoted)
     assert float(cli.group(1)) == pytest.approx(sigma_rot_deg(res.covariance), abs=1e-3)

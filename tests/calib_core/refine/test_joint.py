@@ -110,7 +110,7 @@ def noisy_copy(obs, rng, px, sigma_m):
         r = np.linalg.norm(b.scan, axis=1, keepdims=True)
         scan = b.scan * (1 + rng.normal(0, sigma_m, r.shape) / r)
         boards.append(replace(b, scan=scan, corners_px=b.corners_px + rng.normal(0, px, b.corners_px.shape)))
-    return Observations(tuple(boards), obs.T_lidar_cam_true, obs.meta, obs.camera)
+    return Observations(tuple(boards), obs.T_lidar_cam_true, obs.meta, obs.camera, obs.board_range_sigma_m)
 
 
 def test_covariance_matches_the_monte_carlo_spread():

@@ -1,0 +1,200 @@
+"""The scale of the per-board systematic error (``calib_core.model.board_error``): stated by the observation file,
+estimated from the boards by restricted maximum likelihood, or a prior where the boards leave too few degrees of
+freedom.
+
+Estimate. At an answer ``T`` (the range model's, board poses as observed), each board's range residuals ``r_i``
+reduce to their two coefficients on the term's columns, ``c_i = G_i^-1 B_i^T r_i`` (``G_i = B_i^T B_i``): the
+offset and tilt of the board's scan line against its plane. What is left within the board is per-beam noise and
+carries no information on the term. Linearised in the extrinsic ``x`` (6), ``c_i = C_i x + u_i + v_i`` with
+``C_i = G_i^-1 B_i^T J_i``, the term ``u_i ~ N(0, diag(theta_o, theta_t))`` and ``v_i ~ N(0, K_i)``,
+``K_i = sigma^2 G_i^-1 + Cb_i Sigma_b,i Cb_i^T``: the beams' noise (``sigma`` of the scan lines) and, with image
+corners, the camera's board-pose error from its corner noise alone (``Sigma_b,i = sigma_c^2 (Jc_i^T Jc_i)^-1``,
+``Cb_i = G_i^-1 B_i^T Jb_i``), so that the camera's known error is not counted as the lidar's. With
+``V_i = K_i + diag(theta)`` the restricted log-likelihood (the extrinsic integrated out) is
+
+    l_R(theta) = -1/2 [ sum log det V_i + log det A + sum c_i^T V_i^-1 c_i - b^T A^-1 b ],
+    A = sum C_i^T V_i^-1 C_i,  b = sum C_i^T V_i^-1 c_i,
+
+on ``2N - 6`` degrees of freedom (none at three boards). The prior enters as a normal density of each
+``log theta`` about the prior's ``log s0^2`` with std ``PRIOR_LOG_SD``: ``-1/2 ((log theta - log s0^2) /
+PRIOR_LOG_SD)^2``. Unlike a scaled inverse chi-square it lets boards that show no systematic error (a renderer's)
+bring the estimate near zero, and it keeps the estimate near the prior where the boards have few degrees of
+freedom.
+The estimate is each scale's posterior mean over a grid of ``log theta`` (``estimate_scale``), its
+1-sigma the posterior std. With
+``ESTIMATE_MIN_BOARDS`` boards or more the estimate is used; below, the prior (3-4 boards: 0-2 degrees of freedom
+for two components).
+
+The prior (``DEFAULT_PRIOR``) is measured on the public rigs: docs/lidarcam.md, "Per-board systematic error".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data.lines import range_sigma, residual_sigma
+from ..data.observations import Observations, ScanData
+from ..errors import JointError
+from ..model.board_error import BoardErrorScale, _per_board_sum, systematic_basis
+from ..model.corners import board_poses, corner_residuals, joint_range_residuals
+from ..model.residuals import range_linearised
+
+DEFAULT_PRIOR = BoardErrorScale(offset_m=0.0058, tilt_m=0.0020)
+"""The prior scale of the per-board systematic error (metres; offset along the normal, tilt as the RMS
+displacement of the board's scan points), measured on the public rigs: each variance the mean over EdenShin,
+Kazmierczak and Nowicki of their restricted maximum likelihood estimates without a prior (docs/lidarcam.md)."""
+PRIOR_LOG_SD = 2.0
+"""Width of the prior in the estimate: each variance's log is Normal about the prior's with this std (a factor
+``e`` in the scale per std): the boards' own disagreement moves the estimate where they have the degrees of
+freedom, down to near zero on boards that show none, and leaves it near the prior where they have few."""
+ESTIMATE_MIN_BOARDS = 5
+"""Fewest boards whose disagreement estimates the scale (4 boards leave 2 degrees of freedom for 2 components)."""
+STATED, ESTIMATED, PRIOR = "stated", "estimated", "prior"
+"""Where a scale came from (``BoardErrorEstimate.source``)."""
+
+
+@dataclass(frozen=True)
+class BoardErrorEstimate:
+    """The per-board systematic error's scale used, its source (``STATED``: the file's ``board_range_sigma_m``,
+    an offset, no tilt; ``ESTIMATED``; ``PRIOR``), the boards' degrees of freedom for it (``2N - 6``), the 1-sigma
+    of the estimate's two scales (metres; None unless estimated) and the prior."""
+
+    scale: BoardErrorScale
+    source: str
+    dof: int
+    se_offset_m: float | None = None
+    se_tilt_m: float | None = None
+    prior: BoardErrorScale = DEFAULT_PRIOR
+
+    def to_dict(self) -> dict:
+        """``info["board_error"]``: scales in metres and where they came from."""
+        return {"offset_m": self.scale.offset_m, "tilt_m": self.scale.tilt_m, "source": self.source,
+                "dof": self.dof, "se_offset_m": self.se_offset_m, "se_tilt_m": self.se_tilt_m,
+                "prior_offset_m": self.prior.offset_m, "prior_tilt_m": self.prior.tilt_m, "prior_log_sd": PRIOR_LOG_SD}
+
+
+@dataclass(frozen=True, eq=False)
+class BoardCoefficients:
+    """Each board's coefficients ``c`` (N,2), their extrinsic Jacobian ``C`` (N,2,6) and known covariance ``K``
+    (N,2,2) at an answer (module docstring)."""
+
+    c: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+
+
+def board_coefficients(obs: Observations, T: np.ndarray, range_sigma_m: float | None = None) -> BoardCoefficients:
+    """``BoardCoefficients`` of ``obs`` at the extrinsic ``T`` (range model, board poses as observed); the
+    camera's board-pose error from the corner noise in ``K`` where every board has corners."""
+    T = np.asarray(T, float)
+    data, N = obs.scan_data, obs.n_boards
+    e, J = range_linearised(T, data)
+    B = systematic_basis(data, data.normals @ T[:3, :3].T)
+    Gi = np.linalg.inv(_per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, N))
+    c = np.einsum("nab,nb->na", Gi, _per_board_sum(B * e[:, None], data.board, N))
+    C = Gi @ _per_board_sum(np.einsum("ka,kp->kap", B, J), data.board, N)
+    K = range_sigma(obs, range_sigma_m) ** 2 * Gi
+    if obs.has_corners and obs.camera is not None:
+        try:
+            K = K + _camera_part(obs, T, B, Gi)
+        except (JointError, np.linalg.LinAlgError):
+            pass
+    return BoardCoefficients(c, C, K)
+
+
+def _camera_part(obs: Observations, T: np.ndarray, B: np.ndarray, Gi: np.ndarray) -> np.ndarray:
+    """``Cb_i Sigma_b,i Cb_i^T`` (N,2,2): the camera's board-pose error (corner noise alone) in the coefficients."""
+    N = obs.n_boards
+    Tb = board_poses(obs)
+    ec, Jc = corner_residuals(obs, Tb, jacobian=True)
+    sc = residual_sigma(ec, 6 * N)
+    idx = np.concatenate([np.full(len(b.corners_px), i) for i, b in enumerate(obs.boards)])
+    H = _per_board_sum(np.einsum("jca,jcb->jab", Jc, Jc), idx, N)          # (N,6,6)
+    Sb = sc**2 * np.linalg.inv(H)
+    _, _, Jb = joint_range_residuals(obs, T, Tb, jacobian=True)
+    Cb = Gi @ _per_board_sum(np.einsum("ka,kp->kap", B, Jb), obs.scan_data.board, N)       # (N,2,6)
+    return Cb @ Sb @ np.swapaxes(Cb, 1, 2)
+
+
+def restricted_loglik(theta: np.ndarray, co: BoardCoefficients) -> np.ndarray:
+    """``l_R(theta)`` (module docstring) at the variances ``theta`` (..., 2) (m^2), without the prior."""
+    theta = np.asarray(theta, float)
+    shape = theta.shape[:-1]
+    th = theta.reshape(-1, 1, 2)
+    V = co.K[None] + th[..., :, None] * np.eye(2)                                     # (M,N,2,2)
+    Vi = np.linalg.inv(V)
+    A = np.einsum("nap,mnab,nbq->mpq", co.C, Vi, co.C)
+    b = np.einsum("nap,mnab,nb->mp", co.C, Vi, co.c)
+    sA, ldA = np.linalg.slogdet(A)
+    quad = np.einsum("na,mnab,nb->m", co.c, Vi, co.c) - np.einsum("mp,mp->m", b,
+                                                                   np.linalg.solve(A, b[..., None])[..., 0])
+    out = -0.5 * (np.sum(np.linalg.slogdet(V)[1], axis=1) + ldA + quad)
+    return np.where(sA > 0, out, -np.inf).reshape(shape)
+
+
+GRID_SCALES_M = np.geomspace(5e-5, 0.05, 61)
+"""The scales (metres) over which the estimate integrates, each component: 0.05 mm (none, for a calibration) to
+50 mm (beyond a board's flatness or a lidar's bias)."""
+
+
+def estimate_scale(co: BoardCoefficients, prior: BoardErrorScale = DEFAULT_PRIOR,
+                   prior_sd: float = PRIOR_LOG_SD) -> tuple[BoardErrorScale, np.ndarray]:
+    """The scale's estimate (module docstring): the posterior mean of each scale under the restricted likelihood
+    and the prior (``prior_sd`` its width in ``log theta``, ``inf``: the boards alone), over ``GRID_SCALES_M``
+    each; and its 1-sigma (2,) (metres), the posterior std. The mean, not the mode: with few degrees of freedom the
+    restricted likelihood is wide and skewed, and its mode falls near zero by chance on a set of boards that agree;
+    the mean keeps that uncertainty in the scale the covariance uses."""
+    g = np.log(GRID_SCALES_M**2)
+    X = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1)                             # (G,G,2) log theta
+    logp = restricted_loglik(np.exp(X), co)
+    if np.isfinite(prior_sd):
+        logp = logp - 0.5 * np.sum(((X - np.log(prior.variances)) / prior_sd) ** 2, axis=-1)
+    w = np.exp(logp - np.max(logp))
+    w /= w.sum()
+    s = np.exp(0.5 * X)
+    mean = np.einsum("ij,ijc->c", w, s)
+    sd = np.sqrt(np.maximum(np.einsum("ij,ijc->c", w, s**2) - mean**2, 0.0))
+    return BoardErrorScale(float(mean[0]), float(mean[1])), sd
+
+
+def board_error_estimate(obs: Observations, T: np.ndarray, range_sigma_m: float | None = None,
+                         prior: BoardErrorScale = DEFAULT_PRIOR) -> BoardErrorEstimate:
+    """The per-board systematic scale for ``obs`` at the answer ``T``: the file's ``board_range_sigma_m`` where it
+    states one (an offset, no tilt), else estimated from the boards (``ESTIMATE_MIN_BOARDS`` or more), else the
+    prior."""
+    dof = max(2 * obs.n_boards - 6, 0)
+    if obs.board_range_sigma_m is not None:
+        return BoardErrorEstimate(BoardErrorScale(float(obs.board_range_sigma_m), 0.0), STATED, dof, prior=prior)
+    if obs.n_boards < ESTIMATE_MIN_BOARDS:
+        return BoardErrorEstimate(prior, PRIOR, dof, prior=prior)
+    scale, se = estimate_scale(board_coefficients(obs, T, range_sigma_m), prior)
+    se = [float(v) if np.isfinite(v) else None for v in se]
+    return BoardErrorEstimate(scale, ESTIMATED, dof, se[0], se[1], prior)
+
+
+def with_systematic(C: np.ndarray, scale: BoardErrorScale | None, data: ScanData, T_e: np.ndarray, lin: tuple,
+                    H_gb: np.ndarray, H_bb: np.ndarray, sr: float, starts: np.ndarray) -> np.ndarray:
+    """The joint model's covariance ``C`` (G,G) of its shared parameters (extrinsic, then any free intrinsics;
+    ``calib_core.refine.joint``, board poses marginalised) with the per-board systematic error ``scale`` held (``C``
+    itself without one): the answer is weighed by the per-beam noise, so its covariance under the term is the
+    sandwich ``C + C M C``, ``M = sum_i w_i P w_i^T / sr^2`` the term's part of the profiled score covariance,
+    ``w_i = V_g,i^T - H_gb,i H_bb,i^-1 V_b,i^T`` (G,2) with ``V_i = B_i^T J_i`` the term's columns
+    (``model.board_error.systematic_basis`` on ``data``, the scan points with the current board planes) on the
+    board's normalised range rows (``lin``: ``joint._weighted``'s output, ``Je`` (K,6) extrinsic and ``Jb`` (K,6)
+    board pose columns; the intrinsics' are zero on range rows; rows of board i from ``starts[i]``) and ``P`` the
+    term's variances. Linear in the boards."""
+    if scale is None or not scale.active:
+        return C
+    Je, Jb = lin[2], lin[3]
+    B = systematic_basis(data, data.normals @ np.asarray(T_e, float)[:3, :3].T)
+    N, G = len(data.normals), H_gb.shape[1]
+    Vx = np.add.reduceat(np.einsum("ka,kp->kap", B, Je), starts)                      # (N,2,6)
+    Vb = np.add.reduceat(np.einsum("ka,kp->kap", B, Jb), starts)                      # (N,2,6)
+    Vg = np.zeros((N, G, 2))
+    Vg[:, :6, :] = np.swapaxes(Vx, 1, 2)
+    W = Vg - H_gb @ np.linalg.solve(H_bb, np.swapaxes(Vb, 1, 2))                       # (N,G,2)
+    M = np.einsum("nga,a,nha->gh", W, scale.variances / float(sr) ** 2, W)
+    C = C + C @ M @ C
+    return 0.5 * (C + C.T)
