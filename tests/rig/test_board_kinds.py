@@ -202,3 +202,13 @@ def test_extract_names_the_bad_board_key_in_one_line(tmp_path, capsys):
     assert main(["extract", str(tmp_path), "--out", str(tmp_path / "obs.json")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "board.yaml" in err and "'tagSpace'" in err
+
+
+def test_formats_lists_every_board_kind_and_camera_model(capsys):
+    from calib_core.data.cameras import CAMERA_MODELS
+    from lidarcam.cli import main
+    from lidarcam.rig.dataset.boards import FORMS
+
+    assert main(["formats"]) == 0
+    out = capsys.readouterr().out
+    assert all(form in out for form in FORMS) and all(f"{c}/{d}" in out for c, d in CAMERA_MODELS)
