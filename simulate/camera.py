@@ -123,14 +123,15 @@ def board_texture(spec, px_per_m: float) -> tuple[np.ndarray, float]:
 
 
 def render_board_image(K: np.ndarray, T_cam_board: np.ndarray, spec, width: int, height: int,
-                       supersample: int = 4, texel_px: float = 0.5) -> np.ndarray:
+                       supersample: int = 4, texel_px: float = 0.5, texture=None) -> np.ndarray:
     """Grey uint8 image (height, width) of the board seen with pose ``T_cam_board`` on a uniform background.
 
     ``spec``: a BoardSpec or SimOptions. Rendered with ``cv2.warpPerspective`` of the board texture at
     ``supersample`` x the resolution, then averaged down (INTER_AREA); texels are at most ``texel_px``
     supersampled pixels wide. Pixel-centre conventions are matched exactly: texel u has its centre at board
     x = (u + 0.5)/ppm, and supersampled pixel xs at image x = (xs + 0.5)/s - 0.5, so the rendered corners
-    sit where ``project`` puts them. The board must lie in front of the camera.
+    sit where ``project`` puts them. The board must lie in front of the camera. ``texture``: a function of the
+    texels per metre needed returning (texture, texels per metre) of another pattern (``simulate.patterns``).
     """
     b = BoardSpec.of(spec)
     s = int(supersample)
@@ -141,7 +142,7 @@ def render_board_image(K: np.ndarray, T_cam_board: np.ndarray, spec, width: int,
         raise CameraError("render_board_image: board not in front of the camera")
     f = max(K[0, 0], K[1, 1])
     ppm_needed = f * s / np.min(corners[:, 2]) / texel_px
-    tex, ppm = board_texture(b, min(ppm_needed, 20000.0))
+    tex, ppm = (texture or (lambda q: board_texture(b, q)))(min(ppm_needed, 20000.0))
     A = np.array([[1.0 / ppm, 0.0, 0.5 / ppm], [0.0, 1.0 / ppm, 0.5 / ppm], [0.0, 0.0, 1.0]])  # texel -> board
     S = np.array([[s, 0.0, (s - 1) / 2.0], [0.0, s, (s - 1) / 2.0], [0.0, 0.0, 1.0]])        # image -> supersampled
     M = S @ H @ A

@@ -19,10 +19,13 @@ from calib_core.geometry.transforms import invert_T, make_T
 
 from . import trial_rngs
 from .camera import BACKGROUND, BoardSpec, camera_matrix, checkerboard_corners, render_board_image
+from .lens import is_default, true_camera
+from .lens_render import render_board_lens
 from .lidar import beam_bearings, board_ranges, scan_chords
 from .options import SimOptions
+from .patterns import Pattern, texture_source
 from .rig import refuse_rig_conditions
-from .scene import sample_scene
+from .scene import Scene, sample_scene
 
 
 @dataclass(frozen=True)
@@ -140,7 +143,8 @@ def write_board_yaml(path, options: SimOptions, outline_sim: np.ndarray) -> None
 def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, room: RoomOptions | None = None,
                   distortion=(0.0, 0.0, 0.0, 0.0, 0.0), blur_sigma_px: float = 0.7, image_noise_std: float = 2.0,
                   scan_columns: str = "bearing_range", keyed_scans: bool = False, camera_style: str = "opencv",
-                  dropout_prob: float = 0.002, image_format: str = "png") -> Path:
+                  dropout_prob: float = 0.002, image_format: str = "png", pattern: Pattern | None = None,
+                  cut_every: int = 0) -> Path:
     """Write a simulated dataset folder and return its path.
 
     ``options``: the scene, lidar and camera (``cam_width``, ``cam_height``, ``focal_px``, board, noise_mm;
@@ -149,6 +153,13 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
     or ``xy``. ``keyed_scans``: one scans.csv instead of NNN.csv. ``camera_style``: ``opencv`` (%YAML:1.0 via
     cv2.FileStorage) or ``plain``. ``dropout_prob``: share of beams with no return (written as range 0).
     The ground truth (T_lidar_cam, T_cam_board per pose in the dataset's board frame) is in ground_truth.yaml.
+
+    ``pattern``: a ChArUco board or an AprilGrid (``simulate.patterns``) instead of the checkerboard, centred on the
+    board (board.yaml in its form, the dataset's board frame the pattern's). A lens other than the plain pinhole
+    (``cam_model``, ``cam_params``: ``simulate.lens``) renders through the model (``render_board_lens``) and is
+    written into camera.yaml (``camera_model``, ``distortion_model``, the model's parameters). ``cut_every``: every
+    ``cut_every``-th pose (0: none) has its board slid along its scan chord until 20-45% of its corners leave the
+    image (a board cut by the image edge; the scan still crosses it), where such a slide exists.
     """
     o = options
     refuse_rig_conditions(o, "write_dataset")
@@ -159,33 +170,32 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
     rng_room = np.random.default_rng(np.random.SeedSequence(entropy=int(seed), spawn_key=(7919, int(trial))))
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     dist = np.asarray(distortion, float).ravel()
+    lens = None if is_default(o) else true_camera(o, K)
+    if lens is not None and np.any(dist != 0):
+        raise ValueError("write_dataset: distortion is the pinhole's; a lens (cam_model) carries its own")
     spec = BoardSpec.of(o)
     cols, rows = spec.squares_x - 1, spec.squares_y - 1
-    c0 = checkerboard_corners(spec)[0]
+    c0 = checkerboard_corners(spec)[0] if pattern is None else np.r_[pattern.offset(spec.size_m), 0.0]
     T_sim_ds = make_T(np.eye(3), c0)  # dataset board frame (origin at the first inner corner) -> sim board frame
+    P_ds = None if pattern is None else pattern.corners()
 
     images: list[np.ndarray] = []
-    maps = distortion_maps(K, dist, o.cam_width, o.cam_height) if np.any(dist != 0) else None
-
-    def render(T_cam_board: np.ndarray) -> np.ndarray:
-        def ideal(Kr, W, H):
-            img = render_board_image(Kr, T_cam_board, spec, W, H, o.render_supersample).astype(np.float32)
-            if blur_sigma_px > 0:
-                img = cv2.GaussianBlur(img, (0, 0), blur_sigma_px)
-            return img
-
-        img = distort_image(ideal(*maps[:3]), maps) if maps is not None else ideal(K, o.cam_width, o.cam_height)
-        img = img + rng_cam.normal(0.0, image_noise_std, img.shape) if image_noise_std > 0 else img
-        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    render = _renderer(o, K, dist, lens, pattern, blur_sigma_px, image_noise_std, rng_cam)
 
     def accept(T_lidar_cam, T_lidar_board) -> bool:
         img = render(invert_T(T_lidar_cam) @ T_lidar_board)
-        found, _ = cv2.findChessboardCornersSB(img, (cols, rows), flags=cv2.CALIB_CB_ACCURACY)
-        if found:
-            images.append(img)
-        return bool(found)
+        if pattern is None and lens is None:
+            found, _ = cv2.findChessboardCornersSB(img, (cols, rows), flags=cv2.CALIB_CB_ACCURACY)
+            if not found:
+                return False
+        images.append(img)
+        return True
 
     scene = sample_scene(o, rng_geo, accept=accept)
+    if cut_every > 0:
+        scene = _cut_boards(o, scene, lens or _PinholeView(K, o.cam_width, o.cam_height), T_sim_ds,
+                            checkerboard_corners(spec) if P_ds is None else P_ds @ T_sim_ds[:3, :3].T + T_sim_ds[:3, 3],
+                            cut_every, images, render)
     bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
     walls = rng_room.uniform(room.wall_min_m, room.wall_max_m, 4)
     yaw = float(rng_room.uniform(-np.pi / 4, np.pi / 4))
@@ -200,11 +210,54 @@ def write_dataset(options: SimOptions, seed: int, out_dir, *, trial: int = 0, ro
     names = [f"{i:03d}" for i in range(len(scene.T_lidar_board))]
     owners = _write_scans(out, names, scene, images, bearings, r_room, noisy, scan_columns=scan_columns,
                           keyed_scans=keyed_scans, image_format=image_format)
-    _write_camera_yaml(out / "camera.yaml", camera_style, o, K, dist)
-    write_board_yaml(out / "board.yaml", o, scene.outline)
+    if lens is not None:
+        _lens_camera_yaml(out / "camera.yaml", lens)
+    else:
+        _write_camera_yaml(out / "camera.yaml", camera_style, o, K, dist)
+    _write_board(out / "board.yaml", o, scene, pattern, c0)
     _write_ground_truth(out / "ground_truth.yaml", o, scene, T_sim_ds, names, owners, seed=seed, trial=trial,
                         sigma=sigma, walls=walls, yaw=yaw)
     return out
+
+
+def _renderer(o: SimOptions, K: np.ndarray, dist: np.ndarray, lens, pattern: Pattern | None, blur_sigma_px: float,
+              image_noise_std: float, rng_cam: np.random.Generator):
+    """``render(T_cam_board) -> uint8 image`` of ``write_dataset``: the checkerboard or ``pattern`` through the pinhole
+    (with OpenCV ``dist``) or through ``lens``, blurred, with grey-level noise."""
+    spec = BoardSpec.of(o)
+    maps = distortion_maps(K, dist, o.cam_width, o.cam_height) if np.any(dist != 0) else None
+
+    texture = None if pattern is None else texture_source(pattern, spec.size_m)
+
+    def render(T_cam_board: np.ndarray) -> np.ndarray:
+        def ideal(Kr, W, H):
+            if lens is not None:
+                corners = np.column_stack([spec.outline(), np.zeros(4)]) @ T_cam_board[:3, :3].T + T_cam_board[:3, 3]
+                d = np.linalg.norm(corners, axis=1).min()   # texels of at most half a supersampled pixel there
+                tex = None if pattern is None else texture(lens.K[0, 0] * o.render_supersample / max(d, 0.05) / 0.5)
+                img = render_board_lens(lens, T_cam_board, spec, o.render_supersample, texture=tex)
+            else:
+                img = render_board_image(Kr, T_cam_board, spec, W, H, o.render_supersample,
+                                         texture=None if pattern is None else texture)
+            img = img.astype(np.float32)
+            if blur_sigma_px > 0:
+                img = cv2.GaussianBlur(img, (0, 0), blur_sigma_px)
+            return img
+
+        img = distort_image(ideal(*maps[:3]), maps) if maps is not None else ideal(K, o.cam_width, o.cam_height)
+        img = img + rng_cam.normal(0.0, image_noise_std, img.shape) if image_noise_std > 0 else img
+        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+    return render
+
+
+def _write_board(path: Path, o: SimOptions, scene: Scene, pattern: Pattern | None, c0: np.ndarray) -> None:
+    """board.yaml: the checkerboard's, or ``pattern``'s form with the board's outline in its frame (origin at
+    ``c0`` of the simulator's board frame)."""
+    if pattern is None:
+        write_board_yaml(path, o, scene.outline)
+    else:
+        path.write_text(pattern.board_yaml(np.asarray(scene.outline) - c0[:2]))
 
 
 def _write_scans(out: Path, names, scene, images, bearings: np.ndarray, r_room: np.ndarray, noisy, *,
@@ -270,3 +323,72 @@ def _write_ground_truth(path: Path, o: SimOptions, scene, T_sim_ds: np.ndarray, 
     gt += [f"  {k}: {str(v).lower() if isinstance(v, bool) else repr(v)}" if not isinstance(v, str) else f"  {k}: '{v}'"
            for k, v in o.to_dict().items()]
     path.write_text("\n".join(gt) + "\n")
+
+
+class _PinholeView:
+    """The distortion-free pinhole as ``_cut_boards`` asks a camera: ``valid`` and ``project``."""
+
+    def __init__(self, K: np.ndarray, width: int, height: int) -> None:
+        self.K, self.width, self.height = K, width, height
+
+    def valid(self, P: np.ndarray) -> np.ndarray:
+        return P[..., 2] > 1e-6
+
+    def project(self, P: np.ndarray) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            uvw = P @ self.K.T
+            return uvw[..., :2] / uvw[..., 2:3]
+
+
+CUT_SHARE = (0.2, 0.45)
+"""Share of a cut board's corners (``write_dataset``'s ``cut_every``) that leave the image."""
+
+
+def _cut_boards(o: SimOptions, scene: Scene, camera, T_sim_ds: np.ndarray, P_sim: np.ndarray, every: int,
+                images: list, render) -> Scene:
+    """``scene`` with every ``every``-th board slid along its scan chord (lidar frame) until a share ``CUT_SHARE`` of
+    its corners ``P_sim`` (simulator board frame) leaves the image, keeping ``o.min_points_per_board`` lidar points on
+    it; its image re-rendered into ``images``. Boards with no such slide stay whole."""
+    T_lc = scene.T_lidar_cam
+    T_cl = invert_T(T_lc)
+    bearings = beam_bearings(o.lidar_fov_deg, o.lidar_res_deg)
+    boards = np.array(scene.T_lidar_board, float)
+    steps = np.linspace(0.02, 2.5, 125)[:, None] * np.array([1.0, -1.0])   # smallest slide first, either way
+    for k in range(0, len(boards), every):
+        ch = scan_chords(boards[k], scene.outline)[0]
+        if np.isnan(ch).any():
+            continue
+        d = np.r_[(ch[1] - ch[0]) / np.linalg.norm(ch[1] - ch[0]), 0.0]
+        for s in steps.ravel():
+            T = boards[k].copy()
+            T[:3, 3] += s * d
+            X = P_sim @ (T_cl @ T)[:3, :3].T + (T_cl @ T)[:3, 3]
+            E = np.column_stack([scene.outline, np.zeros(len(scene.outline))])
+            Xe = E @ (T_cl @ T)[:3, :3].T + (T_cl @ T)[:3, 3]
+            if not (camera.valid(X).all() and camera.valid(Xe).all()):
+                continue
+            uv = camera.project(X)
+            out = ~((uv[:, 0] >= 0) & (uv[:, 0] <= camera.width - 1) & (uv[:, 1] >= 0)
+                    & (uv[:, 1] <= camera.height - 1))
+            if not CUT_SHARE[0] <= out.mean() <= CUT_SHARE[1]:
+                continue
+            if np.isfinite(board_ranges(bearings, T[None], scene.outline)[0]).sum() < o.min_points_per_board:
+                continue
+            boards[k] = T
+            images[k] = render(T_cl @ T)
+            break
+    return Scene(T_lc, boards, scene.outline, scene.margins_m)
+
+
+def _lens_camera_yaml(path: Path, lens) -> None:
+    """camera.yaml of a ``calib_core.data.cameras`` model: the OpenCV keys, ``camera_model``, ``distortion_model``
+    and the model's parameters."""
+    K = np.asarray(lens.K, float)
+    rows = ", ".join("[" + ", ".join(repr(float(v)) for v in r) + "]" for r in K)
+    n = {"pinhole-equidistant": 4}.get(lens.name, len(np.asarray(lens.dist)))
+    dist = np.asarray(lens.dist, float).ravel()[:n]
+    params = "".join(f"{name}: {float(getattr(lens, name))!r}\n" for name in lens.param_names)
+    path.write_text(f"# {lens.name} camera (calib_core.data.cameras; Kalibr's model names)\n"
+                    f"image_width: {lens.width}\nimage_height: {lens.height}\ncamera_model: {lens.camera_model}\n"
+                    f"distortion_model: {lens.distortion_model}\n{params}camera_matrix: [{rows}]\n"
+                    f"distortion_coefficients: [{', '.join(repr(float(v)) for v in dist)}]\n")

@@ -27,6 +27,7 @@ from .camera import BoardSpec, CameraError, camera_matrix, render_board_image
 from .dataset import RoomOptions, room_ranges, write_board_yaml
 from .lidar import beam_bearings, board_ranges
 from .options import SimOptions
+from .patterns import Pattern, texture_source
 from .rig import refuse_rig_conditions
 from .scene import sample_scene
 
@@ -174,15 +175,17 @@ class _BagOut:
         self.w.close()
 
 
-def _renderer(o: SimOptions, K: np.ndarray, rng: np.random.Generator):
-    """render(T_cam_board, key) -> noisy uint8 image; the noise-free render is cached per ``key`` (still poses)."""
+def _renderer(o: SimOptions, K: np.ndarray, rng: np.random.Generator, pattern: Pattern | None = None):
+    """render(T_cam_board, key) -> noisy uint8 image (the checkerboard, or ``pattern``); the noise-free render is
+    cached per ``key`` (still poses)."""
     spec = BoardSpec.of(o)
     cache: dict = {}
+    texture = None if pattern is None else texture_source(pattern, spec.size_m)
 
     def ideal(T_cam_board):
         try:
             return render_board_image(K, T_cam_board, spec, o.cam_width, o.cam_height,
-                                      o.render_supersample).astype(np.float32)
+                                      o.render_supersample, texture=texture).astype(np.float32)
         except CameraError:
             return np.full((o.cam_height, o.cam_width), 128.0, np.float32)
 
@@ -199,9 +202,10 @@ def _renderer(o: SimOptions, K: np.ndarray, rng: np.random.Generator):
 
 
 def write_recording_bag(options: SimOptions, seed: int, path, rec: RecordingOptions | None = None, *,
-                        trial: int = 0) -> RecordingTruth:
+                        trial: int = 0, pattern: Pattern | None = None) -> RecordingTruth:
     """Write a simulated calibration recording (module docstring) to ``path`` (a ``.bag`` file for ROS 1, a
-    folder for ROS 2) and ``board.yaml`` beside it; return its truth. ``options.n_boards`` still poses."""
+    folder for ROS 2) and ``board.yaml`` beside it; return its truth. ``options.n_boards`` still poses.
+    ``pattern``: a ChArUco board or an AprilGrid (``simulate.patterns``) instead of the checkerboard."""
     rec = rec or RecordingOptions()
     o = options
     refuse_rig_conditions(o, "write_recording_bag")
@@ -210,9 +214,11 @@ def write_recording_bag(options: SimOptions, seed: int, path, rec: RecordingOpti
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     spec = BoardSpec.of(o)
     cols, rows = spec.squares_x - 1, spec.squares_y - 1
-    render = _renderer(o, K, rng_cam)
+    render = _renderer(o, K, rng_cam, pattern)
 
     def accept(T_lidar_cam, T_lidar_board) -> bool:
+        if pattern is not None:
+            return True
         img = render(invert_T(T_lidar_cam) @ T_lidar_board)
         return bool(cv2.findChessboardCornersSB(img, (cols, rows), flags=cv2.CALIB_CB_ACCURACY)[0])
 
@@ -249,6 +255,10 @@ def write_recording_bag(options: SimOptions, seed: int, path, rec: RecordingOpti
                 out.scan(rec.scan_topic, t_ns, bearings, r, rec, o.lidar_max_range_m)
     finally:
         out.close()
-    write_board_yaml(path.parent / f"{path.name.removesuffix('.bag')}.board.yaml", o, scene.outline)
+    board_yaml = path.parent / f"{path.name.removesuffix('.bag')}.board.yaml"
+    if pattern is None:
+        write_board_yaml(board_yaml, o, scene.outline)
+    else:
+        board_yaml.write_text(pattern.board_yaml(np.asarray(scene.outline) - pattern.offset(spec.size_m)))
     return RecordingTruth(scene.T_lidar_cam, scene.T_lidar_board, still + rec.start_s, rec.time_offset_s,
                           len(t_img), len(t_scan))

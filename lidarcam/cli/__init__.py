@@ -9,7 +9,7 @@ import sys
 
 from calib_core.errors import LidarcamError
 
-from . import bag, demo, importer, plan, rig, simulate
+from . import bag, demo, formats, importer, plan, rig, simulate
 from .argtypes import check_numbers
 from .extras import add_optional, mark_missing, missing_extra
 from .intrinsics_flag import STD_INTRINSICS_HELP, with_std_intrinsics
@@ -180,6 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
     sp = sub.add_parser("methods", help="list the calibration methods")
     sp.set_defaults(func=_cmd_methods)
+    formats.add_parsers(sub)
     sp = sub.add_parser("calibrate", help="calibrate from an observation JSON file", epilog=EXIT_CODES)
     sp.add_argument("observations", help="lidarcam.observations/1 JSON file")
     sp.add_argument("--method", default="lidarcam", help="any name of `lidarcam methods`, X+ml, X+plane, X+joint, "

@@ -15,7 +15,14 @@ DEMO_SIM = dict(n_boards=12, cam_width=640, cam_height=480, focal_px=600.0, lida
                 render_supersample=2, dist_min_m=2.0, dist_max_m=4.0, max_tilt_deg=55.0)
 """The demo's rig: 12 board poses at 2-4 m tilted up to 55 deg, a 640x480 camera, a 0.25 deg lidar with 5 mm range
 noise."""
-DEMO_ENTRIES = frozenset({"dataset", "recording", "recording.board.yaml", "truth.json"})
+DEMO_FISHEYE = dict(n_boards=12, cam_model="pinhole-equidistant", cam_params="-0.01,0.02,-0.01,0.002", focal_px=300.0,
+                   cam_width=800, cam_height=600, lidar_res_deg=0.25, noise_mm=5.0, render_supersample=2,
+                   dist_min_m=0.7, dist_max_m=1.6, max_tilt_deg=50.0)
+"""The demo's wide-angle rig: a fisheye (equidistant, about 150 deg across the image's 800 px) and a ChArUco board
+(``DEMO_CHARUCO``) at 0.7-1.6 m, every third board cut by the image edge."""
+DEMO_CHARUCO = dict(kind="charuco", cols=6, rows=5, square=0.15, marker=0.11, dictionary="DICT_5X5_100")
+"""The fisheye rig's board: 6 x 5 squares of 0.15 m with 0.11 m markers (``simulate.patterns.Pattern``)."""
+DEMO_ENTRIES = frozenset({"dataset", "recording", "recording.board.yaml", "truth.json", "fisheye_charuco"})
 """What ``write_demo`` writes into its folder."""
 TOPICS = {"image": "/camera/image_raw", "scan": "/scan", "info": "/camera/camera_info"}
 
@@ -30,6 +37,8 @@ def demo_commands(out: Path) -> list[list[str]]:
          "--camera-info-topic", TOPICS["info"], "--board", f"{o}/recording.board.yaml", "--out", f"{o}/bag_dataset"],
         ["extract", f"{o}/bag_dataset", "--out", f"{o}/bag_obs.json", "--range-sigma", "0.005"],
         ["calibrate", f"{o}/bag_obs.json", "--out", f"{o}/bag_result.json"],
+        ["extract", f"{o}/fisheye_charuco", "--out", f"{o}/fisheye_obs.json"],
+        ["calibrate", f"{o}/fisheye_obs.json", "--out", f"{o}/fisheye_result.json"],
     ]
 
 
@@ -41,11 +50,13 @@ def is_demo_folder(folder: Path) -> bool:
 
 def write_demo(out, seed: int = 1) -> dict:
     """Write ``out/dataset/`` (images, scans, board, camera: ``simulate.dataset``), ``out/recording/`` (a ROS 2
-    sqlite3 bag of about 11 s: ``simulate.recording``) and ``out/truth.json`` (both true extrinsics)."""
+    sqlite3 bag of about 11 s: ``simulate.recording``), ``out/fisheye_charuco/`` (a fisheye and a ChArUco board,
+    some boards cut by the image edge) and ``out/truth.json`` (the true extrinsics)."""
     import yaml
 
     from simulate import SimOptions
     from simulate.dataset import write_dataset
+    from simulate.patterns import Pattern
     from simulate.recording import RecordingOptions, write_recording_bag
 
     out = Path(out)
@@ -57,7 +68,11 @@ def write_demo(out, seed: int = 1) -> dict:
                            image_format="png", image_topic=TOPICS["image"], scan_topic=TOPICS["scan"],
                            info_topic=TOPICS["info"])
     truth = write_recording_bag(sim, seed, out / "recording", rec)
+    fe = write_dataset(SimOptions(**DEMO_FISHEYE), seed, out / "fisheye_charuco", pattern=Pattern(**DEMO_CHARUCO),
+                       cut_every=3)
+    T_fe = yaml.safe_load((fe / "ground_truth.yaml").read_text())["T_lidar_cam"]
     doc = {"dataset": {"T_lidar_cam": T_ds}, "recording": {"T_lidar_cam": truth.T_lidar_cam.tolist()},
+           "fisheye_charuco": {"T_lidar_cam": T_fe},
            "note": "T_lidar_cam maps camera points into the lidar frame (metres)"}
     (out / "truth.json").write_text(json.dumps(doc, indent=1) + "\n")
     return doc
@@ -71,13 +86,17 @@ def cmd_demo(args) -> int:
     with replaced_folder(out, "OUT", is_demo_folder, "an earlier demo's output") as scratch:
         write_demo(scratch, args.seed)
     print(f"wrote {out}/dataset (a dataset folder: camera.yaml, board.yaml, NNN.png + NNN.csv), {out}/recording "
-          f"(a ROS 2 bag) and {out}/truth.json (the simulated extrinsics)")
+          f"(a ROS 2 bag), {out}/fisheye_charuco (a fisheye camera and a ChArUco board, some boards cut by the "
+          f"image edge) and {out}/truth.json (the simulated extrinsics)")
     print("calibrate the folder:")
     cmds = demo_commands(out)
     for c in cmds[:2]:
         print("  lidarcam " + shlex.join(c))
     print("calibrate the bag (lidarcam bag --list-topics REC lists its topics):")
-    for c in cmds[2:]:
+    for c in cmds[2:5]:
+        print("  lidarcam " + shlex.join(c))
+    print("calibrate the fisheye + ChArUco folder:")
+    for c in cmds[5:]:
         print("  lidarcam " + shlex.join(c))
     return 0
 
@@ -98,9 +117,10 @@ def list_topics(path) -> int:
 def add_parsers(subparsers) -> None:
     """Register the ``demo`` verb on an argparse subparsers object."""
     p = subparsers.add_parser(
-        "demo", help="write sample data (a simulated dataset folder and a ROS 2 bag) and print how to calibrate it",
+        "demo", help="write sample data (simulated dataset folders and a ROS 2 bag) and print how to calibrate them",
         description="Write OUT/dataset (rendered images, scans, board.yaml, camera.yaml), OUT/recording (a short "
-                    "ROS 2 bag of the board moving and resting in front of the rig) and OUT/truth.json, then print "
+                    "ROS 2 bag of the board moving and resting in front of the rig), OUT/fisheye_charuco (a fisheye "
+                    "camera and a ChArUco board, some boards cut by the image edge) and OUT/truth.json, then print "
                     "the lidarcam commands that calibrate each.")
     p.add_argument("out", help="folder to write (new, empty, or an earlier demo's, which is replaced; written "
                    "whole or not at all)")

@@ -13,7 +13,7 @@ EXTRA_OF = {"cv2": "rig", "yaml": "rig", "rosbags": "rig", "matplotlib": "rig", 
 
 VERB_NEEDS = {"simulate": ("cv2",), "extract": ("cv2", "yaml"), "report": ("cv2", "yaml", "matplotlib"),
               "import": ("cv2", "yaml"), "bag": ("rosbags", "cv2", "yaml"), "demo": ("cv2", "yaml", "rosbags"),
-              "plan": ("yaml", "matplotlib")}
+              "plan": ("yaml", "matplotlib"), "formats": ("yaml",)}
 """The modules each verb reaches (``plan`` with ``--from`` alone and no ``--figure`` needs neither)."""
 PARTLY = {"plan": " for a rig file or --figure; --from OBS.json alone runs without"}
 """Verbs that run in part without their extra: what needs it."""

@@ -1,8 +1,10 @@
 """From a dataset folder to ``Observations``: board poses from images, board points from scans, per-pose diagnostics.
 
-Per pose: ``cv2.findChessboardCornersSB`` -> corner order made canonical (right-handed board frame, origin square
-colour from board.yaml) -> undistorted corners -> ``cv2.solvePnP(SOLVEPNP_IPPE)`` + ``cv2.solvePnPRefineLM`` ->
-reprojection RMS (pixels, with distortion). Scan: no-returns dropped, optional background subtraction, breakpoint
+Per pose: the board's corners (``cv2.findChessboardCornersSB`` for a checkerboard, its order made canonical;
+``cv2.aruco`` for a ChArUco board or an AprilGrid, each corner with its identity, a board cut by the image edge
+counting above ``lidarcam.rig.detect.check_spread``) -> the board pose (undistorted corners ->
+``cv2.solvePnP(SOLVEPNP_IPPE)`` + ``cv2.solvePnPRefineLM``, or the rays of camera.yaml's lens model) ->
+reprojection RMS (pixels, through the lens). Scan: no-returns dropped, optional background subtraction, breakpoint
 clustering (adaptive threshold of Borges & Aldon 2004), split-and-merge into line segments, and the segment that
 agrees with the camera's view of the board is kept (hard gates: ranges within the camera-to-board distances
 +- ``max_offset_m``, length at most the board's diagonal; ranking: distance to the board centre and the expected
@@ -73,7 +75,8 @@ def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = Non
         _board_finish(scan, idx, diag)
         if diag.source == "window" and diag.line_rms_mm > 1000 * opts.split_tol:
             diag.notes.append(f"window points fit a line only to {diag.line_rms_mm:.0f} mm RMS")
-        obs = board_observation(det.T_cam_board, dataset, scan.points[idx], det.corners, opts)
+        obs = board_observation(det.T_cam_board, dataset, scan.points[idx], det.corners, opts,
+                                det.corners_board(dataset.board))
         diag.used = True
         return obs, diag, det
     except (ExtractionError, DatasetError) as err:
@@ -83,11 +86,14 @@ def extract_pose(pose: Pose, dataset: Dataset, opts: ExtractOptions | None = Non
 
 
 def board_observation(T_cam_board: np.ndarray, dataset: Dataset, points: np.ndarray, corners: np.ndarray | None,
-                      opts: ExtractOptions) -> BoardObservation:
-    """One extracted board: its camera pose, scan points and corners, the outline as ``opts.outline_kind`` reads it
-    (left out for ``none``)."""
+                      opts: ExtractOptions, corners_board: np.ndarray | None = None) -> BoardObservation:
+    """One extracted board: its camera pose, scan points and corners (``corners_board``: their board-frame
+    positions; default the whole grid of ``dataset.board``), the outline as ``opts.outline_kind`` reads it (left out
+    for ``none``)."""
     outline = None if opts.outline_kind == "none" else dataset.board.outline
-    return BoardObservation(T_cam_board, outline, points, corners, None if corners is None else dataset.board.corners,
+    if corners is not None and corners_board is None:
+        corners_board = dataset.board.corners
+    return BoardObservation(T_cam_board, outline, points, corners, None if corners is None else corners_board,
                             outline_kind=opts.outline_kind)
 
 
@@ -148,7 +154,8 @@ def _resolve_ambiguous(dataset: Dataset, boards: list, diags: list[PoseDiagnosti
         if best < opts.split_tol and best < opts.resolve_ratio * second:
             i0, i1 = d.ambiguous[order[0]]
             idx = np.arange(i0, i1)
-            boards[k] = board_observation(T_cb, dataset, pose.scan.points[idx], dets[d.name].corners, opts)
+            boards[k] = board_observation(T_cb, dataset, pose.scan.points[idx], dets[d.name].corners, opts,
+                                          dets[d.name].corners_board(dataset.board))
             d.used, d.reason = True, None
             _board_finish(pose.scan, idx, d)
             d.notes.append(f"ambiguous segments resolved by the extrinsic of {len(good)} other boards "
@@ -308,7 +315,7 @@ def noise_line(meta: dict) -> str:
 
 def format_diagnostics(diags: list[PoseDiagnostics]) -> str:
     """A fixed-width table of the diagnostics, one pose a line, then the skip reasons."""
-    head = f"{'pose':>8} {'board':>5} {'reproj_px':>9} {'dist_m':>7} {'src':>6} {'points':>6} " \
+    head = f"{'pose':>8} {'board':>5} {'corners':>7} {'reproj_px':>9} {'dist_m':>7} {'src':>6} {'points':>6} " \
            f"{'bearing_deg':>15} {'len_m':>6} {'line_mm':>7}"
     lines = [head]
     for d in diags:
@@ -318,7 +325,8 @@ def format_diagnostics(diags: list[PoseDiagnostics]) -> str:
         def f(v, fmt):
             return "-" if not math.isfinite(v) else format(v, fmt)
 
-        lines.append(f"{d.name:>8} {b:>5} {f(d.reproj_rms_px, '.3f'):>9} {f(d.cam_distance_m, '.2f'):>7} "
+        lines.append(f"{d.name:>8} {b:>5} {d.n_corners or '-':>7} {f(d.reproj_rms_px, '.3f'):>9} "
+                     f"{f(d.cam_distance_m, '.2f'):>7} "
                      f"{d.source or '-':>6} {d.n_points:>6} {br:>15} {f(d.length_m, '.3f'):>6} "
                      f"{f(d.line_rms_mm, '.1f'):>7}" + ("" if d.used else "  SKIPPED"))
     skipped = [d for d in diags if not d.used]

@@ -16,7 +16,8 @@ import numpy as np
 
 from .dataset import BoardSpec, CameraModel, Dataset, DatasetError
 from .dataset.camera_files import lens_camera
-from .detect import find_chessboard
+from .detect import check_spread, find_chessboard, find_identified
+from .extract_options import ExtractionError
 from .markdown import md_table
 
 PARAM_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
@@ -38,8 +39,17 @@ class IntrinsicsFit:
 
 
 def find_corners(gray: np.ndarray, board: BoardSpec) -> np.ndarray | None:
-    """(cols*rows, 2) pixel corners of the board in ``gray`` (``lidarcam.rig.detect.find_chessboard``), or None."""
-    return find_chessboard(gray, board)
+    """The board's corners in ``gray``, or None: a checkerboard's (cols*rows, 2) pixels
+    (``lidarcam.rig.detect.find_chessboard``); an identified board's (N,3) pixels and identity
+    (``lidarcam.rig.detect.find_identified``, when they pass ``check_spread``)."""
+    if not board.identified:
+        return find_chessboard(gray, board)
+    ids, px = find_identified(gray, board)
+    try:
+        check_spread(board, ids)
+    except ExtractionError:
+        return None
+    return np.column_stack([px, ids])
 
 
 def calibrate_intrinsics(images: dict[str, np.ndarray], board: BoardSpec, fix_k3: bool = True,
@@ -60,10 +70,11 @@ def calibrate_intrinsics(images: dict[str, np.ndarray], board: BoardSpec, fix_k3
         c = corners.get(name) if corners else None
         c = find_corners(gray, board) if c is None else np.asarray(c, np.float32)
         if c is None:
-            skipped[name] = f"checkerboard with {board.cols}x{board.rows} inner corners not found"
+            skipped[name] = f"{board.describe()} not found"
             continue
-        obj.append(board.corners.astype(np.float32))
-        img.append(c.reshape(-1, 1, 2))
+        grid = board.corners[c[:, 2].astype(int)] if board.identified else board.corners
+        obj.append(grid.astype(np.float32))
+        img.append(np.ascontiguousarray(c[:, :2] if board.identified else c, np.float32).reshape(-1, 1, 2))
         names.append(name)
     if len(names) < MIN_VIEWS:
         raise DatasetError(f"intrinsics need at least {MIN_VIEWS} detected boards, found {len(names)}")

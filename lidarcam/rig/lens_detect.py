@@ -22,7 +22,7 @@ def detect_board_lens(gray: np.ndarray, camera: CameraModel, board: BoardSpec, f
                       corners: np.ndarray | None = None) -> BoardDetection:
     """``detect_board`` through ``camera``'s own model (module docstring); ExtractionError when the board is not
     found or its corners give no pose through the lens."""
-    if camera.is_opencv_pinhole:
+    if camera.is_opencv_pinhole or board.identified:   # an identified board's pose is fitted through the lens there
         return detect_board(gray, camera, board, flags, corners)
     stand_in = CameraModel(camera.width, camera.height, camera.K, np.zeros(0))
     det = detect_board(gray, stand_in, board, flags, corners)

@@ -104,6 +104,9 @@ def draw_overlay(path: Path, gray: np.ndarray, camera: CameraModel, T_cam_lidar,
 
     ring = np.zeros((0, 3)) if outline is None else np.column_stack([outline, np.zeros(len(outline))])
     ring = transform_points(T_cam_board, np.vstack([ring, ring[:1]]))
+    if len(ring) and not camera.is_opencv_pinhole:   # the outline's edges bend through the lens
+        t = np.linspace(0.0, 1.0, 33)[:-1]
+        ring = np.vstack([a + t[:, None] * (b - a) for a, b in zip(ring[:-1], ring[1:], strict=True)] + [ring[:1]])
     if len(ring) and not camera.is_opencv_pinhole and camera.core().valid(ring).all():
         uvb = camera.core().project(ring)
         ax.plot(uvb[:, 0], uvb[:, 1], "-", color="yellow", lw=1.0, alpha=0.8)

@@ -225,19 +225,21 @@ def _board_plots(dataset: Dataset | None, observations: Observations, res: dict,
 
 def _boards_md(observations: Observations, res: dict, Ti: np.ndarray, rms_mm: list[float], mean_mm: list[float],
                links: list[str]) -> list[str]:
-    """The per-board table (points, residual RMS and mean, corner reprojection, status, plots) and the totals."""
+    """The per-board table (points, residual RMS and mean, corners used, their reprojection, status, plots) and the
+    totals."""
     rejected = {int(r["index"]): r for r in res.get("boards_rejected") or []}
     reproj = (observations.meta or {}).get("reproj_rms_px") or []
     rows = []
     for i, b in enumerate(observations.boards):
         rp_px = reproj[i] if i < len(reproj) and reproj[i] is not None else math.nan
         status = "rejected: " + str(rejected[i]["reason"]) if i in rejected else "used"
+        n_corners = len(b.corners_px) if b.corners_px is not None else "-"
         rows.append([i, f"`{_pose_name(observations, i)}`", len(b.scan), f"{rms_mm[i]:.1f}", f"{mean_mm[i]:+.1f}",
-                     num(rp_px, ".3f"), status, links[i]])
+                     n_corners, num(rp_px, ".3f"), status, links[i]])
     md = ["## Boards", "", "Residual: signed distance of the board's scan points to its plane (camera's pose of "
           "the board), through the extrinsic.", ""]
-    md += md_table(["board", "pose", "points", "residual RMS (mm)", "mean (mm)", "corner reproj. RMS (px)", "status",
-                    "plots"], rows, "rlrrrrll") + [""]
+    md += md_table(["board", "pose", "points", "residual RMS (mm)", "mean (mm)", "corners", "corner reproj. RMS (px)",
+                    "status", "plots"], rows, "rlrrrrrll") + [""]
     finite = [r for r in rms_mm if math.isfinite(r)]
     if finite:
         every = np.concatenate([1000 * board_plane_distances(Ti, b.T_cam_board, b.scan) for b in observations.boards])

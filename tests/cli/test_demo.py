@@ -1,5 +1,6 @@
-"""``lidarcam demo OUT``: the sample folder and bag it writes, calibrated by the very commands it prints, give
-the simulated extrinsic within 0.5 deg and 20 mm; ``lidarcam bag --list-topics`` lists the bag's topics."""
+"""``lidarcam demo OUT``: the sample folders (a pinhole + checkerboard, a fisheye + ChArUco with boards cut by the
+image edge) and bag it writes, calibrated by the very commands it prints, give the simulated extrinsic within 0.5 deg
+and 20 mm; ``lidarcam bag --list-topics`` lists the bag's topics."""
 
 from __future__ import annotations
 
@@ -17,12 +18,13 @@ def test_demo_then_its_printed_commands_calibrate_the_folder_and_the_bag(tmp_pat
     assert main(["demo", str(out)]) == 0
     printed = capsys.readouterr().out
     commands = [shlex.split(ln.strip())[1:] for ln in printed.splitlines() if ln.startswith("  lidarcam ")]
-    assert len(commands) == 5
+    assert len(commands) == 7
     for argv in commands:
         assert main(argv) == 0, argv
     capsys.readouterr()
     truth = json.loads((out / "truth.json").read_text())
-    for part, result in (("dataset", "dataset_result.json"), ("recording", "bag_result.json")):
+    for part, result in (("dataset", "dataset_result.json"), ("recording", "bag_result.json"),
+                         ("fisheye_charuco", "fisheye_result.json")):
         res = json.loads((out / result).read_text())
         e_R, e_t = pose_errors(np.array(res["T_lidar_cam"]), np.array(truth[part]["T_lidar_cam"]))
         assert res["ok"] and float(e_R) < 0.5 and float(e_t) < 0.020, (part, float(e_R), float(e_t))

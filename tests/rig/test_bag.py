@@ -254,3 +254,27 @@ def test_the_bag_verb_ends_with_the_capture_planners_verdict(recording):
     last = recording.printed.strip().splitlines()[-1]
     assert last.startswith("capture plan: "), recording.printed
     assert "1-sigma" in last or "not determined" in last, last  # the planner's words, not a failure to plan
+
+
+def test_a_charuco_recording_goes_through_bag_extract_and_calibrate(tmp_path):
+    """``lidarcam bag`` with a ChArUco board.yaml: every still pose kept, each board found with its identified
+    corners, and the extrinsic recovered."""
+    from simulate.patterns import Pattern
+
+    sim = SimOptions(**{**SIM.to_dict(), "dist_min_m": 1.5, "dist_max_m": 3.0})
+    rec = RecordingOptions(fps=15.0, scan_hz=20.0, still_s=0.8, move_s=0.6, eased=False, ros=2, storage="sqlite3",
+                           image_format="png")
+    truth = write_recording_bag(sim, 5, tmp_path / "rec", rec, pattern=Pattern("charuco", 7, 5, 0.12, 0.09))
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = cli_main(["bag", str(tmp_path / "rec"), "--image-topic", TOPICS["image_topic"], "--scan-topic", "/scan",
+                       "--camera-info-topic", "/camera/camera_info", "--board", str(tmp_path / "rec.board.yaml"),
+                       "--out", str(tmp_path / "ds")])
+    assert rc == 0, buf.getvalue()
+    ds = load_dataset(tmp_path / "ds")
+    assert ds.board.kind == "charuco"
+    obs, diags = extract(ds, ExtractOptions(range_sigma_m=0.01))
+    assert obs.n_boards >= len(truth.still) - 1, [d.reason for d in diags if not d.used]
+    res = calibrate(obs)
+    e_R, e_t = pose_errors(res.T_lidar_cam, truth.T_lidar_cam)
+    assert res.ok and float(e_R) < 1.0 and float(e_t) < 0.04, (float(e_R), float(e_t))

@@ -3,7 +3,7 @@
 Layout of a dataset folder::
 
     camera.yaml        intrinsics: OpenCV keys, a ROS camera_info or a Kalibr camchain (``camera_files``)
-    board.yaml         checkerboard: inner-corner grid, square size, physical outline (metres)
+    board.yaml         the board: a checkerboard, a Kalibr target (AprilGrid, checkerboard) or a ChArUco board
     NNN.png | NNN.jpg  one image per pose
     NNN.csv            one scan per pose: header ``bearing_rad,range_m`` or ``x,y`` (lidar frame, metres)
     scans.csv          alternative to the per-pose CSVs: one file keyed by a ``pose`` column
@@ -17,15 +17,14 @@ board.yaml, background.csv, windows.yaml); a bad image or scan makes that pose's
 naming the file and line, and the other poses go on.
 """
 
+from .boards import board_from_dict, load_board
 from .camera_files import camera_formats, camera_yaml, load_camera, read_camera
 from .direction import SCAN_DIRECTIONS, check_scan_direction, lidar_yaml, load_lidar, mirror_scan
 from .load import IMAGE_SUFFIXES, RESERVED_STEMS, load_dataset
-from .model import BoardSpec, CameraModel, Dataset, DatasetError, Pose, Scan
+from .model import BOARD_KINDS, BoardSpec, CameraModel, Dataset, DatasetError, Pose, Scan
 from .scans import csv_rows, make_scan, read_keyed_scans, read_scan_csv, same_pose
 from .yaml_files import (
-    board_from_dict,
     camera_from_dict,
-    load_board,
     load_ground_truth,
     load_windows,
     matrix_field,
@@ -33,9 +32,9 @@ from .yaml_files import (
 )
 
 __all__ = [
-    "IMAGE_SUFFIXES", "RESERVED_STEMS", "SCAN_DIRECTIONS", "BoardSpec", "CameraModel", "Dataset", "DatasetError",
-    "Pose", "Scan", "board_from_dict", "camera_formats", "camera_from_dict", "camera_yaml", "check_scan_direction",
-    "csv_rows", "lidar_yaml", "load_board", "load_camera", "load_dataset", "load_ground_truth", "load_lidar",
-    "load_windows", "make_scan", "matrix_field", "mirror_scan", "read_camera", "read_keyed_scans", "read_scan_csv",
-    "read_yaml", "same_pose",
+    "BOARD_KINDS", "IMAGE_SUFFIXES", "RESERVED_STEMS", "SCAN_DIRECTIONS", "BoardSpec", "CameraModel", "Dataset",
+    "DatasetError", "Pose", "Scan", "board_from_dict", "camera_formats", "camera_from_dict", "camera_yaml",
+    "check_scan_direction", "csv_rows", "lidar_yaml", "load_board", "load_camera", "load_dataset", "load_ground_truth",
+    "load_lidar", "load_windows", "make_scan", "matrix_field", "mirror_scan", "read_camera", "read_keyed_scans",
+    "read_scan_csv", "read_yaml", "same_pose",
 ]

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .boards import load_board
 from .camera_files import load_camera
 from .direction import check_scan_direction, load_lidar, mirror_scan, mirror_window
 from .model import Dataset, DatasetError, Pose, Scan
 from .scans import read_keyed_scans, read_scan_csv, same_pose
-from .yaml_files import load_board, load_ground_truth, load_windows
+from .yaml_files import load_ground_truth, load_windows
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 RESERVED_STEMS = {"camera", "board", "background", "scans", "windows", "ground_truth", "lidar"}

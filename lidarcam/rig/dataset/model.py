@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from calib_core.errors import LidarcamError
+from calib_core.geometry.patterns import aprilgrid_corners, aprilgrid_extent, charuco_corners
 
 
 class DatasetError(LidarcamError, ValueError):
@@ -97,19 +98,47 @@ class CameraModel:
         return Camera(self.K, self.dist, self.width, self.height, self.std_intrinsics)
 
 
+BOARD_KINDS = ("checkerboard", "charuco", "aprilgrid")
+"""The board kinds of board.yaml (``lidarcam.rig.dataset.boards`` reads their file forms)."""
+
+
 @dataclass(frozen=True, eq=False)
 class BoardSpec:
-    """Checkerboard geometry, board frame: origin at the first inner corner, x along a row of ``cols`` corners,
-    y along a column of ``rows`` corners, z = x cross y (the board plane is z = 0); metres.
+    """A calibration board's geometry in its frame (the pattern on the plane z = 0, z = x cross y pointing away from
+    the side that carries the pattern); metres.
+
+    Kinds (``kind``):
+
+    - ``checkerboard``: origin at the first inner corner, x along a row of ``cols`` corners, y along a column of
+      ``rows`` corners; ``square`` the pitch along x (``square_y`` along y when it differs: Kalibr's
+      ``colSpacingMeters`` / ``rowSpacingMeters``). Its corners have no identity: the whole grid is found or none.
+    - ``charuco``: OpenCV's ChArUco board of ``squares_x`` x ``squares_y`` squares (``cols`` = squares_x - 1,
+      ``rows`` = squares_y - 1 inner corners) of side ``square`` with markers of side ``marker`` from the predefined
+      ``dictionary`` (``legacy_pattern``: OpenCV's pattern before 4.6.0); OpenCV's board frame: origin at the
+      pattern's outer corner next to corner 0, x along the first row of squares, y down the columns. Corner ``k``
+      is ChArUco corner id ``k``.
+    - ``aprilgrid``: Kalibr's AprilGrid of ``cols`` x ``rows`` tag36h11 tags of side ``square`` (2-bit black border)
+      ``spacing`` apart (``tagSpacing * tagSize``), a black square of side ``spacing`` at every gap crossing; origin at
+      the outer corner of the top-left tag as printed (tag 0 is printed bottom-left, ids grow along a row, then
+      upwards), x to the right, y down. Corner ``4 id + k`` is tag ``id``'s corner ``k`` (0 top-left, 1 top-right,
+      2 bottom-right, 3 bottom-left as printed).
 
     Attributes:
-        cols, rows: inner corners per row / per column (OpenCV's ``patternSize = (cols, rows)``).
-        square: side of one square (m).
-        outline: (V,2) physical outline of the board in the board frame (m).
-        origin_square_dark: colour of the square spanning x in [0, square], y in [0, square] (True dark, False
-            light); used to undo a 180-degree reversal of the corner order (possible only when cols + rows is
-            odd). None: keep the detector's order (``findChessboardCornersSB`` starts next to a light outer square
-            on an odd x even board, i.e. a light origin square).
+        cols, rows: inner corners per row / per column (checkerboard, charuco) or tags (aprilgrid).
+        square: pitch along x (checkerboard), square side (charuco) or tag side (aprilgrid), metres.
+        outline: (V,2) physical outline of the board in the board frame (m); board.yaml's ``outline_m``, else the
+            pattern's extent (a lower bound).
+        origin_square_dark: checkerboard only: colour of the square spanning x in [0, square], y in [0, square]
+            (True dark, False light); used to undo a 180-degree reversal of the corner order (possible only when
+            cols + rows is odd). None: keep the detector's order (``findChessboardCornersSB`` starts next to a light
+            outer square on an odd x even board, i.e. a light origin square).
+        kind: one of ``BOARD_KINDS``.
+        square_y: checkerboard pitch along y when it differs from ``square`` (None: square).
+        marker: charuco marker side (m).
+        spacing: aprilgrid gap between tags (m).
+        dictionary: charuco: OpenCV's predefined dictionary name (``DICT_5X5_100``); aprilgrid: ``DICT_APRILTAG_36h11``.
+        legacy_pattern: charuco: OpenCV's pattern before 4.6.0 (``CharucoBoard.setLegacyPattern``).
+        source: the board.yaml form it was read from (``lidarcam``, ``kalibr`` or ``charuco``), for messages.
     """
 
     cols: int
@@ -117,12 +146,46 @@ class BoardSpec:
     square: float
     outline: np.ndarray
     origin_square_dark: bool | None = None
+    kind: str = "checkerboard"
+    square_y: float | None = None
+    marker: float = 0.0
+    spacing: float = 0.0
+    dictionary: str = ""
+    legacy_pattern: bool = False
+    source: str = "lidarcam"
+
+    @property
+    def identified(self) -> bool:
+        """True when each detected corner carries its identity (charuco, aprilgrid): part of the board may be seen."""
+        return self.kind != "checkerboard"
+
+    @property
+    def pitch_y(self) -> float:
+        """Checkerboard pitch along y (m)."""
+        return self.square if self.square_y is None else self.square_y
 
     @property
     def corners(self) -> np.ndarray:
-        """(cols*rows, 3) inner corners in the board frame, row-major (x fastest), as OpenCV orders them."""
+        """(N,3) corners in the board frame, by identity: the checkerboard's and ChArUco's inner corners row-major
+        (x fastest, as OpenCV orders them), an AprilGrid's 4 per tag (``4 id + k``)."""
+        if self.kind == "aprilgrid":
+            return aprilgrid_corners(self.cols, self.rows, self.square, self.spacing)
+        if self.kind == "charuco":
+            return charuco_corners(self.cols + 1, self.rows + 1, self.square)
         j, i = np.mgrid[0:self.rows, 0:self.cols]
-        return np.column_stack([i.ravel() * self.square, j.ravel() * self.square, np.zeros(i.size)])
+        return np.column_stack([i.ravel() * self.square, j.ravel() * self.pitch_y, np.zeros(i.size)])
+
+    @property
+    def pattern_extent(self) -> np.ndarray:
+        """(4,2) rectangle of the printed pattern in the board frame (m): one square beyond the outer inner corners
+        (checkerboard), the squares (charuco), the tags with their corner squares (aprilgrid)."""
+        if self.kind == "checkerboard":
+            x0, y0, x1, y1 = -self.square, -self.pitch_y, self.cols * self.square, self.rows * self.pitch_y
+        elif self.kind == "charuco":
+            x0, y0, x1, y1 = 0.0, 0.0, (self.cols + 1) * self.square, (self.rows + 1) * self.square
+        else:
+            return aprilgrid_extent(self.cols, self.rows, self.square, self.spacing)
+        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
 
     @property
     def diagonal(self) -> float:
@@ -139,6 +202,14 @@ class BoardSpec:
     def reversible(self) -> bool:
         """True when a 180-degree turn maps the corner grid onto itself with the same colours (cols+rows even)."""
         return (self.cols + self.rows) % 2 == 0
+
+    def describe(self) -> str:
+        """The board in words: ``checkerboard with 6x5 inner corners``, ``ChArUco 7x5 squares (DICT_5X5_100)``."""
+        if self.kind == "charuco":
+            return f"ChArUco board of {self.cols + 1}x{self.rows + 1} squares ({self.dictionary})"
+        if self.kind == "aprilgrid":
+            return f"AprilGrid of {self.cols}x{self.rows} tag36h11 tags"
+        return f"checkerboard with {self.cols}x{self.rows} inner corners"
 
 
 @dataclass(frozen=True, eq=False)

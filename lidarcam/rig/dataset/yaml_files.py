@@ -1,6 +1,6 @@
 """The dataset's YAML files (plain or OpenCV FileStorage): camera.yaml's OpenCV keys (``camera_files`` reads the
-file), board.yaml, windows.yaml,
-ground_truth.yaml, and the checked numeric matrices they hold."""
+file), windows.yaml, ground_truth.yaml, and the checked numeric matrices they hold (board.yaml:
+``lidarcam.rig.dataset.boards``)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from calib_core.geometry.polygon import check_simple_polygon
-
-from .model import BoardSpec, CameraModel, DatasetError
+from .model import CameraModel, DatasetError
 
 
 class _Loader(yaml.SafeLoader):
@@ -118,41 +116,6 @@ def camera_from_dict(data: dict, path: Path) -> CameraModel:
     K.setflags(write=False)
     dist.setflags(write=False)
     return CameraModel(w, h, K, dist)
-
-
-def load_board(path) -> BoardSpec:
-    """Read board.yaml: ``cols``, ``rows`` (inner corners), ``square_m``, ``outline_m`` [[x, y], ...] and the
-    optional ``origin_square`` (``dark`` | ``light``; absent: keep the detector's order). Without ``outline_m``
-    the outline is the squares' extent: one square beyond the outer inner corners on every side."""
-    path = Path(path)
-    return board_from_dict(read_yaml(path), path)
-
-
-def board_from_dict(data: dict, path: Path) -> BoardSpec:
-    """A BoardSpec from board.yaml's keys (already parsed); errors name ``path``."""
-    try:
-        cols, rows = int(_require(data, "cols", path)), int(_require(data, "rows", path))
-        square = float(_require(data, "square_m", path))
-    except (TypeError, ValueError):
-        raise DatasetError("cols, rows must be integers and square_m a number", file=path) from None
-    if cols < 2 or rows < 2:
-        raise DatasetError(f"needs at least 2x2 inner corners, got {cols}x{rows}", file=path)
-    if not (square > 0 and math.isfinite(square)):
-        raise DatasetError(f"square_m must be positive, got {square}", file=path)
-    if "outline_m" in data:
-        outline = matrix_field(data["outline_m"], "outline_m", path, (None, 2))
-    else:
-        x0, y0, x1, y1 = -square, -square, cols * square, rows * square
-        outline = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-    why = check_simple_polygon(outline)
-    if why:
-        raise DatasetError(f"'outline_m' {why}", file=path)
-    colour = data.get("origin_square")
-    if colour is not None and str(colour).lower() not in ("dark", "light", "black", "white"):
-        raise DatasetError(f"'origin_square' must be dark or light, got {colour!r}", file=path)
-    outline.setflags(write=False)
-    dark = None if colour is None else str(colour).lower() in ("dark", "black")
-    return BoardSpec(cols, rows, square, outline, dark)
 
 
 def load_windows(path) -> dict[str, tuple[float, float]]:
