@@ -119,3 +119,34 @@ def profile_sigma(data: ScanData, T: np.ndarray, v: np.ndarray, span: float, sca
             lo, hi = (lo if k == 0 else grid[k - 1]), grid[k]
         out = max(out, hi)
     return float(out)
+
+
+PROFILE_SCAN_POINTS = 48
+"""``profile_extent`` evaluates the profile at this many points on each side, evenly across the span."""
+PROFILE_EXTENT_SIGMAS = (1, 2, 3)
+"""``profile_extent`` reads the profile's k-sigma region for each of these k (the rise below k^2/2)."""
+
+
+def profile_extent(data: ScanData, T: np.ndarray, v: np.ndarray, span: float, scale_m: float,
+                   sigma_m: float) -> float:
+    """The profile-likelihood 1-sigma along ``v`` (scaled units) over the whole ``span``: for each k of
+    ``PROFILE_EXTENT_SIGMAS`` the farthest ``delta`` on either side at which the profile (``profile_rises``) is
+    still below ``k^2 / 2``, divided by k, the largest of these and of the nearest crossing (``profile_sigma``):
+    for a quadratic profile all are its sigma, and where the likelihood has a second mode along ``v`` (a second
+    solution of the boards nearly as likely) the 1-sigma reaches a third of the way to it at least. ``inf`` when
+    the profile stays below ``PROFILE_ONE_SIGMA`` at the span's end on a side: the likelihood does not rule out
+    the end of the span, it is flat across it. ``PROFILE_SCAN_POINTS`` points a side, re-fitted at once."""
+    near = profile_sigma(data, T, v, span, scale_m, sigma_m)
+    if not np.isfinite(near):
+        return near
+    along = _along(data, T, v)
+    steps = span * np.arange(1, PROFILE_SCAN_POINTS + 1) / PROFILE_SCAN_POINTS
+    deltas = np.r_[steps, -steps]
+    rise = profile_rises(data, T, v, deltas, scale_m, sigma_m, along)
+    if rise[PROFILE_SCAN_POINTS - 1] < PROFILE_ONE_SIGMA or rise[-1] < PROFILE_ONE_SIGMA:
+        return float("inf")
+    out = near
+    for k in PROFILE_EXTENT_SIGMAS:
+        inside = rise < PROFILE_ONE_SIGMA * k**2
+        out = max(out, float(np.max(np.abs(deltas[inside]), initial=0.0)) / k)
+    return float(out)

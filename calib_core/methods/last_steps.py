@@ -53,14 +53,39 @@ def fold_covariance(obs: Observations, T: np.ndarray, deg: Degeneracy) -> np.nda
     ``deg.range_sigma_m``."""
     T = np.asarray(T, float)
     e, J = range_linearised(T, obs.scan_data)
-    L = deg.scale_m
-    A = np.eye(6)                                   # scaled lidar-origin axes -> the parameters of data.residuals
-    A[3:, :3] = -skew(T[:3, 3])
-    A[:, 3:] *= L
+    A = _origin_axes(T, deg.scale_m)                # scaled lidar-origin axes -> the parameters of data.residuals
     Fs = (J @ A).T @ (J @ A) / deg.range_sigma_m**2
     for v, s in zip(deg.directions[deg.profile], deg.sigmas[deg.profile], strict=True):
         Fs = Fs + (1.0 / s**2 - v @ Fs @ v) * np.outer(v, v)
     return A @ inverse_information(Fs, 1e-12) @ A.T
+
+
+def _origin_axes(T: np.ndarray, scale_m: float) -> np.ndarray:
+    """(6,6) from the scaled lidar-origin axes of ``checks.degeneracy`` to the parameters of ``data.residuals``."""
+    A = np.eye(6)
+    A[3:, :3] = -skew(np.asarray(T, float)[:3, 3])
+    A[:, 3:] *= scale_m
+    return A
+
+
+def profile_floor(T: np.ndarray, cov: np.ndarray, deg: Degeneracy) -> np.ndarray:
+    """``cov`` (6x6 in the parameters of ``data.residuals``) at ``T`` widened so that along each direction whose
+    sigma the profile likelihood raised above the linear one (``Degeneracy.floors``) its 1-sigma is at least that
+    (scaled lidar-origin axes): a rank-one term along ``C v`` (the other parameters keep their regression on the
+    direction), never a smaller covariance. ``cov`` itself where there is none, or it already reaches them."""
+    floors = deg.floors if len(deg.floors) == len(deg.sigmas) else np.zeros(len(deg.sigmas), bool)
+    if not floors.any() or deg.geometric:
+        return cov
+    A = _origin_axes(T, deg.scale_m)
+    Ai = np.linalg.inv(A)
+    C = Ai @ np.asarray(cov, float) @ Ai.T
+    for v, s in zip(deg.directions[floors], deg.sigmas[floors], strict=True):
+        var = float(v @ C @ v)
+        if np.isfinite(s) and var > 0 and s**2 > var:
+            u = C @ v / var
+            C = C + (s**2 - var) * np.outer(u, u)
+    out = A @ C @ A.T
+    return 0.5 * (out + out.T)
 
 
 NO_CORNERS = "no image corners"
