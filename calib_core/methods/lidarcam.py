@@ -68,8 +68,9 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
        every board stands exactly vertical) are not presented as estimated: ``ok=False``, the reason names them and
        how to calibrate the rest. Weak directions are answered with their large 1-sigma and warned about: boards
        that lean a little fix roll, pitch and z with the larger of the linear and the profile 1-sigma, to which the
-       covariance is widened (``last_steps.profile_floor``); so is a fold (three boards' solutions meeting at the answer: no first-order information along one direction, its
-       sigma from the profile likelihood, ``checks.profile``); where the joint step fails there (its linearisation
+       covariance is widened (``last_steps.profile_floor``); so is a fold (three boards' solutions meeting at the
+       answer: no first-order information along one direction, its sigma from the profile likelihood,
+       ``checks.profile``); where the joint step fails there (its linearisation
        is singular too), the covariance is ``last_steps.fold_covariance``.
     6. On the boards used: with image corners on every board (``joint.use_corners``), the joint maximum likelihood
        over corners and ranges, covariance with the board poses marginalised (``info["covariance_model"]``
