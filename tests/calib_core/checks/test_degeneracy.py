@@ -146,6 +146,8 @@ def test_a_refused_direction_is_flat_across_the_physically_possible_span(seed):
     z = np.eye(6)[AXES.index("z")]
     assert np.isinf(profile_extent(obs.scan_data, T, z, free_span(L), L, 0.005))
     assert not undetermined_directions(obs, T, 0.005).determined
+    r = calibrate(obs, "lidarcam")
+    assert not r.ok and "z (height" in r.reason and "not determined" in r.reason
     leaning = vertical_rig(seed, lean_deg=3.0)
     T, L = leaning.T_lidar_cam_true, typical_range(leaning)
     assert np.isfinite(profile_extent(leaning.scan_data, T, z, free_span(L), L, 0.005))
