@@ -70,21 +70,24 @@ def _origin_axes(T: np.ndarray, scale_m: float) -> np.ndarray:
 
 def profile_floor(T: np.ndarray, cov: np.ndarray, deg: Degeneracy) -> np.ndarray:
     """``cov`` (6x6 in the parameters of ``data.residuals``) at ``T`` widened so that along each direction whose
-    sigma the profile likelihood raised above the linear one (``Degeneracy.floors``) its 1-sigma is at least that
-    (scaled lidar-origin axes): a rank-one term along ``C v`` (the other parameters keep their regression on the
-    direction), never a smaller covariance. ``cov`` itself where there is none, or it already reaches them."""
+    sigma the profile likelihood raised above the linear one (``Degeneracy.floors``, unit ``v_i`` in the scaled
+    lidar-origin axes) its 1-sigma is that sigma ``s_i`` exactly: with ``W`` the stacked directions, ``B = W C W^T``
+    their block and ``G = C W^T B^-1`` the regression of every parameter on them, ``C + G diag(d) G^T`` with
+    ``d_i = max(0, s_i^2 - B_ii)`` (independent extra error along each, carried to the others as the data
+    correlate them; never a smaller covariance). ``cov`` itself where there is none, or the set is refused."""
     floors = deg.floors if len(deg.floors) == len(deg.sigmas) else np.zeros(len(deg.sigmas), bool)
     if not floors.any() or deg.geometric:
         return cov
     A = _origin_axes(T, deg.scale_m)
     Ai = np.linalg.inv(A)
     C = Ai @ np.asarray(cov, float) @ Ai.T
-    for v, s in zip(deg.directions[floors], deg.sigmas[floors], strict=True):
-        var = float(v @ C @ v)
-        if np.isfinite(s) and var > 0 and s**2 > var:
-            u = C @ v / var
-            C = C + (s**2 - var) * np.outer(u, u)
-    out = A @ C @ A.T
+    W, s = deg.directions[floors], deg.sigmas[floors]
+    B = W @ C @ W.T
+    d = np.maximum(0.0, np.where(np.isfinite(s), s, 0.0) ** 2 - np.diag(B))
+    if not d.any():
+        return cov
+    G = C @ W.T @ np.linalg.pinv(B)
+    out = A @ (C + G @ np.diag(d) @ G.T) @ A.T
     return 0.5 * (out + out.T)
 
 

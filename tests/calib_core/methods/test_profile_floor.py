@@ -4,6 +4,7 @@
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from rigs import vertical_rig
 
 from calib_core.checks.degeneracy import undetermined_directions
@@ -26,7 +27,10 @@ def test_floor_reaches_the_profile_sigma_and_never_shrinks_the_covariance():
         assert np.linalg.eigvalsh(out - cov).min() > -1e-12 * np.abs(cov).max()      # never smaller
         for v, s, f in zip(d.directions, d.sigmas, d.floors, strict=True):
             got = _sigma_along(T, out, v, d.scale_m)
-            assert got >= (s if f else _sigma_along(T, cov, v, d.scale_m)) * (1 - 1e-6)
+            if f:                                 # exactly the profile's sigma, not beyond it
+                assert got == pytest.approx(max(s, _sigma_along(T, cov, v, d.scale_m)), rel=1e-6)
+            else:
+                assert got >= _sigma_along(T, cov, v, d.scale_m) * (1 - 1e-6)
             hits += bool(f)
     assert hits >= 3
 
