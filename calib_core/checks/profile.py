@@ -133,9 +133,10 @@ def profile_extent(data: ScanData, T: np.ndarray, v: np.ndarray, span: float, sc
     ``PROFILE_EXTENT_SIGMAS`` the farthest ``delta`` on either side at which the profile (``profile_rises``) is
     still below ``k^2 / 2``, divided by k, the largest of these and of the nearest crossing (``profile_sigma``):
     for a quadratic profile all are its sigma, and where the likelihood has a second mode along ``v`` (a second
-    solution of the boards nearly as likely) the 1-sigma reaches a third of the way to it at least. ``inf`` when
-    the profile stays below ``PROFILE_ONE_SIGMA`` at the span's end on a side: the likelihood does not rule out
-    the end of the span, it is flat across it. ``PROFILE_SCAN_POINTS`` points a side, re-fitted at once."""
+    solution of the boards nearly as likely) the 1-sigma reaches a third of the way to it at least. ``inf`` only
+    where ``profile_sigma`` is (the profile does not reach its 1-sigma within ``span`` on a side: flat); a profile
+    that rises and falls back to the span's end gives a 1-sigma of the span (a mode there is a distinct answer,
+    for the choice's tie rule, not a free direction). ``PROFILE_SCAN_POINTS`` points a side, re-fitted at once."""
     near = profile_sigma(data, T, v, span, scale_m, sigma_m)
     if not np.isfinite(near):
         return near
@@ -143,8 +144,6 @@ def profile_extent(data: ScanData, T: np.ndarray, v: np.ndarray, span: float, sc
     steps = span * np.arange(1, PROFILE_SCAN_POINTS + 1) / PROFILE_SCAN_POINTS
     deltas = np.r_[steps, -steps]
     rise = profile_rises(data, T, v, deltas, scale_m, sigma_m, along)
-    if rise[PROFILE_SCAN_POINTS - 1] < PROFILE_ONE_SIGMA or rise[-1] < PROFILE_ONE_SIGMA:
-        return float("inf")
     out = near
     for k in PROFILE_EXTENT_SIGMAS:
         inside = rise < PROFILE_ONE_SIGMA * k**2
