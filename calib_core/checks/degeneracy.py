@@ -297,15 +297,16 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     lean = vertical_boards(obs, T)
     vertical = lean is not None
     fold = np.zeros(6, bool)
-    if (null | (sig > FOLD_SPAN)).any() and not vertical:
-        sig, fold = _folds(obs, T, V, null | (sig > FOLD_SPAN), sig, L, sigma, span)
+    E = np.eye(6)[[AXES.index(a) for a in VERTICAL_AXES]]
+    candidates = (null | (sig > FOLD_SPAN)) & ~(vertical & (np.sum((E @ V) ** 2, axis=0) >= 0.5))
+    if candidates.any():                 # the vertical axes themselves: _vertical_sigmas
+        sig, fold = _folds(obs, T, V, candidates, sig, L, sigma, span)
         null = null & ~fold
     weak = null | (sig > max_scaled_sigma)
     U, sig_u, fold_u, null_u = V[:, weak].T, sig[weak], fold[weak], null[weak]
     floor_u = np.zeros(len(U), bool)
     free_vertical = False
     if vertical:
-        E = np.eye(6)[[AXES.index(a) for a in VERTICAL_AXES]]
         other = np.sum((U @ E.T) ** 2, axis=1) < 0.5
         sig_e, floor_e = _vertical_sigmas(obs, T, F, E, sigma, L, span, null_conditioning)
         free_vertical = not np.all(np.isfinite(sig_e))
