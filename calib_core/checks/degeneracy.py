@@ -308,8 +308,8 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     free_vertical = False
     if vertical:
         other = np.sum((U @ E.T) ** 2, axis=1) < 0.5
-        sig_e, floor_e = _vertical_sigmas(obs, T, F, E, sigma, L, span, null_conditioning)
-        free_vertical = not np.all(np.isfinite(sig_e))
+        sig_e, floor_e, prof_e = _vertical_sigmas(obs, T, F, E, sigma, L, span, null_conditioning)
+        free_vertical = not np.all(np.isfinite(prof_e))
         U, sig_u = np.concatenate([E, U[other]]), np.r_[sig_e, sig_u[other]]
         fold_u, null_u = np.r_[np.zeros(len(E), bool), fold_u[other]], np.r_[np.zeros(len(E), bool), null_u[other]]
         floor_u = np.r_[floor_e, np.zeros(int(other.sum()), bool)]
@@ -319,8 +319,8 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     geometric = bool(k and (free_vertical or null_u.any()))
     cause = "" if not k else board_set_cause(obs, T) if lean is None else \
         f"every board stands vertical (normals {lean:.1f} deg RMS from the scan plane)"
-    if vertical and not free_vertical:
-        cause += LEAN_WORDS
+    if vertical:
+        cause += LEAN_WORDS if not free_vertical else _flat_words(prof_e, L)
     return Degeneracy(U, sig_u, tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
                       cause, L, sigma, fold_u, floor_u)
 
@@ -331,16 +331,27 @@ LEAN_WORDS = (": only their lean fixes these, so that board-pose errors of the l
 
 
 def _vertical_sigmas(obs: Observations, T: np.ndarray, F: np.ndarray, E: np.ndarray, sigma: float, scale_m: float,
-                     span: float, null_conditioning: float) -> tuple[np.ndarray, np.ndarray]:
-    """The 1-sigma (scaled) of the vertical axes ``E`` (3,6) and which of them the profile raised: the marginal
-    linear sigmas when a profile stays flat across ``span`` (then the set is refused and the linear sigmas are
-    what its message quotes), else the larger of the linear one (where within ``FOLD_SPAN``) and the profile."""
+                     span: float, null_conditioning: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 1-sigma (scaled) of the vertical axes ``E`` (3,6), which of them the profile raised, and their profile
+    1-sigma (``inf``: flat across ``span``): the marginal linear sigmas when a profile stays flat (then the set is
+    refused and the linear sigmas are what its message quotes), else the larger of the linear one (where within
+    ``FOLD_SPAN``) and the profile."""
     lin = _marginal_sigmas(F, E, sigma, null_conditioning)
     prof = np.array([profile_extent(obs.scan_data, T, e, span, scale_m, sigma) for e in E])
     if not np.all(np.isfinite(prof)):
-        return lin, np.zeros(len(E), bool)
+        return lin, np.zeros(len(E), bool), prof
     use_lin = np.isfinite(lin) & (lin <= FOLD_SPAN) & (lin >= prof)
-    return np.where(use_lin, lin, prof), ~use_lin
+    return np.where(use_lin, lin, prof), ~use_lin, prof
+
+
+def _flat_words(prof: np.ndarray, scale_m: float) -> str:
+    """What leaves a vertical set free, for its cause: the axes whose profile stays flat across ``free_span``, and
+    the profile 1-sigma of the others (fixed beyond first order only, named with them for the planar calibration)."""
+    flat = [a for a, p in zip(VERTICAL_AXES, prof, strict=True) if not np.isfinite(p)]
+    rest = [f"{a} {np.degrees(p):.1f} deg" if AXES.index(a) < 3 else f"{a} {1000 * p * scale_m:.0f} mm"
+            for a, p in zip(VERTICAL_AXES, prof, strict=True) if np.isfinite(p)]
+    return (f": {_join(flat)} {'stays' if len(flat) == 1 else 'stay'} flat across the physically possible span"
+            + (f" ({', '.join(rest)}: profile 1-sigma, beyond first order only)" if rest else ""))
 
 
 def _folds(obs: Observations, T: np.ndarray, V: np.ndarray, linear_beyond: np.ndarray, sig: np.ndarray,
