@@ -272,7 +272,8 @@ def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> float | None:
 
 def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float | None = None, *,
                             max_scaled_sigma: float = MAX_SCALED_SIGMA,
-                            null_conditioning: float = NULL_CONDITIONING) -> Degeneracy:
+                            null_conditioning: float = NULL_CONDITIONING,
+                            profile_vertical: bool = True) -> Degeneracy:
     """The weak and the not determined directions of the extrinsic at ``T_lidar_cam`` (module docstring).
 
     Eigen-decomposition of the range model's Fisher information in the scaled lidar-origin axes; the candidates
@@ -283,6 +284,9 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     Vertical boards (``vertical_boards``) fix roll, pitch and z through their lean alone: the three are named
     (weak, with the larger of their marginal linear and profile sigma, ``floors`` where the profile's is the
     larger), and not determined when the profile of one of them stays flat across ``free_span``.
+    ``profile_vertical=False``: they are not determined without a profile (a caller whose ``T_lidar_cam`` is not
+    the range likelihood's optimum, e.g. a mounting prior's posterior mode, where the range profile does not
+    apply: the prior then holds them).
     """
     T = np.asarray(T_lidar_cam, float)
     e, J = range_linearised(T, obs.scan_data)
@@ -308,7 +312,11 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     free_vertical = False
     if vertical:
         other = np.sum((U @ E.T) ** 2, axis=1) < 0.5
-        sig_e, floor_e, prof_e = _vertical_sigmas(obs, T, F, E, sigma, L, span, null_conditioning)
+        if profile_vertical:
+            sig_e, floor_e, prof_e = _vertical_sigmas(obs, T, F, E, sigma, L, span, null_conditioning)
+        else:
+            sig_e, floor_e = _marginal_sigmas(F, E, sigma, null_conditioning), np.zeros(len(E), bool)
+            prof_e = np.full(len(E), np.inf)
         free_vertical = not np.all(np.isfinite(prof_e))
         U, sig_u = np.concatenate([E, U[other]]), np.r_[sig_e, sig_u[other]]
         fold_u, null_u = np.r_[np.zeros(len(E), bool), fold_u[other]], np.r_[np.zeros(len(E), bool), null_u[other]]
@@ -319,7 +327,7 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     geometric = bool(k and (free_vertical or null_u.any()))
     cause = "" if not k else board_set_cause(obs, T) if lean is None else \
         f"every board stands vertical (normals {lean:.1f} deg RMS from the scan plane)"
-    if vertical:
+    if vertical and profile_vertical:
         cause += LEAN_WORDS if not free_vertical else _flat_words(prof_e, L)
     return Degeneracy(U, sig_u, tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
                       cause, L, sigma, fold_u, floor_u)

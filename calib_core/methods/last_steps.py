@@ -30,10 +30,12 @@ def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray
                         refuse: bool = True) -> Degeneracy:
     """The degeneracy analysis at ``T`` (``checks.degeneracy.undetermined_directions``); a SolveFailure naming
     the directions the board geometry leaves free, with the analysis and the board-set warnings in its info
-    (``refuse=False``: the analysis alone, for a caller whose prior determines those directions)."""
+    (``refuse=False``: the analysis alone, for a caller whose prior determines those directions; ``T`` is then
+    the posterior's mode, not the range optimum, and vertical boards' roll, pitch and z are left to the prior
+    without a profile: ``profile_vertical``)."""
     options = options or DegeneracyOptions()
     deg = undetermined_directions(obs, T, range_sigma_m, max_scaled_sigma=options.max_scaled_sigma,
-                                  null_conditioning=options.null_conditioning)
+                                  null_conditioning=options.null_conditioning, profile_vertical=refuse)
     if refuse and not deg.determined:
         raise undetermined_failure(obs, deg, candidates, who)
     return deg
