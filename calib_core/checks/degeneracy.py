@@ -211,9 +211,7 @@ class Degeneracy:
             return (f"{self._what()} {verb} poorly determined (1-sigma {self._sigma_words()}): {self.cause}; "
                     "add board poses")
         keys = ", ".join(f"{fixed_key(a)!r}: ..." for a in self.axes)
-        lean = "" if not np.all(np.isfinite(self.sigmas)) else \
-            f" (the range model alone would give 1-sigma {self._sigma_words()}, leaving out board-pose errors)"
-        return (f"{self._what()} {verb} not determined by these boards: {self.cause}{lean}; give their values "
+        return (f"{self._what()} {verb} not determined by these boards: {self.cause}; give their values "
                 f"and calibrate the rest with fixed={{{keys}}}")
 
     def to_dict(self) -> dict:
