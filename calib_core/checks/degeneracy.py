@@ -13,20 +13,21 @@ direction moves scan points by about the same distance whatever it mixes.
 A direction is *weak* when its 1-sigma in scaled units exceeds ``MAX_SCALED_SIGMA`` (0.1: 5.7 deg of rotation,
 or 10 % of the typical range of translation): the answer stands and a warning names it with its sigma. It is
 *not determined* (``geometric``: the methods refuse to present it, ``ok=False``) only where the data leave it
-free: where its profile likelihood (``checks.profile``) does not rise by its 1-sigma anywhere across the span a
-small motion of the extrinsic can physically cover (``FREE_SPAN``: a radian of rotation, or one typical range
-and at least ``MIN_FREE_SPAN_M`` of translation). The linear analysis only picks the candidates: a direction with
-no information at first order (singular value below ``NULL_CONDITIONING`` of the largest) or a linear 1-sigma
-beyond ``FOLD_SPAN``, and, where the boards stand (nearly) vertical (normals within ``MIN_NORMAL_SPREAD_DEG`` of
-the scan plane, the rig of a ground robot), roll, pitch and z, which only the boards' lean fixes.
+free: where its profile likelihood (``checks.profile``) does not rise by its 1-sigma anywhere across the span
+a small motion of the extrinsic can physically cover (``profile.FREE_SPAN``: a radian of rotation, or one
+typical range and at least ``profile.MIN_FREE_SPAN_M`` of translation). The linear analysis only picks the
+candidates: a direction with no information at first order (singular value below ``NULL_CONDITIONING`` of the
+largest) or a linear 1-sigma beyond ``FOLD_SPAN``, and, where the boards stand (nearly) vertical (normals within
+``MIN_NORMAL_SPREAD_DEG`` of the scan plane, the rig of a ground robot), roll, pitch and z, which only the
+boards' lean fixes.
 
 Two cases reach the profile. With three boards the answer can sit where two of the minimal solver's solutions
 meet (a fold): the residuals change only at second order along one direction (the linear sigma runs to
 radians) while the likelihood still rises; the direction is weak (or determined) with its profile sigma, named
 as such in the message. With vertical boards, roll, pitch and z are answered with the larger of their linear
-(marginal) and profile 1-sigma when the profile of each rises within ``FREE_SPAN`` (boards that lean a little:
-the lean fixes them, weakly), and refused together when one of them stays flat (boards exactly vertical leave
-z free at every order, and roll and pitch with fourth-order information only): the planar calibration
+(marginal) and profile 1-sigma when the profile of each rises within ``profile.FREE_SPAN`` (boards that lean a
+little: the lean fixes them, weakly), and refused together when one of them stays flat (boards exactly vertical
+leave z free at every order, and roll and pitch with fourth-order information only): the planar calibration
 (``fixed=``) needs all three. The warning then says that the lean is all that fixes them, so that board-pose
 errors of the lean's order are not in the range model's sigma (the joint model's board-pose covariance holds
 the corners' share of them).
@@ -46,7 +47,7 @@ from ..model.residuals import range_linearised
 from ..refine.partial import vertical_start
 from ..refine.uncertainty import conditioning, normal_spread_deg, typical_range
 from ..solvers._common import MIN_BOARDS
-from .profile import profile_extent
+from .profile import fold_sigmas, free_span, marginal_sigmas, vertical_sigmas
 
 WARN_BELOW_BOARDS = 4
 """Fewer boards than this is warned about: with 3 the minimal solver's candidates all fit the scan lines exactly
@@ -73,24 +74,8 @@ FOLD_SPAN = 1.0
 """A direction whose linear 1-sigma exceeds this many scaled units (a radian, or one typical range: as far as a
 small motion of the extrinsic means anything), or that has no first-order information at all
 (``NULL_CONDITIONING``), is judged by its profile likelihood (``checks.profile``): when that still rises by its
-1-sigma within ``FREE_SPAN``, the direction is a fold of the board set's solutions, not one the geometry leaves
+1-sigma within ``profile.FREE_SPAN``, the direction is a fold of the board set's solutions, not one the geometry leaves
 free; it is weak (or determined) with its profile 1-sigma, judged by ``MAX_SCALED_SIGMA`` like any other."""
-
-MIN_FREE_SPAN_M = 0.3
-"""A translation is called free only where its profile stays flat over at least this (metres), however close
-the boards: the refusal rule's floor (a rig whose typical range is below it is profiled that far)."""
-
-FREE_SPAN = FOLD_SPAN
-"""The physically possible range of a small motion, in scaled units (a radian; one typical range, and at least
-``MIN_FREE_SPAN_M``): a direction whose profile likelihood does not rise by its 1-sigma across it, on either
-side, is free (refused); every other direction is answered with its sigma, however large. Refused directions
-therefore have a profile 1-sigma above 57 deg or above max(typical range, ``MIN_FREE_SPAN_M``)."""
-
-
-def free_span(scale_m: float) -> float:
-    """``FREE_SPAN`` in scaled units for a typical range ``scale_m`` (metres): at least ``MIN_FREE_SPAN_M`` of
-    translation."""
-    return FREE_SPAN * max(1.0, MIN_FREE_SPAN_M / float(scale_m))
 
 
 
@@ -302,7 +287,7 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     E = np.eye(6)[[AXES.index(a) for a in VERTICAL_AXES]]
     candidates = (null | (sig > FOLD_SPAN)) & ~(vertical & (np.sum((E @ V) ** 2, axis=0) >= 0.5))
     if candidates.any():                 # the vertical axes themselves: _vertical_sigmas
-        sig, fold = _folds(obs, T, V, candidates, sig, L, sigma, span)
+        sig, fold = fold_sigmas(obs.scan_data, T, V, candidates, sig, L, sigma, span)
         null = null & ~fold
     weak = null | (sig > max_scaled_sigma)
     U, sig_u, fold_u, null_u = V[:, weak].T, sig[weak], fold[weak], null[weak]
@@ -311,9 +296,10 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     if vertical:
         other = np.sum((U @ E.T) ** 2, axis=1) < 0.5
         if profile_vertical:
-            sig_e, floor_e, prof_e = _vertical_sigmas(obs, T, F, E, sigma, L, span, null_conditioning)
+            sig_e, floor_e, prof_e = vertical_sigmas(obs.scan_data, T, F, E, sigma, L, span, null_conditioning,
+                                                     FOLD_SPAN)
         else:
-            sig_e, floor_e = _marginal_sigmas(F, E, sigma, null_conditioning), np.zeros(len(E), bool)
+            sig_e, floor_e = marginal_sigmas(F, E, sigma, null_conditioning), np.zeros(len(E), bool)
             prof_e = np.full(len(E), np.inf)
         free_vertical = not np.all(np.isfinite(prof_e))
         U, sig_u = np.concatenate([E, U[other]]), np.r_[sig_e, sig_u[other]]
@@ -336,20 +322,6 @@ LEAN_WORDS = (": only their lean fixes these, so that board-pose errors of the l
 """How an answered vertical-board set's cause goes on (``undetermined_directions``)."""
 
 
-def _vertical_sigmas(obs: Observations, T: np.ndarray, F: np.ndarray, E: np.ndarray, sigma: float, scale_m: float,
-                     span: float, null_conditioning: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The 1-sigma (scaled) of the vertical axes ``E`` (3,6), which of them the profile raised, and their profile
-    1-sigma (``inf``: flat across ``span``): the marginal linear sigmas when a profile stays flat (then the set is
-    refused and the linear sigmas are what its message quotes), else the larger of the linear one (where within
-    ``FOLD_SPAN``) and the profile."""
-    lin = _marginal_sigmas(F, E, sigma, null_conditioning)
-    prof = np.array([profile_extent(obs.scan_data, T, e, span, scale_m, sigma) for e in E])
-    if not np.all(np.isfinite(prof)):
-        return lin, np.zeros(len(E), bool), prof
-    use_lin = np.isfinite(lin) & (lin <= FOLD_SPAN) & (lin >= prof)
-    return np.where(use_lin, lin, prof), ~use_lin, prof
-
-
 def _flat_words(prof: np.ndarray, scale_m: float) -> str:
     """What leaves a vertical set free, for its cause: the axes whose profile stays flat across ``free_span``, and
     the profile 1-sigma of the others (fixed beyond first order only, named with them for the planar calibration)."""
@@ -358,27 +330,6 @@ def _flat_words(prof: np.ndarray, scale_m: float) -> str:
             for a, p in zip(VERTICAL_AXES, prof, strict=True) if np.isfinite(p)]
     return (f": {_join(flat)} {'stays' if len(flat) == 1 else 'stay'} flat across the physically possible span"
             + (f" ({', '.join(rest)}: profile 1-sigma, beyond first order only)" if rest else ""))
-
-
-def _folds(obs: Observations, T: np.ndarray, V: np.ndarray, linear_beyond: np.ndarray, sig: np.ndarray,
-           scale_m: float, sigma: float, span: float = FREE_SPAN) -> tuple[np.ndarray, np.ndarray]:
-    """The sigmas (scaled) with each direction the linear analysis leaves beyond ``FOLD_SPAN`` (columns of ``V``
-    where ``linear_beyond``) that is a fold given its profile 1-sigma (within ``span``), and the mask of those
-    folds."""
-    sig, fold = sig.copy(), np.zeros(len(sig), bool)
-    for j in np.flatnonzero(linear_beyond):
-        s = profile_extent(obs.scan_data, T, V[:, j], span, scale_m, sigma)
-        if np.isfinite(s):
-            sig[j], fold[j] = s, True
-    return sig, fold
-
-
-def _marginal_sigmas(F: np.ndarray, E: np.ndarray, sigma: float, null_conditioning: float) -> np.ndarray:
-    """1-sigma (scaled) of the unit directions ``E`` (k,6) under information ``F / sigma^2``; inf if singular."""
-    lam, V = np.linalg.eigh(F)
-    if lam[0] <= (null_conditioning**2) * lam[-1]:
-        return np.full(len(E), np.inf)
-    return sigma * np.sqrt(np.einsum("ij,jk,ik->i", E, (V / lam) @ V.T, E))
 
 
 def pair_angle_deg(obs: Observations) -> float:

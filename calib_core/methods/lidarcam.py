@@ -64,7 +64,7 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
        residuals beyond ``inliers.TRIM_SIGMAS`` stds of their board's median one); when they change the boards or
        points, step 3 again from the answer on what is left.
     5. Degeneracy (``methods.last_steps.refuse_undetermined``): directions the data leave free (their profile
-       likelihood flat across the physically possible range, ``checks.degeneracy.FREE_SPAN``: e.g. height z when
+       likelihood flat across the physically possible range, ``checks.profile.FREE_SPAN``: e.g. height z when
        every board stands exactly vertical) are not presented as estimated: ``ok=False``, the reason names them and
        how to calibrate the rest. Weak directions are answered with their large 1-sigma and warned about: boards
        that lean a little fix roll, pitch and z with the larger of the linear and the profile 1-sigma, to which the

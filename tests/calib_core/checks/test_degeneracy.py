@@ -8,16 +8,14 @@ from rigs import VERTICAL_OPTIONS, facing_board, general_rig, rig_from_boards, v
 from calib_core import calibrate
 from calib_core.checks.degeneracy import (
     AXES,
-    MIN_FREE_SPAN_M,
     MIN_NORMAL_SPREAD_DEG,
     WARN_BELOW_BOARDS,
     board_set_warnings,
     degeneracy_warnings,
-    free_span,
     origin_jacobian,
     undetermined_directions,
 )
-from calib_core.checks.profile import profile_extent
+from calib_core.checks.profile import MIN_FREE_SPAN_M, free_span, profile_extent
 from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.transforms import make_T, rotvec_to_matrix
 from calib_core.model.residuals import range_residuals
