@@ -11,21 +11,26 @@ converts.) Translations are scaled by the typical range ``L`` so that radians an
 direction moves scan points by about the same distance whatever it mixes.
 
 A direction is *weak* when its 1-sigma in scaled units exceeds ``MAX_SCALED_SIGMA`` (0.1: 5.7 deg of rotation,
-or 10 % of the typical range of translation) or when it carries no information at all (singular value below
-``NULL_CONDITIONING`` of the largest, whatever the noise). Weak directions are *not determined* (``geometric``:
-the methods refuse to present them, ``ok=False``) when the board geometry is their cause: no information at
-all, or boards standing vertical (normals within ``MIN_NORMAL_SPREAD_DEG`` of the scan plane, the rig of a ground
-robot), which leave roll, pitch and z not determined whatever their sigma: a lean that small is of the order of
-the board-pose and flatness errors the range model leaves out. Otherwise they are weak for lack of data (few
-boards, high noise, normals near one other plane): the answer stands and a warning names them with their sigma
-(on simulated sets of that kind, with exact board poses, the estimates are mostly still valid).
+or 10 % of the typical range of translation): the answer stands and a warning names it with its sigma. It is
+*not determined* (``geometric``: the methods refuse to present it, ``ok=False``) only where the data leave it
+free: where its profile likelihood (``checks.profile``) does not rise by its 1-sigma anywhere across the span
+a small motion of the extrinsic can physically cover (``profile.FREE_SPAN``: a radian of rotation, or one
+typical range and at least ``profile.MIN_FREE_SPAN_M`` of translation). The linear analysis only picks the
+candidates: a direction with no information at first order (singular value below ``NULL_CONDITIONING`` of the
+largest) or a linear 1-sigma beyond ``FOLD_SPAN``, and, where the boards stand (nearly) vertical (normals within
+``MIN_NORMAL_SPREAD_DEG`` of the scan plane, the rig of a ground robot), roll, pitch and z, which only the
+boards' lean fixes.
 
-No information at first order is not always none at all: with three boards the answer can sit where two of the
-minimal solver's solutions meet (a fold), and there the residuals change only at second order along one
-direction (near it, the linear sigma runs to radians). Such a direction is judged by its profile likelihood
-(``checks.profile``, ``FOLD_SPAN``): when the likelihood rises by its 1-sigma within ``FOLD_SPAN`` it is weak (or
-determined) with that profile sigma, as any other direction, and named as such in the message; only a direction
-flat at every order is undetermined.
+Two cases reach the profile. With three boards the answer can sit where two of the minimal solver's solutions
+meet (a fold): the residuals change only at second order along one direction (the linear sigma runs to
+radians) while the likelihood still rises; the direction is weak (or determined) with its profile sigma, named
+as such in the message. With vertical boards, roll, pitch and z are answered with the larger of their linear
+(marginal) and profile 1-sigma when the profile of each rises within ``profile.FREE_SPAN`` (boards that lean a
+little: the lean fixes them, weakly), and refused together when one of them stays flat (boards exactly vertical
+leave z free at every order, and roll and pitch with fourth-order information only): the planar calibration
+(``fixed=``) needs all three. The warning then says that the lean is all that fixes them, so that board-pose
+errors of the lean's order are not in the range model's sigma (the joint model's board-pose covariance holds
+the corners' share of them).
 """
 
 from __future__ import annotations
@@ -42,7 +47,7 @@ from ..model.residuals import range_linearised
 from ..refine.partial import vertical_start
 from ..refine.uncertainty import conditioning, normal_spread_deg, typical_range
 from ..solvers._common import MIN_BOARDS
-from .profile import profile_sigma
+from .profile import fold_sigmas, free_span, marginal_sigmas, vertical_sigmas
 
 WARN_BELOW_BOARDS = 4
 """Fewer boards than this is warned about: with 3 the minimal solver's candidates all fit the scan lines exactly
@@ -69,8 +74,8 @@ FOLD_SPAN = 1.0
 """A direction whose linear 1-sigma exceeds this many scaled units (a radian, or one typical range: as far as a
 small motion of the extrinsic means anything), or that has no first-order information at all
 (``NULL_CONDITIONING``), is judged by its profile likelihood (``checks.profile``): when that still rises by its
-1-sigma within this span, the direction is a fold of the board set's solutions, not one the geometry leaves free;
-it is weak (or determined) with its profile 1-sigma, judged by ``MAX_SCALED_SIGMA`` like any other."""
+1-sigma within ``profile.FREE_SPAN``, the direction is a fold of the board set's solutions, not one the geometry leaves
+free; it is weak (or determined) with its profile 1-sigma, judged by ``MAX_SCALED_SIGMA`` like any other."""
 
 
 
@@ -139,6 +144,9 @@ class Degeneracy:
         scale_m: the typical range used to scale translations; range_sigma_m: the noise std used.
         profile: (k,) bool, the directions whose sigma is the profile likelihood's (a fold: no first-order
             information, or a linear sigma beyond ``FOLD_SPAN``); empty when none.
+        floors: (k,) bool, the directions whose sigma the profile likelihood raised above the linear one (the
+            vertical axes of boards that lean a little): the covariance is widened to it along them
+            (``methods.last_steps.profile_floor``); empty when none.
     """
 
     directions: np.ndarray
@@ -150,6 +158,7 @@ class Degeneracy:
     scale_m: float
     range_sigma_m: float
     profile: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    floors: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def determined(self) -> bool:
@@ -187,19 +196,17 @@ class Degeneracy:
             return (f"{self._what()} {verb} poorly determined (1-sigma {self._sigma_words()}): {self.cause}; "
                     "add board poses")
         keys = ", ".join(f"{fixed_key(a)!r}: ..." for a in self.axes)
-        lean = "" if not np.all(np.isfinite(self.sigmas)) else \
-            f" (the range model alone would give 1-sigma {self._sigma_words()}, leaving out board-pose errors)"
-        return (f"{self._what()} {verb} not determined by these boards: {self.cause}{lean}; give their values "
+        return (f"{self._what()} {verb} not determined by these boards: {self.cause}; give their values "
                 f"and calibrate the rest with fixed={{{keys}}}")
 
     def to_dict(self) -> dict:
-        """JSON-able summary: axes, aligned, geometric, cause, message, directions, sigmas (None for infinite) and
-        which are profile sigmas (folds)."""
+        """JSON-able summary: axes, aligned, geometric, cause, message, directions, sigmas (None for infinite),
+        which are profile sigmas (folds) and which the profile raised (``floors``)."""
         return {"axes": list(self.axes), "aligned": bool(self.aligned), "geometric": bool(self.geometric),
                 "cause": self.cause, "message": self.message(), "directions": np.round(self.directions, 6).tolist(),
                 "sigmas_scaled": [None if not np.isfinite(s) else float(s) for s in self.sigmas],
-                "profile": [bool(p) for p in self.profile], "scale_m": self.scale_m,
-                "range_sigma_m": self.range_sigma_m}
+                "profile": [bool(p) for p in self.profile], "floors": [bool(p) for p in self.floors],
+                "scale_m": self.scale_m, "range_sigma_m": self.range_sigma_m}
 
 
 def fixed_key(axis: str) -> str:
@@ -248,23 +255,28 @@ def vertical_boards(obs: Observations, T_lidar_cam: np.ndarray) -> float | None:
 
 def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float | None = None, *,
                             max_scaled_sigma: float = MAX_SCALED_SIGMA,
-                            null_conditioning: float = NULL_CONDITIONING) -> Degeneracy:
+                            null_conditioning: float = NULL_CONDITIONING,
+                            profile_vertical: bool = True) -> Degeneracy:
     """The weak and the not determined directions of the extrinsic at ``T_lidar_cam`` (module docstring).
 
-    Eigen-decomposition of the range model's Fisher information in the scaled lidar-origin axes.
-    ``range_sigma_m``: the range noise std (metres); ``None`` estimates it from the range residuals at
-    ``T_lidar_cam`` (``K - 6`` degrees of freedom), as the methods' covariance does.
+    Eigen-decomposition of the range model's Fisher information in the scaled lidar-origin axes; the candidates
+    of the linear analysis judged by their profile likelihood over ``free_span``. ``range_sigma_m``: the range
+    noise std (metres); ``None`` estimates it from the range residuals at ``T_lidar_cam`` (``K - 6`` degrees of
+    freedom), as the methods' covariance does.
 
-    Vertical boards (``vertical_boards``) leave roll, pitch and z free exactly; boards that lean by less than
-    ``MIN_NORMAL_SPREAD_DEG`` fix them only through that lean, which is of the order of the board-pose and
-    board-flatness errors the range model leaves out: these three are then not determined whatever their
-    sigma under the range model (reported as ``sigmas``).
+    Vertical boards (``vertical_boards``) fix roll, pitch and z through their lean alone: the three are named
+    (weak, with the larger of their marginal linear and profile sigma, ``floors`` where the profile's is the
+    larger), and not determined when the profile of one of them stays flat across ``free_span``.
+    ``profile_vertical=False``: they are not determined without a profile (a caller whose ``T_lidar_cam`` is not
+    the range likelihood's optimum, e.g. a mounting prior's posterior mode, where the range profile does not
+    apply: the prior then holds them).
     """
     T = np.asarray(T_lidar_cam, float)
     e, J = range_linearised(T, obs.scan_data)
     L = typical_range(obs)
     Js = origin_jacobian(J, T) * np.r_[np.ones(3), np.full(3, L)]
     sigma = residual_sigma(e, 6) if range_sigma_m is None else float(range_sigma_m)
+    span = free_span(L)
     F = Js.T @ Js
     lam, V = np.linalg.eigh(F)
     null = lam <= (null_conditioning**2) * lam[-1]
@@ -272,45 +284,52 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     lean = vertical_boards(obs, T)
     vertical = lean is not None
     fold = np.zeros(6, bool)
-    if (null | (sig > FOLD_SPAN)).any() and not vertical:
-        sig, fold = _folds(obs, T, V, null | (sig > FOLD_SPAN), sig, L, sigma)
+    E = np.eye(6)[[AXES.index(a) for a in VERTICAL_AXES]]
+    candidates = (null | (sig > FOLD_SPAN)) & ~(vertical & (np.sum((E @ V) ** 2, axis=0) >= 0.5))
+    if candidates.any():                 # the vertical axes themselves: _vertical_sigmas
+        sig, fold = fold_sigmas(obs.scan_data, T, V, candidates, sig, L, sigma, span)
         null = null & ~fold
     weak = null | (sig > max_scaled_sigma)
-    U, sig_u, fold_u = V[:, weak].T, sig[weak], fold[weak]
+    U, sig_u, fold_u, null_u = V[:, weak].T, sig[weak], fold[weak], null[weak]
+    floor_u = np.zeros(len(U), bool)
+    free_vertical = False
     if vertical:
-        E = np.eye(6)[[AXES.index(a) for a in VERTICAL_AXES]]
         other = np.sum((U @ E.T) ** 2, axis=1) < 0.5
-        U, sig_u = np.concatenate([E, U[other]]), np.r_[_marginal_sigmas(F, E, sigma, null_conditioning),
-                                                        sig_u[other]]
-        fold_u = np.r_[np.zeros(len(E), bool), fold_u[other]]
+        if profile_vertical:
+            sig_e, floor_e, prof_e = vertical_sigmas(obs.scan_data, T, F, E, sigma, L, span, null_conditioning,
+                                                     FOLD_SPAN)
+        else:
+            sig_e, floor_e = marginal_sigmas(F, E, sigma, null_conditioning), np.zeros(len(E), bool)
+            prof_e = np.full(len(E), np.inf)
+        free_vertical = not np.all(np.isfinite(prof_e))
+        U, sig_u = np.concatenate([E, U[other]]), np.r_[sig_e, sig_u[other]]
+        fold_u, null_u = np.r_[np.zeros(len(E), bool), fold_u[other]], np.r_[np.zeros(len(E), bool), null_u[other]]
+        floor_u = np.r_[floor_e, np.zeros(int(other.sum()), bool)]
     k = len(U)
     order = np.argsort(-np.sum(U**2, axis=0), kind="stable")
     n_axes = next((n for n in range(k, 6) if np.all(np.sum(U[:, order[:n]] ** 2, axis=1) >= ALIGNED_SHARE)), 6)
-    geometric = bool(k and (vertical or null.any()))
+    geometric = bool(k and (free_vertical or null_u.any()))
     cause = "" if not k else board_set_cause(obs, T) if lean is None else \
         f"every board stands vertical (normals {lean:.1f} deg RMS from the scan plane)"
+    if vertical and profile_vertical:
+        cause += LEAN_WORDS if not free_vertical else _flat_words(prof_e, L)
     return Degeneracy(U, sig_u, tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
-                      cause, L, sigma, fold_u)
+                      cause, L, sigma, fold_u, floor_u)
 
 
-def _folds(obs: Observations, T: np.ndarray, V: np.ndarray, linear_beyond: np.ndarray, sig: np.ndarray,
-           scale_m: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """The sigmas (scaled) with each direction the linear analysis leaves beyond ``FOLD_SPAN`` (columns of ``V``
-    where ``linear_beyond``) that is a fold given its profile 1-sigma, and the mask of those folds."""
-    sig, fold = sig.copy(), np.zeros(len(sig), bool)
-    for j in np.flatnonzero(linear_beyond):
-        s = profile_sigma(obs.scan_data, T, V[:, j], FOLD_SPAN, scale_m, sigma)
-        if np.isfinite(s):
-            sig[j], fold[j] = s, True
-    return sig, fold
+LEAN_WORDS = (": only their lean fixes these, so that board-pose errors of the lean's order are not in this "
+              "1-sigma")
+"""How an answered vertical-board set's cause goes on (``undetermined_directions``)."""
 
 
-def _marginal_sigmas(F: np.ndarray, E: np.ndarray, sigma: float, null_conditioning: float) -> np.ndarray:
-    """1-sigma (scaled) of the unit directions ``E`` (k,6) under information ``F / sigma^2``; inf if singular."""
-    lam, V = np.linalg.eigh(F)
-    if lam[0] <= (null_conditioning**2) * lam[-1]:
-        return np.full(len(E), np.inf)
-    return sigma * np.sqrt(np.einsum("ij,jk,ik->i", E, (V / lam) @ V.T, E))
+def _flat_words(prof: np.ndarray, scale_m: float) -> str:
+    """What leaves a vertical set free, for its cause: the axes whose profile stays flat across ``free_span``, and
+    the profile 1-sigma of the others (fixed beyond first order only, named with them for the planar calibration)."""
+    flat = [a for a, p in zip(VERTICAL_AXES, prof, strict=True) if not np.isfinite(p)]
+    rest = [f"{a} {np.degrees(p):.1f} deg" if AXES.index(a) < 3 else f"{a} {1000 * p * scale_m:.0f} mm"
+            for a, p in zip(VERTICAL_AXES, prof, strict=True) if np.isfinite(p)]
+    return (f": {_join(flat)} {'stays' if len(flat) == 1 else 'stay'} flat across the physically possible span"
+            + (f" ({', '.join(rest)}: profile 1-sigma, beyond first order only)" if rest else ""))
 
 
 def pair_angle_deg(obs: Observations) -> float:

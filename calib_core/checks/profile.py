@@ -119,3 +119,88 @@ def profile_sigma(data: ScanData, T: np.ndarray, v: np.ndarray, span: float, sca
             lo, hi = (lo if k == 0 else grid[k - 1]), grid[k]
         out = max(out, hi)
     return float(out)
+
+
+PROFILE_SCAN_POINTS = 48
+"""``profile_extent`` evaluates the profile at this many points on each side, evenly across the span."""
+PROFILE_EXTENT_SIGMAS = (1, 2, 3)
+"""``profile_extent`` reads the profile's k-sigma region for each of these k (the rise below k^2/2)."""
+
+
+def profile_extent(data: ScanData, T: np.ndarray, v: np.ndarray, span: float, scale_m: float,
+                   sigma_m: float) -> float:
+    """The profile-likelihood 1-sigma along ``v`` (scaled units) over the whole ``span``: for each k of
+    ``PROFILE_EXTENT_SIGMAS`` the farthest ``delta`` on either side at which the profile (``profile_rises``) is
+    still below ``k^2 / 2``, divided by k, the largest of these and of the nearest crossing (``profile_sigma``):
+    for a quadratic profile all are its sigma, and where the likelihood has a second mode along ``v`` (a second
+    solution of the boards nearly as likely) the 1-sigma reaches a third of the way to it at least. ``inf`` only
+    where ``profile_sigma`` is (the profile does not reach its 1-sigma within ``span`` on a side: flat); a profile
+    that rises and falls back to the span's end gives a 1-sigma of the span (a mode there is a distinct answer,
+    for the choice's tie rule, not a free direction). ``PROFILE_SCAN_POINTS`` points a side, re-fitted at once."""
+    near = profile_sigma(data, T, v, span, scale_m, sigma_m)
+    if not np.isfinite(near):
+        return near
+    along = _along(data, T, v)
+    steps = span * np.arange(1, PROFILE_SCAN_POINTS + 1) / PROFILE_SCAN_POINTS
+    deltas = np.r_[steps, -steps]
+    rise = profile_rises(data, T, v, deltas, scale_m, sigma_m, along)
+    out = near
+    for k in PROFILE_EXTENT_SIGMAS:
+        inside = rise < PROFILE_ONE_SIGMA * k**2
+        out = max(out, float(np.max(np.abs(deltas[inside]), initial=0.0)) / k)
+    return float(out)
+
+
+MIN_FREE_SPAN_M = 0.3
+"""A translation is called free only where its profile stays flat over at least this (metres), however close
+the boards: the refusal rule's floor (a rig whose typical range is below it is profiled that far)."""
+
+FREE_SPAN = 1.0
+"""The physically possible range of a small motion, in scaled units (a radian; one typical range, and at least
+``MIN_FREE_SPAN_M``): a direction whose profile likelihood does not rise by its 1-sigma across it, on either
+side, is free (refused by ``checks.degeneracy``); every other direction is answered with its sigma, however
+large. Refused directions therefore have a profile 1-sigma above 57 deg or above max(typical range,
+``MIN_FREE_SPAN_M``)."""
+
+
+def free_span(scale_m: float) -> float:
+    """``FREE_SPAN`` in scaled units for a typical range ``scale_m`` (metres): at least ``MIN_FREE_SPAN_M`` of
+    translation."""
+    return FREE_SPAN * max(1.0, MIN_FREE_SPAN_M / float(scale_m))
+
+
+def marginal_sigmas(F: np.ndarray, E: np.ndarray, sigma: float, null_conditioning: float) -> np.ndarray:
+    """1-sigma (scaled) of the unit directions ``E`` (k,6) under information ``F / sigma^2``; inf when the
+    smallest eigenvalue of ``F`` is below ``null_conditioning^2`` of the largest."""
+    lam, V = np.linalg.eigh(F)
+    if lam[0] <= (null_conditioning**2) * lam[-1]:
+        return np.full(len(E), np.inf)
+    return sigma * np.sqrt(np.einsum("ij,jk,ik->i", E, (V / lam) @ V.T, E))
+
+
+def vertical_sigmas(data: ScanData, T: np.ndarray, F: np.ndarray, E: np.ndarray, sigma: float, scale_m: float,
+                    span: float, null_conditioning: float,
+                    linear_span: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 1-sigma (scaled) of the vertical axes ``E`` (3,6) of ``checks.degeneracy``, which of them the profile
+    raised, and their profile 1-sigma (``profile_extent``; ``inf``: flat across ``span``): the marginal linear
+    sigmas (information ``F``) when a profile stays flat (the set is refused), else the larger of the linear one
+    (where within ``linear_span``) and the profile."""
+    lin = marginal_sigmas(F, E, sigma, null_conditioning)
+    prof = np.array([profile_extent(data, T, e, span, scale_m, sigma) for e in E])
+    if not np.all(np.isfinite(prof)):
+        return lin, np.zeros(len(E), bool), prof
+    use_lin = np.isfinite(lin) & (lin <= linear_span) & (lin >= prof)
+    return np.where(use_lin, lin, prof), ~use_lin, prof
+
+
+def fold_sigmas(data: ScanData, T: np.ndarray, V: np.ndarray, linear_beyond: np.ndarray, sig: np.ndarray,
+                scale_m: float, sigma: float, span: float = FREE_SPAN) -> tuple[np.ndarray, np.ndarray]:
+    """The sigmas (scaled) ``sig`` with each direction the linear analysis leaves beyond its span (columns of
+    ``V`` where ``linear_beyond``) replaced by its profile 1-sigma (``profile_extent``) where that is finite
+    within ``span`` (a fold of the board set's solutions), and the mask of those folds."""
+    sig, fold = np.array(sig, float), np.zeros(len(sig), bool)
+    for j in np.flatnonzero(linear_beyond):
+        s = profile_extent(data, T, V[:, j], span, scale_m, sigma)
+        if np.isfinite(s):
+            sig[j], fold[j] = s, True
+    return sig, fold

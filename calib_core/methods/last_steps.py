@@ -31,10 +31,12 @@ def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray
                         refuse: bool = True) -> Degeneracy:
     """The degeneracy analysis at ``T`` (``checks.degeneracy.undetermined_directions``); a SolveFailure naming
     the directions the board geometry leaves free, with the analysis and the board-set warnings in its info
-    (``refuse=False``: the analysis alone, for a caller whose prior determines those directions)."""
+    (``refuse=False``: the analysis alone, for a caller whose prior determines those directions; ``T`` is then
+    the posterior's mode, not the range optimum, and vertical boards' roll, pitch and z are left to the prior
+    without a profile: ``profile_vertical``)."""
     options = options or DegeneracyOptions()
     deg = undetermined_directions(obs, T, range_sigma_m, max_scaled_sigma=options.max_scaled_sigma,
-                                  null_conditioning=options.null_conditioning)
+                                  null_conditioning=options.null_conditioning, profile_vertical=refuse)
     if refuse and not deg.determined:
         raise undetermined_failure(obs, deg, candidates, who)
     return deg
@@ -54,14 +56,42 @@ def fold_covariance(obs: Observations, T: np.ndarray, deg: Degeneracy) -> np.nda
     ``deg.range_sigma_m``."""
     T = np.asarray(T, float)
     e, J = range_linearised(T, obs.scan_data)
-    L = deg.scale_m
-    A = np.eye(6)                                   # scaled lidar-origin axes -> the parameters of data.residuals
-    A[3:, :3] = -skew(T[:3, 3])
-    A[:, 3:] *= L
+    A = _origin_axes(T, deg.scale_m)                # scaled lidar-origin axes -> the parameters of data.residuals
     Fs = (J @ A).T @ (J @ A) / deg.range_sigma_m**2
     for v, s in zip(deg.directions[deg.profile], deg.sigmas[deg.profile], strict=True):
         Fs = Fs + (1.0 / s**2 - v @ Fs @ v) * np.outer(v, v)
     return A @ inverse_information(Fs, 1e-12) @ A.T
+
+
+def _origin_axes(T: np.ndarray, scale_m: float) -> np.ndarray:
+    """(6,6) from the scaled lidar-origin axes of ``checks.degeneracy`` to the parameters of ``data.residuals``."""
+    A = np.eye(6)
+    A[3:, :3] = -skew(np.asarray(T, float)[:3, 3])
+    A[:, 3:] *= scale_m
+    return A
+
+
+def profile_floor(T: np.ndarray, cov: np.ndarray, deg: Degeneracy) -> np.ndarray:
+    """``cov`` (6x6 in the parameters of ``data.residuals``) at ``T`` widened so that along each direction whose
+    sigma the profile likelihood raised above the linear one (``Degeneracy.floors``, unit ``v_i`` in the scaled
+    lidar-origin axes) its 1-sigma is that sigma ``s_i`` exactly: with ``W`` the stacked directions, ``B = W C W^T``
+    their block and ``G = C W^T B^-1`` the regression of every parameter on them, ``C + G diag(d) G^T`` with
+    ``d_i = max(0, s_i^2 - B_ii)`` (independent extra error along each, carried to the others as the data
+    correlate them; never a smaller covariance). ``cov`` itself where there is none, or the set is refused."""
+    floors = deg.floors if len(deg.floors) == len(deg.sigmas) else np.zeros(len(deg.sigmas), bool)
+    if not floors.any() or deg.geometric:
+        return cov
+    A = _origin_axes(T, deg.scale_m)
+    Ai = np.linalg.inv(A)
+    C = Ai @ np.asarray(cov, float) @ Ai.T
+    W, s = deg.directions[floors], deg.sigmas[floors]
+    B = W @ C @ W.T
+    d = np.maximum(0.0, np.where(np.isfinite(s), s, 0.0) ** 2 - np.diag(B))
+    if not d.any():
+        return cov
+    G = C @ W.T @ np.linalg.pinv(B)
+    out = A @ (C + G @ np.diag(d) @ G.T) @ A.T
+    return 0.5 * (out + out.T)
 
 
 NO_CORNERS = "no image corners"

@@ -39,6 +39,7 @@ from .last_steps import (
     prior_contradiction,
     prior_fixed,
     prior_info,
+    profile_floor,
     range_covariance,
     refuse_undetermined,
     try_joint,
@@ -66,11 +67,14 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
     4. Final tests (``robust.final.final_tests``): a per-board test at the refined pose and a point test (range
        residuals beyond ``inliers.TRIM_SIGMAS`` stds of their board's median one); when they change the boards or
        points, step 3 again from the answer on what is left.
-    5. Degeneracy (``methods.last_steps.refuse_undetermined``): directions the board geometry leaves free (e.g. roll,
-       pitch and height z when every board is vertical) are not presented as estimated: ``ok=False``, the reason
-       names them and how to calibrate the rest. Directions weak only for lack of data are warned about; so is a
-       fold (three boards' solutions meeting at the answer: no first-order information along one direction, its
-       sigma from the profile likelihood, ``checks.profile``); where the joint step fails there (its linearisation
+    5. Degeneracy (``methods.last_steps.refuse_undetermined``): directions the data leave free (their profile
+       likelihood flat across the physically possible range, ``checks.profile.FREE_SPAN``: e.g. height z when
+       every board stands exactly vertical) are not presented as estimated: ``ok=False``, the reason names them and
+       how to calibrate the rest. Weak directions are answered with their large 1-sigma and warned about: boards
+       that lean a little fix roll, pitch and z with the larger of the linear and the profile 1-sigma, to which the
+       covariance is widened (``last_steps.profile_floor``); so is a fold (three boards' solutions meeting at the
+       answer: no first-order information along one direction, its sigma from the profile likelihood,
+       ``checks.profile``); where the joint step fails there (its linearisation
        is singular too), the covariance is ``last_steps.fold_covariance``.
     6. On the boards used: with image corners on every board (``joint.use_corners``), the joint maximum likelihood
        over corners and ranges, covariance with the board poses marginalised (``info["covariance_model"]``
@@ -182,6 +186,7 @@ def finish(found: Found, opts: LidarcamOptions):
                            names=tests.info.get("boards_used"), mounting=prior, board_error=term, spread_held=held)
     if joint is not None:
         T, cov, jinfo = joint
+        cov = profile_floor(T, cov, deg)
         if prior is not None:  # the joint model's answer is the posterior's mode; its covariance the data's
             jinfo.setdefault("warnings", []).extend(filter(None, [prior_contradiction(T, cov, prior)]))
             cov = with_prior(T, cov, prior)
@@ -193,6 +198,7 @@ def finish(found: Found, opts: LidarcamOptions):
             cov, disp = widened_range_covariance(obs_u, T, cov, sigma_given, tests.info.get("boards_used"), term,
                                                  held)
             jinfo.update(disp)
+        cov = profile_floor(T, cov, deg)
         if prior is not None:  # the refinement held the prior already: its information only
             jinfo["warnings"].extend(filter(None, [prior_contradiction(T, cov, prior)]))
             cov = with_prior(T, cov, prior)

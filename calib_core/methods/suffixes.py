@@ -15,7 +15,14 @@ from ..refine.joint import RANGE_ONLY_MODEL, JointOptions
 from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV, refine
 from ..refine.uncertainty import conditioning
 from ..registry import Method, derived
-from .last_steps import fixed_calibration, fold_covariance, range_covariance, refuse_undetermined, try_joint
+from .last_steps import (
+    fixed_calibration,
+    fold_covariance,
+    profile_floor,
+    range_covariance,
+    refuse_undetermined,
+    try_joint,
+)
 
 REFINE_OPTIONS = ("loss", "f_scale_m", "range_sigma_m", "max_nfev", "fixed")
 """Options of an ``X+ml`` / ``X+plane`` method that go to the refinement (metres); all others go to ``X``."""
@@ -35,6 +42,7 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
     deg = refuse_undetermined(obs, r.T_lidar_cam, np.stack([r.T_lidar_cam, T0]), "refinement", range_sigma_m)
     cov = fold_covariance(obs, r.T_lidar_cam, deg) if residual == "range" and deg.profile.any() else \
         range_covariance(obs, r.T_lidar_cam, T0[None], "refinement", residual, range_sigma_m)
+    cov = profile_floor(r.T_lidar_cam, cov, deg)
     info = {"refine_cost": r.cost, "refine_initial_cost": r.initial_cost, "refine_nfev": r.nfev,
             "refine_residual": residual, "refine_loss": str(loss), "covariance": cov,
             "covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS,
