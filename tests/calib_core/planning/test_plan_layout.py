@@ -1,6 +1,7 @@
 """Where the plan puts boards: the grid's orientation (8x5 or 5x8) does not change it, proposed boards stand at
 distinct places, and a plan that needs many boards says what limits it."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +9,8 @@ import pytest
 
 from calib_core import calibrate
 from calib_core.data.observations import BoardObservation, Observations
-from calib_core.planning.capture import plan_capture, separation_m
+from calib_core.model.board_error import BoardErrorScale
+from calib_core.planning.capture import plan_capture, plan_summary, separation_m
 from calib_core.planning.observed import plan_from_observations
 from lidarcam.rig.plan_figure import LABEL_MERGE_M
 from lidarcam.rig.plan_rig import load_plan_rig
@@ -54,9 +56,25 @@ def test_proposed_boards_stand_at_distinct_places():
 
 
 def test_a_plan_of_many_boards_says_what_limits_it():
-    rig = load_plan_rig(RIG_FILE)
+    """Without a per-board systematic error the noise limits it: the boards in all with half of each noise."""
+    rig = replace(load_plan_rig(RIG_FILE), board_error=BoardErrorScale())
     plan = plan_capture(rig, 3)
+    assert not plan.limited_by_systematic
     assert plan.to_target is None or plan.to_target > 30
     line = next(ln for ln in plan.summary_lines(rig) if ln.startswith("what limits it"))
     counts = [int(n) for n in __import__("re").findall(r"\): (\d+)", line)]
     assert len(counts) == 2 and all(n < (plan.to_target or 10**9) for n in counts)
+
+
+@pytest.mark.parametrize("offset_mm, limited", [(0.0, False), (20.0, True)])
+def test_a_target_the_per_board_systematic_error_puts_out_of_reach_is_said_in_one_line(offset_mm, limited):
+    rig = replace(load_plan_rig(RIG_FILE), board_error=BoardErrorScale(offset_mm / 1000.0, 0.0))
+    plan = plan_capture(rig, 3, target=(0.05, 2.0))
+    assert plan.to_target is None and plan.limited_by_systematic == limited
+    lines = plan.summary_lines(rig)
+    said = [ln for ln in lines if "limited by the per-board systematic error" in ln and ln.startswith("the target")]
+    assert len(said) == (1 if limited else 0)
+    if limited:
+        assert "20.0 mm offset" in said[0] and not any("not within the planner's limit" in ln for ln in lines)
+        assert "limited by the per-board systematic error" in plan_summary(plan)
+        assert "not reached within" not in plan_summary(plan)

@@ -1,8 +1,10 @@
 """The plan speaks with the calibration's own uncertainty: ``lidarcam plan --from``, the capture verdict of
-``extract``/``bag`` and the report's all start from the covariance the calibration reports (the boards' dispersion
-widening included) and add proposed boards at the same widened noise."""
+``extract``/``bag`` and the report's all predict with the calibration's noise model (the per-board systematic error
+included: stated, estimated or the prior), start from the covariance the calibration reports and add proposed
+boards under the same model."""
 
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,7 +12,7 @@ import pytest
 from calib_core import calibrate
 from calib_core.data.io import save_observations
 from calib_core.geometry.metrics import sigma_rot_deg, sigma_trans_m
-from calib_core.planning.capture import predict
+from calib_core.planning.capture import predict, set_informations
 from calib_core.planning.observed import calibration_widening, plan_from_observations
 from simulate import SimOptions, generate
 
@@ -35,11 +37,40 @@ def test_the_plan_starts_from_the_calibrations_covariance(widened):
     assert p.plan.current.rot_sigma_deg == pytest.approx(sigma_rot_deg(res.covariance), rel=1e-6)
     assert p.plan.current.trans_sigma_mm == pytest.approx(1000 * sigma_trans_m(res.covariance), rel=1e-6)
     model = plan_from_observations(obs, res.T_lidar_cam, 3, info=res.info)
-    assert p.widening > 1.3 and model.widening == 1.0
-    assert p.plan.current.rot_sigma_deg > 1.3 * model.plan.current.rot_sigma_deg
-    # a proposed board counts for what a captured one did: at the noise stds times the widening
+    assert model.widening == 1.0
+    # the model holds the boards' own error (the file's per-board offset): little is left for the widening
+    assert model.board_error.offset_m == pytest.approx(obs.board_range_sigma_m)
+    assert p.widening < 1.3
+    # a proposed board counts for what a captured one did: at the noise stds and scale times the widening
     assert p.range_sigma_m == pytest.approx(model.range_sigma_m * p.widening)
+    assert p.board_error.offset_m == pytest.approx(model.board_error.offset_m * p.widening)
     assert p.plan.after[-1].rot_sigma_deg < p.plan.current.rot_sigma_deg
+
+
+def _unstated(obs):
+    return replace(obs, board_range_sigma_m=None)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("options, unstate, source", [
+    (SimOptions(n_boards=10, pose_mode="pixel", noise_mm=10.0, lidar_board_offset_mm=5.0), False, "stated"),
+    (SimOptions(n_boards=4, pose_mode="pixel", noise_mm=10.0), True, "prior"),
+    (SimOptions(n_boards=8, pose_mode="pixel", noise_mm=10.0, lidar_board_offset_mm=5.0), True, "estimated")])
+def test_the_models_prediction_at_the_captured_boards_is_the_calibrations(options, unstate, source, seed):
+    """Without the calibration's covariance, the plan's own model (noise and per-board systematic scale from the
+    result) predicts the calibration's reported 1-sigma at the boards captured."""
+    obs = generate(options, seed)
+    obs = _unstated(obs) if unstate else obs
+    res = calibrate(obs)
+    assert res.ok and res.info["board_error"]["source"] == source
+    p = plan_from_observations(obs, res.T_lidar_cam, 2, info=res.info)
+    assert p.widening == 1.0 and p.board_error.active
+    assert p.plan.current.rot_sigma_deg == pytest.approx(sigma_rot_deg(res.covariance), rel=0.03)
+    assert p.plan.current.trans_sigma_mm == pytest.approx(1000 * sigma_trans_m(res.covariance), rel=0.03)
+    # without the term the same model would claim a smaller 1-sigma: the term is what the match rests on
+    used = obs.subset(res.info.get("boards_used") or range(obs.n_boards))
+    bare = predict(set_informations(used, res.T_lidar_cam, p.range_sigma_m, p.corner_sigma_px).sum(axis=0))
+    assert bare.rot_sigma_deg < 0.97 * p.plan.current.rot_sigma_deg
 
 
 def test_widening_is_one_for_the_models_own_covariance_and_scales_as_the_noise(rng):
