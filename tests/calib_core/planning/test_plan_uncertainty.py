@@ -101,3 +101,33 @@ def test_every_verb_quotes_one_number(widened, tmp_path, capsys):
         assert float(q.group(1)) == pytest.approx(sigma_rot_deg(res.covariance), abs=0.006)
         assert float(q.group(2)) == pytest.approx(1000 * sigma_trans_m(res.covariance), abs=0.6)
     assert extract_line.split(". (Assumed")[0] in text
+
+
+@pytest.mark.parametrize("corner_sigma_px", [0.0, 0.5])
+def test_the_plans_systematic_part_is_the_calibrations(corner_sigma_px):
+    """``set_systematic``'s per-board parts add up to the covariance the calibration holds: the joint model's
+    (``refine.systematic.with_systematic``) with corners, the range model's (``refinement_covariance``) without."""
+    from calib_core.model.board_error import BoardErrorScale
+    from calib_core.model.corners import scan_data_at
+    from calib_core.refine.joint import _row_offsets, _weighted, board_informations
+    from calib_core.refine.systematic import with_systematic
+    from calib_core.refine.uncertainty import refinement_covariance
+
+    obs = generate(SimOptions(n_boards=6, pose_mode="pixel"), 5)
+    T, sr, scale = obs.T_lidar_cam_true, 0.02, BoardErrorScale(0.006, 0.003)
+    T_b = np.array([b.T_cam_board for b in obs.boards])
+    pairs = set_informations(obs, T, sr, corner_sigma_px, board_error=scale)
+    got = predict(pairs.sum(axis=0)).covariance
+    if corner_sigma_px == 0:
+        want = refinement_covariance(scan_data_at(obs, T_b), T, "range", sr, board_error=scale)
+    else:
+        lin = _weighted(obs, T, T_b, corner_sigma_px, sr, True)
+        _, Jc, Je, Jb = lin
+        oc, os = _row_offsets(obs)
+        H_bb = np.add.reduceat(np.einsum("ra,rb->rab", Jc, Jc), oc) + \
+            np.add.reduceat(np.einsum("ra,rb->rab", Jb, Jb), os)
+        H_eb = np.add.reduceat(np.einsum("ra,rb->rab", Je, Jb), os)
+        C = np.linalg.inv(board_informations(obs, T, T_b, corner_sigma_px, sr).sum(axis=0))
+        want = with_systematic(C, scale, scan_data_at(obs, T_b), T, lin, H_eb, H_bb, sr, os)
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-14)
+    assert np.trace(got) > 1.05 * np.trace(predict(pairs[:, 0].sum(axis=0)).covariance)
