@@ -6,11 +6,13 @@ The calibration's own uncertainty: the plan predicts with the calibration's nois
 per-beam range noise, corner noise, and the per-board systematic error of ``info["board_error"]``; the file's
 stated ``board_range_sigma_m`` or the calibration's prior, ``refine.systematic.DEFAULT_PRIOR``, where the result
 names none), so that the model's 1-sigma of the captured boards is the calibration's. Where a covariance is given,
-the plan's current prediction is that covariance itself, and proposed boards are added under the same noise model
-times ``widening`` = sqrt of the mean eigenvalue of ``S_model C_cal`` (``S_model``: the inverse of the model's
-covariance of the captured boards; 1 when the calibration's covariance is the model's), a factor on the noise
-stds and on the systematic scale alike (so on the covariance as a whole). So the plan's current 1-sigma is the
-calibration's, and a proposed board counts for what a captured one did."""
+the plan's current prediction is that covariance itself (the captured boards' systematic part is set to
+``M0 = H0 C_cal H0 - H0`` so that their sandwich is ``C_cal``; it is the model's own ``M0`` where the model gives
+``C_cal``), and proposed boards are added under the same noise model times ``widening`` = sqrt of the mean
+eigenvalue of ``S_model C_cal`` (``S_model``: the inverse of the model's covariance of the captured boards; 1 when
+the calibration's covariance is the model's), a factor on the noise stds and on the systematic scale alike (so on
+the covariance as a whole). So the plan's current 1-sigma is the calibration's, and a proposed board counts for
+what a captured one did."""
 
 from __future__ import annotations
 
@@ -22,7 +24,7 @@ from ..data.lines import range_sigma
 from ..data.observations import Observations
 from ..model.board_error import BoardErrorScale
 from ..refine.systematic import DEFAULT_PRIOR
-from .capture import DEFAULT_TARGET, Plan, as_pair, plan_capture, predict, set_informations
+from .capture import DEFAULT_TARGET, Plan, plan_capture, predict, set_informations
 from .views import PlanRig, rig_from_observations
 
 DEFAULT_CORNER_SIGMA_PX = 0.5
@@ -128,10 +130,9 @@ def plan_from_observations(obs: Observations, T_lidar_cam: np.ndarray, k: int, *
     widening = calibration_widening(np.linalg.inv(model), covariance) if model is not None else 1.0
     current = infos
     if covariance is not None and widening != 1.0:
-        try:
-            current = as_pair(np.linalg.inv(np.asarray(covariance, float)))[None]
-        except np.linalg.LinAlgError:
-            widening = 1.0
+        H0 = np.sum(infos[:, 0], axis=0) / widening**2        # the captured boards' per-beam information, widened
+        C = np.asarray(covariance, float)
+        current = np.stack([H0, H0 @ C @ H0 - H0])[None]       # sandwich(H0, M0) is the calibration's covariance
     if round(widening, 2) != 1.0:
         source += f", times {widening:.2f} to the calibration's covariance"
     wide = BoardErrorScale(scale.offset_m * widening, scale.tilt_m * widening)
