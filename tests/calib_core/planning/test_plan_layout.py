@@ -78,3 +78,17 @@ def test_a_target_the_per_board_systematic_error_puts_out_of_reach_is_said_in_on
         assert "20.0 mm offset" in said[0] and not any("not within the planner's limit" in ln for ln in lines)
         assert "limited by the per-board systematic error" in plan_summary(plan)
         assert "not reached within" not in plan_summary(plan)
+
+
+def test_the_rig_files_systematic_error_defaults_to_the_calibrations_prior(tmp_path):
+    from calib_core.refine.systematic import DEFAULT_PRIOR
+
+    assert load_plan_rig(RIG_FILE).board_error == DEFAULT_PRIOR
+    text = RIG_FILE.read_text().replace("  range_sigma_mm: 20.0",
+                                        "  range_sigma_mm: 20.0\n  board_offset_mm: 4\n  board_tilt_mm: 0", 1)
+    (tmp_path / "rig.yaml").write_text(text)
+    rig = load_plan_rig(tmp_path / "rig.yaml")
+    assert rig.board_error == BoardErrorScale(0.004, 0.0)
+    bare = replace(rig, board_error=BoardErrorScale())
+    # the term costs information: the same boards predict a larger 1-sigma with it
+    assert plan_capture(rig, 4).after[-1].rot_sigma_deg > plan_capture(bare, 4).after[-1].rot_sigma_deg
