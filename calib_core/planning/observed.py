@@ -133,7 +133,7 @@ def plan_from_observations(obs: Observations, T_lidar_cam: np.ndarray, k: int, *
         H0 = np.sum(infos[:, 0], axis=0) / widening**2        # the captured boards' per-beam information, widened
         C = np.asarray(covariance, float)
         current = np.stack([H0, H0 @ C @ H0 - H0])[None]       # sandwich(H0, M0) is the calibration's covariance
-    if round(widening, 2) != 1.0:
+    if abs(widening - 1.0) >= 0.05:
         source += f", times {widening:.2f} to the calibration's covariance"
     wide = BoardErrorScale(scale.offset_m * widening, scale.tilt_m * widening)
     rig = rig_from_observations(obs, T, sr * widening, sc * widening, base, wide)
