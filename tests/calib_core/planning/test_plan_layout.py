@@ -28,16 +28,18 @@ def _turned(obs: Observations) -> Observations:
     return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta), obs.camera, obs.board_range_sigma_m)
 
 
-@pytest.mark.parametrize("seed", [3, 4])
-def test_the_grids_orientation_does_not_change_the_plan(seed):
+@pytest.mark.parametrize("seed, offset_mm", [(3, 0.0), (4, 0.0), (3, 5.0)])
+def test_the_grids_orientation_does_not_change_the_plan(seed, offset_mm):
+    """With and without a per-board systematic error (the file's stated offset, which the plan holds)."""
     obs = generate(SimOptions(n_boards=8, pose_mode="pixel", board_squares_x=8, board_squares_y=5, max_roll_deg=10.0,
-                              noise_mm=10.0), seed)
+                              noise_mm=10.0, lidar_board_offset_mm=offset_mm), seed)
     plans = []
     for o in (obs, _turned(obs)):
         r = calibrate(o)
         assert r.ok
         plans.append(plan_from_observations(o, r.T_lidar_cam, 4, covariance=r.covariance, info=r.info).plan)
     a, b = plans
+    assert a.board_error.active == (offset_mm > 0) == b.board_error.active
     assert b.current.rot_sigma_deg == pytest.approx(a.current.rot_sigma_deg, rel=1e-3)
     for pa, pb in zip(a.after, b.after, strict=True):
         assert pb.rot_sigma_deg == pytest.approx(pa.rot_sigma_deg, rel=0.1)
