@@ -8,6 +8,14 @@ about the lidar's x, y, z axes), ``dt`` the change of ``t_lidar_cam`` (x, y, z a
 (each board's own pose marginalised), so a plan is a sum of 6x6 matrices: the greedy search adds, one board at a
 time, the feasible pose that most improves the criterion (D-optimal: the largest log-determinant; or the smallest
 variance of one axis, or of the rotation or translation as a whole).
+
+The per-board systematic error (``calib_core.model.board_error``, the rig's ``board_error``) is in every
+prediction as the calibration holds it (``refine.systematic.with_systematic``): the answer is weighed by the
+per-beam noise, so a set's covariance is the sandwich ``H^-1 + H^-1 M H^-1`` of ``H``, the sum of the boards'
+per-beam information, and ``M``, the sum of each board's systematic part (``set_systematic``). A plan's
+"information" is therefore the pair ``(H, M)`` stacked as (..., 2, 6, 6) (a plain (..., 6, 6) is ``H`` with
+``M = 0``): still a sum over boards. Each board adds at most the information its systematic error leaves, so
+where that error dominates, a target may take more boards than the planner's limit (``limited_by_systematic``).
 """
 
 from __future__ import annotations
@@ -16,15 +24,21 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..checks.degeneracy import AXES, NULL_CONDITIONING, undetermined_directions
+from ..checks.degeneracy import AXES, undetermined_directions
 from ..data.observations import MAX_BOARDS, Observations
-from ..errors import LidarcamError, UncertaintyError
-from ..refine.joint import board_informations
-from ..refine.uncertainty import inverse_information
+from ..errors import LidarcamError
+from ..model.board_error import BoardErrorScale
+from .information import (
+    SIGMA_NAMES,
+    Prediction,
+    as_pair,
+    limited_by_systematic,
+    predict,
+    sandwich,
+    set_informations,
+    set_systematic,
+)
 from .views import POSE_FIELDS, REJECTIONS, PlanRig, board_poses_lidar, feasibility, noise_free_views
-
-SIGMA_NAMES = ("roll_deg", "pitch_deg", "yaw_deg", "x_mm", "y_mm", "z_mm")
-"""The per-axis 1-sigma as reported (module docstring)."""
 
 CRITERIA = ("D", "rot", "trans") + AXES
 """``D``: D-optimal; ``rot`` / ``trans``: the trace of the rotation / translation covariance; an axis name: its
@@ -33,10 +47,6 @@ variance."""
 PRIOR_SIGMA = (np.radians(30.0), 3.0)
 """A weak prior (1-sigma: rotation rad, translation m) that keeps the greedy criterion finite while the set does
 not yet determine every direction; it never enters a reported prediction."""
-
-SCALE_M = 4.0
-"""The lever arm (metres) that turns translations into rotation-like units when the rank of an information is
-judged (the typical range of a board; the degeneracy analysis uses the set's own)."""
 
 MAX_PLAN_BOARDS = 200
 """The most boards a plan (current + proposed) is extended to while it looks for the target."""
@@ -48,70 +58,10 @@ class PlanError(LidarcamError):
     """The planner cannot answer: no feasible board pose in the workspace, or an unknown criterion."""
 
 
-@dataclass(frozen=True, eq=False)
-class Prediction:
-    """The predicted 1-sigma of a board set (module docstring for the parameters).
-
-    Attributes:
-        sigma: (6,) per axis, radians then metres, inf where the set does not determine it.
-        rot_sigma_deg, trans_sigma_mm: roots of the traces of the rotation and translation blocks (inf when any
-            of their axes is inf). covariance: the 6x6 inverse information, None when singular.
-    """
-
-    sigma: np.ndarray
-    rot_sigma_deg: float
-    trans_sigma_mm: float
-    covariance: np.ndarray | None
-
-    def sigma_dict(self) -> dict:
-        """``{"roll_deg": ..., ..., "z_mm": ...}``, None where undetermined."""
-        scale = np.r_[np.full(3, np.degrees(1.0)), np.full(3, 1000.0)]
-        return {k: (float(v) if np.isfinite(v) else None) for k, v in zip(SIGMA_NAMES, self.sigma * scale,
-                                                                          strict=True)}
-
-    def meets(self, target: tuple[float, float]) -> bool:
-        """Both ``rot_sigma_deg <= target[0]`` and ``trans_sigma_mm <= target[1]``."""
-        return self.rot_sigma_deg <= target[0] and self.trans_sigma_mm <= target[1]
-
-
-def predict(information: np.ndarray, scale_m: float = SCALE_M) -> Prediction:
-    """The 1-sigma of the extrinsic under the 6x6 Fisher ``information`` (rotation rad then translation m).
-
-    Where it is singular (an eigenvalue below ``NULL_CONDITIONING**2`` of the largest, translations in units of
-    ``scale_m`` as in the degeneracy analysis), an axis is undetermined when the null space reaches it; the others
-    get the variance of an estimable quantity, ``e^T F^+ e``."""
-    F = 0.5 * (np.asarray(information, float) + np.asarray(information, float).T)
-    D = np.r_[np.ones(3), np.full(3, float(scale_m))]
-    lam, V = np.linalg.eigh(F * np.outer(D, D))
-    null = lam <= NULL_CONDITIONING**2 * lam[-1] if lam[-1] > 0 else np.ones(6, bool)
-    cov = None
-    if not null.any():
-        try:
-            cov = inverse_information(F, 1e-12)
-        except UncertaintyError:
-            null = lam <= lam[0]
-    if cov is not None:
-        sigma = np.sqrt(np.diag(cov))
-    else:
-        reach = np.sum(V[:, null] ** 2, axis=1) > 1e-9
-        pinv = (V[:, ~null] / lam[~null]) @ V[:, ~null].T * np.outer(D, D)
-        sigma = np.where(reach, np.inf, np.sqrt(np.clip(np.diag(pinv), 0.0, None)))
-    rot = float(np.degrees(np.sqrt(np.sum(sigma[:3] ** 2))))
-    return Prediction(sigma, rot, float(1000.0 * np.sqrt(np.sum(sigma[3:] ** 2))), cov)
-
-
-def set_informations(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float, corner_sigma_px: float,
-                     T_cam_board: np.ndarray | None = None) -> np.ndarray:
-    """(N,6,6) per-board information of a board set at ``T_lidar_cam`` (``joint.board_informations``), in chunks
-    of at most ``MAX_BOARDS``; range-only for boards without corners or with ``corner_sigma_px <= 0``."""
-    T_b = np.array([b.T_cam_board for b in obs.boards]) if T_cam_board is None else np.asarray(T_cam_board, float)
-    sc = corner_sigma_px if obs.has_corners else 0.0
-    return board_informations(obs, T_lidar_cam, T_b, sc, range_sigma_m)
-
-
 def pool(rig: PlanRig) -> tuple[np.ndarray, np.ndarray]:
-    """The feasible workspace grid: poses (M,6) in ``POSE_FIELDS`` units and their information (M,6,6) under
-    the rig's noise. PlanError when no pose is feasible."""
+    """The feasible workspace grid: poses (M,6) in ``POSE_FIELDS`` units and their information (M,2,6,6) under
+    the rig's noise, per-board systematic error included (``set_informations``). PlanError when no pose is
+    feasible."""
     grid = rig.workspace.grid()
     reason, ranges, bearings = feasibility(rig, board_poses_lidar(rig, grid))
     ok = reason < 0
@@ -124,17 +74,23 @@ def pool(rig: PlanRig) -> tuple[np.ndarray, np.ndarray]:
     infos = []
     for s in range(0, len(poses), MAX_BOARDS):
         views = noise_free_views(rig, T[s:s + MAX_BOARDS], ranges[s:s + MAX_BOARDS], bearings)
-        infos.append(set_informations(views, rig.T_lidar_cam, rig.range_sigma_m, rig.corner_sigma_px))
+        infos.append(set_informations(views, rig.T_lidar_cam, rig.range_sigma_m, rig.corner_sigma_px,
+                                      board_error=rig.board_error))
     return poses, np.concatenate(infos)
 
 
 def _scores(S: np.ndarray, C: np.ndarray, criterion: str) -> np.ndarray:
-    """Criterion per candidate for the information ``S + C_m`` (higher is better), a weak prior added."""
+    """Criterion per candidate for the information ``S + C_m`` (pairs, ``as_pair``; higher is better), a weak
+    prior added to ``H``: of the covariance ``sandwich`` (D-optimal: minus its log-determinant)."""
     prior = np.diag(np.r_[np.full(3, PRIOR_SIGMA[0] ** -2), np.full(3, PRIOR_SIGMA[1] ** -2)])
-    A = S[None] + C + prior[None]
-    if criterion == "D":
+    S, C = as_pair(S), as_pair(C)
+    A = S[0][None] + C[:, 0] + prior[None]
+    M = S[1][None] + C[:, 1]
+    if criterion == "D" and not M.any():
         return np.linalg.slogdet(A)[1]
-    cov = np.linalg.inv(A)
+    cov = sandwich(np.linalg.inv(A), M)
+    if criterion == "D":
+        return -np.linalg.slogdet(cov)[1]
     if criterion == "rot":
         return -np.trace(cov[:, :3, :3], axis1=1, axis2=2)
     if criterion == "trans":
@@ -146,12 +102,14 @@ def _scores(S: np.ndarray, C: np.ndarray, criterion: str) -> np.ndarray:
 def greedy(S0: np.ndarray, candidates: np.ndarray, n: int, criterion: str = "D", centres: np.ndarray | None = None,
            min_separation_m: float = 0.0) -> list[int]:
     """Indices of ``n`` candidates (each at most once) chosen one at a time to maximise ``criterion`` of
-    ``S0 + sum of the chosen candidates' information`` (``candidates`` (M,6,6)). With ``centres`` (M,3, metres), a
+    ``S0 + sum of the chosen candidates' information`` (``candidates`` (M,6,6) or pairs (M,2,6,6), ``as_pair``).
+    With ``centres`` (M,3, metres), a
     candidate closer than ``min_separation_m`` to a board chosen in the current round is passed over, so that the
     proposed boards stand at distinct places; a round ends when every place is taken (boards may then share one)."""
     if criterion not in CRITERIA:
         raise PlanError(f"unknown criterion {criterion!r}; one of {', '.join(CRITERIA)}")
-    S, free, out = np.array(S0, float), np.ones(len(candidates), bool), []
+    candidates = as_pair(candidates)
+    S, free, out = as_pair(np.array(S0, float)), np.ones(len(candidates), bool), []
     taken = np.zeros(len(candidates), bool)
     for _ in range(min(n, len(candidates))):
         if not (free & ~taken).any():
@@ -178,6 +136,8 @@ class Plan:
         extension: predictions after each further greedy board beyond K (for the sigma-vs-boards curve);
         to_target: boards in all (current + proposed) that reach ``target``, None if not within
             ``MAX_PLAN_BOARDS``. T_lidar_board: (K,4,4) the proposed poses in the lidar frame.
+        board_error: the per-board systematic scale the plan holds (the rig's); limited_by_systematic: the target
+            is not reached within ``MAX_PLAN_BOARDS`` and that scale is what stops it (``limited_by_systematic``).
     """
 
     current: Prediction
@@ -193,6 +153,8 @@ class Plan:
     plan_undetermined: tuple[str, ...]
     plan_message: str
     T_lidar_board: np.ndarray
+    board_error: BoardErrorScale = BoardErrorScale()
+    limited_by_systematic: bool = False
 
     def summary_lines(self, rig: PlanRig) -> list[str]:
         """The plan for a reader, one line each (as ``lidarcam plan`` prints it): the current prediction (deg,
@@ -220,10 +182,12 @@ def separation_m(rig: PlanRig) -> float:
 def plan_capture(rig: PlanRig, k: int, *, current: Observations | None = None, current_info: np.ndarray | None = None,
                  target: tuple[float, float] = DEFAULT_TARGET, criterion: str = "D") -> Plan:
     """The next ``k`` board poses for ``rig`` after the boards ``current`` (their per-board information
-    ``current_info`` (N,6,6) at the rig's mounting and noise, e.g. from ``set_informations``), and how many boards
+    ``current_info`` (N,6,6) or pairs (N,2,6,6) at the rig's mounting and noise, e.g. from ``set_informations``
+    with the rig's ``board_error``), and how many boards
     reach ``target`` = (rotation deg, translation mm) of ``rot_sigma_deg`` and ``trans_sigma_mm``."""
     poses, C = pool(rig)
-    S0 = np.zeros((6, 6)) if current_info is None or not len(current_info) else np.sum(current_info, axis=0)
+    S0 = np.zeros((2, 6, 6)) if current_info is None or not len(current_info) else \
+        np.sum(as_pair(current_info), axis=0)
     n0 = 0 if current is None else current.n_boards
     more = max(k, MAX_PLAN_BOARDS - n0)
     T_pool = board_poses_lidar(rig, poses)
@@ -233,13 +197,26 @@ def plan_capture(rig: PlanRig, k: int, *, current: Observations | None = None, c
     preds = [predict(F) for F in cum]
     now = predict(S0)
     reached = [i for i, p in enumerate([now] + preds) if p.meets(target)]
+    limited = not reached and limited_by_systematic(cum[-1], target)
     chosen = order[:k]
     T_new = board_poses_lidar(rig, poses[chosen])
     names, msg = name_undetermined(current, rig.T_lidar_cam, rig.range_sigma_m)
     planned = _with(current, rig, T_new)
     p_names, p_msg = name_undetermined(planned, rig.T_lidar_cam, rig.range_sigma_m)
     return Plan(now, n0, names, msg, poses[chosen], tuple(preds[:k]), tuple(preds[k:]),
-                n0 + reached[0] if reached else None, tuple(target), criterion, p_names, p_msg, T_new)
+                n0 + reached[0] if reached else None, tuple(target), criterion, p_names, p_msg, T_new,
+                rig.board_error, bool(limited))
+
+
+def systematic_words(plan: Plan) -> str:
+    """The one line on a target the per-board systematic error puts out of reach (``Plan.limited_by_systematic``):
+    the scale, and what ``MAX_PLAN_BOARDS`` boards would give."""
+    last = plan.extension[-1] if plan.extension else plan.after[-1] if plan.after else plan.current
+    be = plan.board_error
+    return (f"the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm) is out of reach: limited by the per-board "
+            f"systematic error ({1000 * be.offset_m:.1f} mm offset, {1000 * be.tilt_m:.1f} mm tilt per board caps what "
+            f"each board adds; {plan.current_n + len(plan.after) + len(plan.extension)} boards "
+            f"give {last.rot_sigma_deg:.2f} deg, {last.trans_sigma_mm:.1f} mm)")
 
 
 def _with(current: Observations | None, rig: PlanRig, T_lidar_board: np.ndarray) -> Observations | None:
@@ -274,6 +251,8 @@ def plan_to_dict(plan: Plan) -> dict:
     return {"schema": "lidarcam.plan/1", "criterion": plan.criterion,
             "target": {"rot_sigma_deg": plan.target[0], "trans_sigma_mm": plan.target[1]},
             "boards_to_target": plan.to_target, "verdict": plan_summary(plan),
+            "board_error": {"offset_m": plan.board_error.offset_m, "tilt_m": plan.board_error.tilt_m},
+            "limited_by_systematic": plan.limited_by_systematic,
             "current": {**_pred_dict(plan.current), "undetermined": list(plan.undetermined)},
             "current_boards": plan.current_n, "current_message": plan.message,
             "next": nxt, "after_next": {"undetermined": list(plan.plan_undetermined), "message": plan.plan_message}}
@@ -328,10 +307,14 @@ def _summary_lines(plan: Plan, rig: PlanRig) -> list[str]:
                    + "".join(f" {_fmt(sd[k], 'deg' if k.endswith('deg') else 'mm'):>9}" for k in SIGMA_NAMES))
     if plan.plan_undetermined:
         out.append(f"after these boards: {plan.plan_message}")
-    out.append(f"to reach the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm): "
-               + (f"{plan.to_target} boards in all" if plan.to_target is not None else
-                  "not within the planner's limit of boards; lower the noise or widen the workspace"))
-    if plan.current_n == 0 and (plan.to_target is None or plan.to_target > MANY_BOARDS):
+    if plan.limited_by_systematic:
+        out.append(systematic_words(plan))
+    else:
+        out.append(f"to reach the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm): "
+                   + (f"{plan.to_target} boards in all" if plan.to_target is not None else
+                      "not within the planner's limit of boards; lower the noise or widen the workspace"))
+    if plan.current_n == 0 and not plan.limited_by_systematic and (plan.to_target is None
+                                                                    or plan.to_target > MANY_BOARDS):
         out.append(what_limits(rig, plan))
     _, ranges, _ = feasibility(rig, plan.T_lidar_board)
     out += ["", "checklist at the rig:"]
@@ -381,6 +364,9 @@ def plan_summary(plan: Plan) -> str:
         if plan.current.meets(plan.target):
             return head + f": the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm) is met"
     need = boards_to_add(plan)
+    if need is None and plan.limited_by_systematic:
+        return f"{head}: {systematic_words(plan)}; the most informative next: " + \
+            "; ".join(describe_pose(q) for q in plan.poses)
     if need is None:
         return (f"{head}: the target ({plan.target[0]:g} deg, {plan.target[1]:g} mm) is not reached within "
                 f"{MAX_PLAN_BOARDS} boards; the most informative next: "
@@ -393,6 +379,7 @@ def plan_summary(plan: Plan) -> str:
             + f" ({plan.to_target} boards in all reach {plan.target[0]:g} deg, {plan.target[1]:g} mm)")
 
 
-__all__ = ["CRITERIA", "POSE_FIELDS", "Plan", "PlanError", "PlanRig", "Prediction", "SIGMA_NAMES", "boards_to_add",
-           "describe_pose", "greedy", "name_undetermined", "plan_capture", "plan_summary", "plan_to_dict", "pool",
-           "predict", "set_informations"]
+__all__ = ["CRITERIA", "POSE_FIELDS", "Plan", "PlanError", "PlanRig", "Prediction", "SIGMA_NAMES", "as_pair",
+           "boards_to_add", "describe_pose", "greedy", "limited_by_systematic", "name_undetermined", "plan_capture",
+           "plan_summary", "plan_to_dict", "pool", "predict", "set_informations", "set_systematic",
+           "systematic_words"]

@@ -22,6 +22,8 @@ from ..data.camera import Camera, CameraModel, project
 from ..data.observations import BoardObservation, Observations
 from ..geometry.beams import beam_bearings, board_ranges
 from ..geometry.transforms import invert_T, make_T, rotvec_to_matrix
+from ..model.board_error import BoardErrorScale
+from ..refine.systematic import DEFAULT_PRIOR
 
 POSE_FIELDS = ("distance_m", "bearing_deg", "height_m", "turn_deg", "lean_deg", "roll_deg")
 """The planner's board-pose parameters as they are shown and written (degrees at the edge)."""
@@ -68,6 +70,9 @@ class PlanRig:
         image_margin_px, min_depth_m, min_points: a proposed board lies wholly inside the image by this margin, this
             far in front of the camera, and is cut by the scan plane in at least this many beams.
         workspace: where the board can go.
+        board_error: the per-board systematic error's scale (``calib_core.model.board_error``, metres) each board
+            carries on top of the per-beam noise; default the calibration's prior (``refine.systematic``), the
+            scale ``lidarcam`` assumes where the boards cannot estimate it. Zero: the per-beam noise alone.
     """
 
     camera: CameraModel
@@ -83,6 +88,7 @@ class PlanRig:
     min_depth_m: float = 0.5
     min_points: int = 10
     workspace: Workspace = field(default_factory=Workspace)
+    board_error: BoardErrorScale = DEFAULT_PRIOR
 
 
 def board_poses_lidar(rig: PlanRig, poses: np.ndarray) -> np.ndarray:
@@ -149,9 +155,10 @@ def noise_free_views(rig: PlanRig, T_lidar_board: np.ndarray, ranges: np.ndarray
 
 
 def rig_from_observations(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: float, corner_sigma_px: float,
-                          base: PlanRig | None = None) -> PlanRig:
+                          base: PlanRig | None = None, board_error: BoardErrorScale = DEFAULT_PRIOR) -> PlanRig:
     """The planner's rig of a captured board set: its camera, board (outline and corners of its first board),
-    the extrinsic ``T_lidar_cam`` (e.g. its calibration) and the noise stds given. With ``base`` (a rig
+    the extrinsic ``T_lidar_cam`` (e.g. its calibration) and the noise stds and per-board systematic scale
+    ``board_error`` given. With ``base`` (a rig
     description) the lidar, limits and workspace are ``base``'s; otherwise the lidar's resolution is the median
     bearing step of the scans, and the workspace spans the captured boards' distances (-10 %, +10 %) and bearings
     (+-10 deg) with the default tilts, the boards rolled in their plane as most captured ones are (to the nearest
@@ -173,7 +180,7 @@ def rig_from_observations(obs: Observations, T_lidar_cam: np.ndarray, range_sigm
     if base is not None:
         return PlanRig(camera, T, outline, corners, base.lidar_fov_deg, base.lidar_res_deg, base.lidar_max_range_m,
                        range_sigma_m, corner_sigma_px, base.image_margin_px, base.min_depth_m, base.min_points,
-                       base.workspace)
+                       base.workspace, board_error)
     steps = [np.diff(np.sort(np.arctan2(b.scan[:, 1], b.scan[:, 0]))) for b in obs.boards]
     steps = np.concatenate(steps)
     res_deg = float(np.degrees(np.median(steps[steps > 1e-6]))) if np.any(steps > 1e-6) else 0.25
@@ -185,7 +192,7 @@ def rig_from_observations(obs: Observations, T_lidar_cam: np.ndarray, range_sigm
                    bearing_deg=(bearing.min() - 10.0, bearing.max() + 10.0), roll_deg=(roll, roll))
     fov = min(360.0, 2.0 * max(abs(ws.bearing_deg[0]), abs(ws.bearing_deg[1])) + 40.0)
     return PlanRig(camera, T, outline, corners, fov, res_deg, 1.5 * float(dist.max()) + 5.0, range_sigma_m,
-                   corner_sigma_px, workspace=ws)
+                   corner_sigma_px, workspace=ws, board_error=board_error)
 
 
 def rig_roll_probe(camera: Camera, T_lidar_cam: np.ndarray, outline: np.ndarray, corners: np.ndarray) -> PlanRig:

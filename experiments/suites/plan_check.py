@@ -27,9 +27,10 @@ from calib_core import calibrate
 from calib_core.data.camera import Camera
 from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.mounting import T_from_params
+from calib_core.model.board_error import BoardErrorScale
 from calib_core.planning.capture import plan_capture
 from calib_core.planning.views import PlanRig, Workspace, board_poses_lidar, feasibility
-from simulate import SimOptions, observe_poses
+from simulate import SimOptions, board_range_sigma_m, observe_poses
 from simulate.camera import BoardSpec, CameraError, camera_matrix, checkerboard_corners
 
 from ..engine.cli import positive_float, positive_int, study_parser
@@ -43,12 +44,15 @@ OUT = ROOT / "results" / "plan"
 
 
 def rig_of(o: SimOptions, T_lidar_cam: np.ndarray, workspace: Workspace | None = None) -> PlanRig:
-    """The planner's rig of the simulator's settings ``o`` (its board frame, camera, lidar and noise)."""
+    """The planner's rig of the simulator's settings ``o`` (its board frame, camera, lidar and noise; the
+    per-board systematic scale the simulated files state, ``simulate.board_range_sigma_m``, as the calibration
+    takes it)."""
     cam = Camera(camera_matrix(o.focal_px, o.cam_width, o.cam_height), [], o.cam_width, o.cam_height)
     sc = 0.0 if o.pose_mode == "exact" else o.pixel_noise_px
     return PlanRig(cam, T_lidar_cam, BoardSpec.of(o).outline(), checkerboard_corners(o), o.lidar_fov_deg,
                    o.lidar_res_deg, o.lidar_max_range_m, o.noise_mm / 1000.0, sc, o.image_margin_px + 15.0,
-                   o.min_depth_m, o.min_points_per_board, workspace or Workspace())
+                   o.min_depth_m, o.min_points_per_board, workspace or Workspace(),
+                   BoardErrorScale(board_range_sigma_m(o), 0.0))
 
 
 def random_feasible(rig: PlanRig, k: int, rng: np.random.Generator, batch: int = 256) -> np.ndarray:

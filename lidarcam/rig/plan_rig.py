@@ -24,7 +24,9 @@ import numpy as np
 
 from calib_core.errors import ObservationError
 from calib_core.geometry.mounting import UNIT_NAMES, T_from_params
+from calib_core.model.board_error import BoardErrorScale
 from calib_core.planning.views import POSE_FIELDS, PlanRig, Workspace
+from calib_core.refine.systematic import DEFAULT_PRIOR
 
 from .dataset import DatasetError, board_from_dict, read_yaml
 from .dataset.camera_files import camera_from_mapping, read_camera
@@ -32,7 +34,10 @@ from .dataset.camera_files import camera_from_mapping, read_camera
 TEMPLATE = "plan_template.yaml"
 """The rig description template, a file of this package (``lidarcam plan --template``)."""
 SECTIONS = ("camera", "lidar", "mounting", "board", "workspace")
-LIDAR_KEYS = {"fov_deg": 180.0, "resolution_deg": 0.25, "max_range_m": 30.0, "range_sigma_mm": 20.0}
+LIDAR_KEYS = {"fov_deg": 180.0, "resolution_deg": 0.25, "max_range_m": 30.0, "range_sigma_mm": 20.0,
+              "board_offset_mm": 1000.0 * DEFAULT_PRIOR.offset_m, "board_tilt_mm": 1000.0 * DEFAULT_PRIOR.tilt_m}
+"""The lidar section's keys and defaults; ``board_offset_mm`` / ``board_tilt_mm`` the per-board systematic error
+(``calib_core.model.board_error``), by default the calibration's prior (``calib_core.refine.systematic``)."""
 WORKSPACE_LIMITS = {"image_margin_px": 20.0, "min_points": 10, "min_depth_m": 0.5}
 SYMMETRIC = ("bearing_deg", "turn_deg", "lean_deg", "roll_deg")
 MAX_POSE_BEAMS = 20_000_000
@@ -146,7 +151,8 @@ def rig_from_dict(data: dict, path: Path) -> PlanRig:
     _check_size(workspace, lid, path)
     return PlanRig(camera, T_from_params(theta), np.array(board.outline), board.corners, lid["fov_deg"],
                    lid["resolution_deg"], lid["max_range_m"], lid["range_sigma_mm"] / 1000.0, corner_sigma,
-                   limits["image_margin_px"], limits["min_depth_m"], int(limits["min_points"]), workspace)
+                   limits["image_margin_px"], limits["min_depth_m"], int(limits["min_points"]), workspace,
+                   BoardErrorScale(lid["board_offset_mm"] / 1000.0, lid["board_tilt_mm"] / 1000.0))
 
 
 def template_text() -> str:

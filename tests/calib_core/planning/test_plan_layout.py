@@ -1,6 +1,7 @@
 """Where the plan puts boards: the grid's orientation (8x5 or 5x8) does not change it, proposed boards stand at
 distinct places, and a plan that needs many boards says what limits it."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +9,8 @@ import pytest
 
 from calib_core import calibrate
 from calib_core.data.observations import BoardObservation, Observations
-from calib_core.planning.capture import plan_capture, separation_m
+from calib_core.model.board_error import BoardErrorScale
+from calib_core.planning.capture import plan_capture, plan_summary, separation_m
 from calib_core.planning.observed import plan_from_observations
 from lidarcam.rig.plan_figure import LABEL_MERGE_M
 from lidarcam.rig.plan_rig import load_plan_rig
@@ -26,16 +28,18 @@ def _turned(obs: Observations) -> Observations:
     return Observations(tuple(boards), obs.T_lidar_cam_true, dict(obs.meta), obs.camera, obs.board_range_sigma_m)
 
 
-@pytest.mark.parametrize("seed", [3, 4])
-def test_the_grids_orientation_does_not_change_the_plan(seed):
+@pytest.mark.parametrize("seed, offset_mm", [(3, 0.0), (4, 0.0), (3, 5.0)])
+def test_the_grids_orientation_does_not_change_the_plan(seed, offset_mm):
+    """With and without a per-board systematic error (the file's stated offset, which the plan holds)."""
     obs = generate(SimOptions(n_boards=8, pose_mode="pixel", board_squares_x=8, board_squares_y=5, max_roll_deg=10.0,
-                              noise_mm=10.0), seed)
+                              noise_mm=10.0, lidar_board_offset_mm=offset_mm), seed)
     plans = []
     for o in (obs, _turned(obs)):
         r = calibrate(o)
         assert r.ok
         plans.append(plan_from_observations(o, r.T_lidar_cam, 4, covariance=r.covariance, info=r.info).plan)
     a, b = plans
+    assert a.board_error.active == (offset_mm > 0) == b.board_error.active
     assert b.current.rot_sigma_deg == pytest.approx(a.current.rot_sigma_deg, rel=1e-3)
     for pa, pb in zip(a.after, b.after, strict=True):
         assert pb.rot_sigma_deg == pytest.approx(pa.rot_sigma_deg, rel=0.1)
@@ -54,9 +58,39 @@ def test_proposed_boards_stand_at_distinct_places():
 
 
 def test_a_plan_of_many_boards_says_what_limits_it():
-    rig = load_plan_rig(RIG_FILE)
+    """Without a per-board systematic error the noise limits it: the boards in all with half of each noise."""
+    rig = replace(load_plan_rig(RIG_FILE), board_error=BoardErrorScale())
     plan = plan_capture(rig, 3)
+    assert not plan.limited_by_systematic
     assert plan.to_target is None or plan.to_target > 30
     line = next(ln for ln in plan.summary_lines(rig) if ln.startswith("what limits it"))
     counts = [int(n) for n in __import__("re").findall(r"\): (\d+)", line)]
     assert len(counts) == 2 and all(n < (plan.to_target or 10**9) for n in counts)
+
+
+@pytest.mark.parametrize("offset_mm, limited", [(0.0, False), (20.0, True)])
+def test_a_target_the_per_board_systematic_error_puts_out_of_reach_is_said_in_one_line(offset_mm, limited):
+    rig = replace(load_plan_rig(RIG_FILE), board_error=BoardErrorScale(offset_mm / 1000.0, 0.0))
+    plan = plan_capture(rig, 3, target=(0.05, 2.0))
+    assert plan.to_target is None and plan.limited_by_systematic == limited
+    lines = plan.summary_lines(rig)
+    said = [ln for ln in lines if "limited by the per-board systematic error" in ln and ln.startswith("the target")]
+    assert len(said) == (1 if limited else 0)
+    if limited:
+        assert "20.0 mm offset" in said[0] and not any("not within the planner's limit" in ln for ln in lines)
+        assert "limited by the per-board systematic error" in plan_summary(plan)
+        assert "not reached within" not in plan_summary(plan)
+
+
+def test_the_rig_files_systematic_error_defaults_to_the_calibrations_prior(tmp_path):
+    from calib_core.refine.systematic import DEFAULT_PRIOR
+
+    assert load_plan_rig(RIG_FILE).board_error == DEFAULT_PRIOR
+    text = RIG_FILE.read_text().replace("  range_sigma_mm: 20.0",
+                                        "  range_sigma_mm: 20.0\n  board_offset_mm: 4\n  board_tilt_mm: 0", 1)
+    (tmp_path / "rig.yaml").write_text(text)
+    rig = load_plan_rig(tmp_path / "rig.yaml")
+    assert rig.board_error == BoardErrorScale(0.004, 0.0)
+    bare = replace(rig, board_error=BoardErrorScale())
+    # the term costs information: the same boards predict a larger 1-sigma with it
+    assert plan_capture(rig, 4).after[-1].rot_sigma_deg > plan_capture(bare, 4).after[-1].rot_sigma_deg
