@@ -20,8 +20,8 @@ on ``2N - 6`` degrees of freedom (none at three boards). The prior enters as a n
 PRIOR_LOG_SD)^2``. Unlike a scaled inverse chi-square it lets boards that show no systematic error (a renderer's)
 bring the estimate near zero, and it keeps the estimate near the prior where the boards have few degrees of
 freedom.
-The estimate is each scale's posterior mean over a grid of ``log theta`` (``estimate_scale``), its
-1-sigma the posterior std. With
+The estimate is the square root of each variance's posterior mean over a grid of ``log theta``
+(``estimate_scale``), its 1-sigma the scale's posterior std. With
 ``ESTIMATE_MIN_BOARDS`` boards or more the estimate is used; below, the prior (3-4 boards: 0-2 degrees of freedom
 for two components).
 
@@ -155,11 +155,15 @@ GRID_SCALES_M = np.geomspace(5e-5, 0.05, 61)
 
 def estimate_scale(co: BoardCoefficients, prior: BoardErrorScale = DEFAULT_PRIOR,
                    prior_sd: float = PRIOR_LOG_SD) -> tuple[BoardErrorScale, np.ndarray]:
-    """The scale's estimate (module docstring): the posterior mean of each scale under the restricted likelihood
-    and the prior (``prior_sd`` its width in ``log theta``, ``inf``: the boards alone), over ``GRID_SCALES_M``
-    each; and its 1-sigma (2,) (metres), the posterior std. The mean, not the mode: with few degrees of freedom the
-    restricted likelihood is wide and skewed, and its mode falls near zero by chance on a set of boards that agree;
-    the mean keeps that uncertainty in the scale the covariance uses."""
+    """The scale's estimate (module docstring): the square root of each variance's posterior mean under the
+    restricted likelihood and the prior (``prior_sd`` its width in ``log theta``, ``inf``: the boards alone), over
+    ``GRID_SCALES_M`` each; and the scale's 1-sigma (2,) (metres), its posterior std. A posterior mean, not the
+    mode: with few degrees of freedom the restricted likelihood is wide and skewed, and its mode falls near zero by
+    chance on a set of boards that agree. Of the variance, not of the scale: the covariances that hold the term
+    (the sandwiches of ``with_systematic`` and ``uncertainty.refinement_covariance``) are linear in the variances,
+    so the covariance at the variances' posterior mean is the covariance averaged over what the boards leave
+    uncertain in the scale (the scale's posterior mean would drop its spread: ``E[s]^2 = E[s^2] - sd^2``, 2x too
+    small a variance at 6 boards on EdenShin)."""
     g = np.log(GRID_SCALES_M**2)
     X = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1)                             # (G,G,2) log theta
     logp = restricted_loglik(np.exp(X), co)
@@ -168,9 +172,10 @@ def estimate_scale(co: BoardCoefficients, prior: BoardErrorScale = DEFAULT_PRIOR
     w = np.exp(logp - np.max(logp))
     w /= w.sum()
     s = np.exp(0.5 * X)
-    mean = np.einsum("ij,ijc->c", w, s)
-    sd = np.sqrt(np.maximum(np.einsum("ij,ijc->c", w, s**2) - mean**2, 0.0))
-    return BoardErrorScale(float(mean[0]), float(mean[1])), sd
+    mean, var = np.einsum("ij,ijc->c", w, s), np.einsum("ij,ijc->c", w, s**2)
+    sd = np.sqrt(np.maximum(var - mean**2, 0.0))
+    rms = np.sqrt(var)
+    return BoardErrorScale(float(rms[0]), float(rms[1])), sd
 
 
 def board_error_estimate(obs: Observations, T: np.ndarray, range_sigma_m: float | None = None,
