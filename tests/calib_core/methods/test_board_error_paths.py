@@ -136,3 +136,16 @@ def test_an_estimated_scale_at_six_boards_holds_the_offsets():
         j = joint_refine(obs, obs.T_lidar_cam_true, board_error=est.scale, range_sigma_m=0.005)
         values.append(nees(j.T_lidar_cam, obs.T_lidar_cam_true, j.covariance))
     assert 2.5 < np.median(values) < 9.5, np.median(values)
+
+
+def test_a_subset_past_the_rank_test_yet_singular_is_no_traceback():
+    """Six vertical boards with per-board offsets (the draws of the prior test above, replayed to seed 25): a
+    Zhang & Pless subset whose normal equations pass the rank test yet are exactly singular once raised a
+    LinAlgError out of ``calibrate``; it is now a subset without a solution, and the calibration answers."""
+    rng = np.random.default_rng(11)
+    s_rot, s_t = np.radians(5.0), 0.03
+    for seed in range(26):
+        obs = _offset_boards(vertical_rig(seed, replace(VERTICAL_OPTIONS, n_boards=6)), 0.01, rng)
+        guess = perturb(obs.T_lidar_cam_true, np.r_[rng.normal(0, s_rot, 3), rng.normal(0, s_t, 3)])
+    res = calibrate(obs, "lidarcam", prior=MountingPrior(guess, s_rot, s_t))
+    assert res.ok or res.reason
