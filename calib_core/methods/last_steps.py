@@ -23,7 +23,13 @@ from ..refine.joint import JointOptions
 from ..refine.joint_step import joint_step
 from ..refine.partial import fixed_starts, refine_free
 from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV
-from ..refine.uncertainty import inverse_information, range_board_scores, refinement_covariance
+from ..refine.systematic import fold_noise_ratio
+from ..refine.uncertainty import (
+    inverse_information,
+    range_board_scores,
+    refinement_covariance,
+    systematic_sandwich,
+)
 
 
 def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str,
@@ -48,19 +54,29 @@ def undetermined_failure(obs: Observations, deg: Degeneracy, candidates: np.ndar
                         {"degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
 
 
-def fold_covariance(obs: Observations, T: np.ndarray, deg: Degeneracy) -> np.ndarray:
+def fold_covariance(obs: Observations, T: np.ndarray, deg: Degeneracy,
+                    board_error: BoardErrorScale | None = None) -> np.ndarray:
     """The range model's covariance at ``T`` (6x6 in the parameters of ``data.residuals``) where the degeneracy
     analysis found folds (``Degeneracy.profile``): the first-order information with, along each fold direction
     (an eigen-direction of it), the information of its profile 1-sigma in place of the linear one (``1 / sigma^2``
     in the scaled lidar-origin axes), since the linearisation holds none or next to none there. Noise std:
-    ``deg.range_sigma_m``."""
+    ``deg.range_sigma_m`` (the beams'). ``board_error``: the per-board systematic error held
+    (``model.board_error``): each fold's profile 1-sigma grown by the fourth root of
+    ``refine.systematic.fold_noise_ratio`` and the whole the sandwich of ``refine.uncertainty.systematic_sandwich``
+    (the per-beam estimator under the term); without one, or with a zero one, the per-beam model exactly."""
     T = np.asarray(T, float)
-    e, J = range_linearised(T, obs.scan_data)
+    data = obs.scan_data
+    e, J = range_linearised(T, data)
     A = _origin_axes(T, deg.scale_m)                # scaled lidar-origin axes -> the parameters of data.residuals
+    term = board_error is not None and board_error.active
+    grow = fold_noise_ratio(data, T, board_error, deg.range_sigma_m) ** 0.25 if term else 1.0
     Fs = (J @ A).T @ (J @ A) / deg.range_sigma_m**2
     for v, s in zip(deg.directions[deg.profile], deg.sigmas[deg.profile], strict=True):
-        Fs = Fs + (1.0 / s**2 - v @ Fs @ v) * np.outer(v, v)
-    return A @ inverse_information(Fs, 1e-12) @ A.T
+        Fs = Fs + (1.0 / (grow * s) ** 2 - v @ Fs @ v) * np.outer(v, v)
+    Cs = inverse_information(Fs, 1e-12)
+    if term:
+        Cs = systematic_sandwich(Cs, data, T, J @ A, board_error, deg.range_sigma_m)
+    return A @ Cs @ A.T
 
 
 def _origin_axes(T: np.ndarray, scale_m: float) -> np.ndarray:
@@ -157,19 +173,21 @@ def widened_range_covariance(obs: Observations, T: np.ndarray, cov: np.ndarray, 
 def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray], *,
                       residual: str = "range", loss: str = "linear", f_scale_m: float | None = None,
                       f_scale_sigmas: float = F_SCALE_SIGMAS, range_sigma_m: float | None = None,
-                      max_nfev: int = MAX_NFEV,
-                      fixed_sigma: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+                      max_nfev: int = MAX_NFEV, fixed_sigma: np.ndarray | None = None,
+                      board_error: BoardErrorScale | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Calibrate the free mounting parameters with ``fixed`` ones held (``refine.partial``): from the closed-form
     planar start when roll, pitch and z are given, else from ``full_start()`` (a full calibration's answer);
     refined on ``residual`` (robust scale ``f_scale_m``, default ``f_scale_sigmas`` noise stds); ``fixed_sigma``
-    (6,): the given values' 1-sigma (radians, metres) where they are uncertain. Returns (T_lidar_cam, starts,
+    (6,): the given values' 1-sigma (radians, metres) where they are uncertain; ``board_error``: the per-board
+    systematic error the covariance holds (``refine.partial.refine_free``). Returns (T_lidar_cam, starts,
     info)."""
     mask, values = parse_fixed(fixed)
     sigma = range_sigma(obs, range_sigma_m)
     starts = fixed_starts(obs, mask, values, full_start)
     T, info = refine_free(obs, mask, values, starts, residual=residual, loss=loss,
                               f_scale_m=f_scale_m if f_scale_m is not None else f_scale_sigmas * sigma,
-                              range_sigma_m=range_sigma_m, max_nfev=max_nfev, fixed_sigma=fixed_sigma)
+                              range_sigma_m=range_sigma_m, max_nfev=max_nfev, fixed_sigma=fixed_sigma,
+                              board_error=board_error)
     return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "refine_residual": residual,
                                    "refine_loss": str(loss), "warnings": board_set_warnings(obs)}
 

@@ -177,9 +177,9 @@ def finish(found: Found, opts: LidarcamOptions):
     prior = opts.score.prior
     deg = refuse_undetermined(obs_u, best.T, np.concatenate([best.T[None], C]), "lidarcam", sigma_given,
                               opts.degeneracy, refuse=prior is None)
-    if not deg.determined:              # a mounting prior given: it decides the axes the boards leave free
-        return prior_decides(found, opts, deg)
     est = board_error_estimate(obs_u, best.T, sigma_given) if opts.joint.board_error else None
+    if not deg.determined:              # a mounting prior given: it decides the axes the boards leave free
+        return prior_decides(found, opts, deg, est)
     term = None if est is None else est.scale
     held = est is not None and est.source == ESTIMATED  # the boards' spread is in the term: no widening on top
     joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.choose.loss, options=opts.joint,
@@ -191,7 +191,7 @@ def finish(found: Found, opts: LidarcamOptions):
             jinfo.setdefault("warnings", []).extend(filter(None, [prior_contradiction(T, cov, prior)]))
             cov = with_prior(T, cov, prior)
     else:
-        T, cov = best.T, fold_covariance(obs_u, best.T, deg) if deg.profile.any() else \
+        T, cov = best.T, fold_covariance(obs_u, best.T, deg, term) if deg.profile.any() else \
             range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given, board_error=term)
         jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS, "warnings": []}
         if opts.joint.widen:
@@ -220,8 +220,9 @@ def finish(found: Found, opts: LidarcamOptions):
 
 def noise_model(obs: Observations, T: np.ndarray, jinfo: dict, sigma_given: float | None,
                 corner_given: float | None, est: BoardErrorEstimate | None, fold: bool = False) -> NoiseModel:
-    """``info["noise_model"]`` of ``finish``: the covariance's noise model, each scale with its value and source."""
-    term = est is not None and est.scale.active and not fold
+    """``info["noise_model"]`` of ``finish`` and ``prior_decides``: the covariance's noise model, each scale with
+    its value and source."""
+    term = est is not None and est.scale.active
     joint = jinfo.get("corner_sigma_px") is not None
     if sigma_given is not None:
         r, r_src = float(sigma_given), "stated"
@@ -241,11 +242,12 @@ def noise_model(obs: Observations, T: np.ndarray, jinfo: dict, sigma_given: floa
                       BoardErrorPart.from_info({"board_error": est.to_dict()}) if term else None)
 
 
-def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy):
+def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy, est: BoardErrorEstimate | None = None):
     """Where the boards leave axes free (``deg``) and a mounting prior is given: those axes held at the prior's
     values with its 1-sigma, the others calibrated on the scans (``methods.finish.fixed_calibration``, the range
-    model), the prior's uncertainty carried into the covariance. Axes free only in combination (``deg.aligned``
-    false) cannot be held one by one: refused as without a prior. (T_lidar_cam, candidates, info)."""
+    model, holding the per-board systematic error ``est`` where given), the prior's uncertainty carried into the
+    covariance. Axes free only in combination (``deg.aligned`` false) cannot be held one by one: refused as
+    without a prior. (T_lidar_cam, candidates, info)."""
     best, tests, C, prior = found.best, found.tests, found.search.hypotheses_T, opts.score.prior
     if not deg.aligned:
         raise undetermined_failure(tests.obs_used, deg, np.concatenate([best.T[None], C]), "lidarcam")
@@ -253,10 +255,13 @@ def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy):
     r = opts.choose
     T, _, info = fixed_calibration(tests.obs_used, fixed, lambda: best.T, loss=r.loss, f_scale_m=r.f_scale_m,
                                    f_scale_sigmas=r.f_scale_sigmas, range_sigma_m=opts.range_sigma_m,
-                                   max_nfev=r.max_nfev, fixed_sigma=sigma)
+                                   max_nfev=r.max_nfev, fixed_sigma=sigma,
+                                   board_error=None if est is None else est.scale)
     warnings = tests.warnings + info.pop("warnings") + [deg.message(from_prior=True)]
-    return T, C, {**tests.info, **info, "prior": prior_info(prior), "covariance_model": RANGE_ONLY_MODEL,
-                  "intrinsics": RANGE_ONLY_INTRINSICS, "degeneracy": deg.to_dict(), "warnings": warnings}
+    jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS}
+    return T, C, {**tests.info, **info, "prior": prior_info(prior), **jinfo, "degeneracy": deg.to_dict(),
+                  "warnings": warnings, **({"board_error": est.to_dict()} if est is not None else {}),
+                  "noise_model": noise_model(tests.obs_used, T, jinfo, opts.range_sigma_m, None, est).to_dict()}
 
 
 LIDARCAM = Method("lidarcam", lidarcam, MIN_BOARDS, "this project (lidarcam)",

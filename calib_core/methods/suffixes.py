@@ -10,9 +10,11 @@ from ..checks.degeneracy import explain_failure
 from ..data.lines import range_sigma
 from ..data.observations import Observations
 from ..errors import SolveFailure
+from ..model.board_error import BoardErrorScale
 from ..model.intrinsics import RANGE_ONLY_INTRINSICS
 from ..refine.joint import RANGE_ONLY_MODEL, JointOptions
 from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV, refine
+from ..refine.systematic import ESTIMATED, board_error_estimate
 from ..refine.uncertainty import conditioning
 from ..registry import Method, derived
 from .last_steps import (
@@ -29,9 +31,11 @@ REFINE_OPTIONS = ("loss", "f_scale_m", "range_sigma_m", "max_nfev", "fixed")
 
 
 def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: str = "linear",
-                     f_scale_m: float | None = None, range_sigma_m: float | None = None, max_nfev: int = MAX_NFEV):
+                     f_scale_m: float | None = None, range_sigma_m: float | None = None, max_nfev: int = MAX_NFEV,
+                     board_error: BoardErrorScale | None = None):
     """Refine ``T0`` on ``residual`` (robust scale ``f_scale_m`` metres, default ``F_SCALE_SIGMAS`` noise stds)
-    and compute the covariance; returns (RefineResult, covariance, info).
+    and compute the covariance, holding the per-board systematic error ``board_error`` where given (range
+    residual; ``model.board_error``); returns (RefineResult, covariance, info).
 
     Directions the board geometry leaves free (``calib_core.checks.degeneracy``) are not presented as estimated: a
     SolveFailure names them, with the analysis in its info."""
@@ -40,8 +44,9 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
         f_scale_m = F_SCALE_SIGMAS * range_sigma(obs, range_sigma_m)
     r = refine(data, T0, residual=residual, loss=loss, f_scale_m=f_scale_m, max_nfev=max_nfev)
     deg = refuse_undetermined(obs, r.T_lidar_cam, np.stack([r.T_lidar_cam, T0]), "refinement", range_sigma_m)
-    cov = fold_covariance(obs, r.T_lidar_cam, deg) if residual == "range" and deg.profile.any() else \
-        range_covariance(obs, r.T_lidar_cam, T0[None], "refinement", residual, range_sigma_m)
+    term = board_error if residual == "range" else None
+    cov = fold_covariance(obs, r.T_lidar_cam, deg, term) if residual == "range" and deg.profile.any() else \
+        range_covariance(obs, r.T_lidar_cam, T0[None], "refinement", residual, range_sigma_m, board_error=term)
     cov = profile_floor(r.T_lidar_cam, cov, deg)
     info = {"refine_cost": r.cost, "refine_initial_cost": r.initial_cost, "refine_nfev": r.nfev,
             "refine_residual": residual, "refine_loss": str(loss), "covariance": cov,
@@ -82,31 +87,41 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
     return derived(base, suffix, func, f"{base.name}, then {what}, with covariance", REFINE_OPTIONS)
 
 
-JOINT_OPTIONS = ("loss", "f_scale_sigmas", "range_sigma_m", "corner_sigma_px", "max_iter", "widen", "outline")
-"""Options of an ``X+joint`` method that go to the joint refinement (``f_scale_sigmas`` in noise stds); all others
-go to ``X``."""
+JOINT_OPTIONS = ("loss", "f_scale_sigmas", "range_sigma_m", "corner_sigma_px", "max_iter", "widen", "outline",
+                 "board_error")
+"""Options of an ``X+joint`` method that go to the joint refinement (``f_scale_sigmas`` in noise stds;
+``board_error``: whether its covariance holds the per-board systematic error, as ``lidarcam``'s); all others go to
+``X``."""
 
 
 def joint_method(base: Method) -> Method:
     """The method ``base.name + "+joint"``: run ``base``, then the joint maximum likelihood over the image corners
     and the ranges from its answer (``refine.joint_step``; options ``JOINT_OPTIONS``, ``f_scale_sigmas`` in noise
-    stds), with the extrinsic's covariance, board poses marginalised. Without corners on every board it is
-    ``X+ml`` and says so in ``info["warnings"]`` (its covariance ignores the camera's noise)."""
+    stds), with the extrinsic's covariance, board poses marginalised, holding the per-board systematic error as
+    ``lidarcam`` does (``refine.systematic.board_error_estimate`` at the base's answer; ``info["board_error"]``).
+    Without corners on every board it is ``X+ml`` and says so in ``info["warnings"]`` (its covariance ignores the
+    camera's noise; it holds the per-board term)."""
     def func(obs: Observations, **options):
         jopts = {k: options.pop(k) for k in JOINT_OPTIONS if k in options}
         T0, cands, info = base.func(obs, **options)
         T0 = np.asarray(T0, float)
         loss, sigma = jopts.pop("loss", "linear"), jopts.pop("range_sigma_m", None)
-        joint, why = try_joint(obs, T0, range_sigma_m=sigma, loss=loss, options=JointOptions(**jopts))
+        jo = JointOptions(**jopts)
+        est = board_error_estimate(obs, T0, sigma) if jo.board_error else None
+        term = est.scale if est is not None and est.scale.active else None   # a zero one: the per-beam path
+        held = est is not None and est.source == ESTIMATED
+        berr = {"board_error": est.to_dict()} if est is not None else {}
+        joint, why = try_joint(obs, T0, range_sigma_m=sigma, loss=loss, options=jo, board_error=term,
+                               spread_held=held)
         if joint is not None:
             T, cov, jinfo = joint
             jinfo["conditioning"] = conditioning(obs, T)
             warnings = [*info.get("warnings", []), *jinfo.pop("warnings", [])]
-            return T, cands, {**info, **jinfo, "covariance": cov, "base_T_lidar_cam": T0,
+            return T, cands, {**info, **jinfo, "covariance": cov, "base_T_lidar_cam": T0, **berr,
                               **({"warnings": warnings} if warnings else {})}
-        r, _, rinfo = refine_and_cover(obs, T0, "range", loss=loss, range_sigma_m=sigma)
+        r, _, rinfo = refine_and_cover(obs, T0, "range", loss=loss, range_sigma_m=sigma, board_error=term)
         warn = f"{why}: range-only maximum likelihood; its covariance ignores the camera's noise"
-        return r.T_lidar_cam, cands, {**info, **rinfo, "base_T_lidar_cam": T0,
+        return r.T_lidar_cam, cands, {**info, **rinfo, "base_T_lidar_cam": T0, **berr,
                                       "warnings": [*info.get("warnings", []), warn]}
 
     return derived(base, "joint", func, f"{base.name}, then joint maximum likelihood over image corners and "

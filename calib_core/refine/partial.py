@@ -15,11 +15,12 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from ..data.lines import tls_line
+from ..data.lines import range_sigma, tls_line
 from ..data.observations import Observations
 from ..errors import SolveFailure, UncertaintyError
 from ..geometry.mounting import PARAMS, UNIT_NAMES, T_from_params, params_from_T, params_jacobian, with_units
 from ..geometry.transforms import make_T
+from ..model.board_error import BoardErrorScale
 from ..model.residuals import RESIDUALS
 from .refine import MAX_NFEV, loss_name
 from .uncertainty import refinement_covariance
@@ -123,7 +124,8 @@ def _refine_free(obs: Observations, theta0: np.ndarray, free: np.ndarray, residu
 def refine_free(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.ndarray, starts: list[np.ndarray],
                     *, residual: str = "range", loss: str = "linear", f_scale_m: float = 1.0,
                     range_sigma_m: float | None = None, max_nfev: int = MAX_NFEV,
-                    fixed_sigma: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+                    fixed_sigma: np.ndarray | None = None,
+                    board_error: BoardErrorScale | None = None) -> tuple[np.ndarray, dict]:
     """Refine the free mounting parameters from each start (its fixed parameters replaced by the given values)
     and keep the least cost; returns ``T_lidar_cam`` and ``info``.
 
@@ -136,7 +138,10 @@ def refine_free(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.ndar
     (radians, metres; read at the fixed ones), when they are uncertain (a mounting prior's): the covariance then
     carries it, to the fixed parameters and through the fit to the free ones (``fixed_propagated``), so both
     covariances have full rank and ``mounting_sigma`` holds all six (the answer stays the fit at the given
-    values). Raises SolveFailure when no start is given or the free parameters are still not determined.
+    values). ``board_error``: the per-board systematic error (``model.board_error``) the free parameters'
+    covariance holds (``uncertainty.refinement_covariance``; the beams' noise then the scan lines' unless
+    ``range_sigma_m``); None or a zero one: the per-beam model exactly. Raises SolveFailure when no start is given
+    or the free parameters are still not determined.
     """
     fixed_mask = np.asarray(fixed_mask, bool)
     free = ~fixed_mask
@@ -153,7 +158,10 @@ def refine_free(obs: Observations, fixed_mask: np.ndarray, fixed_values: np.ndar
     T = T_from_params(theta)
     M = params_jacobian(theta)
     try:
-        C_free = refinement_covariance(obs.scan_data, T, residual, range_sigma_m, basis=M[:, free])
+        term = board_error is not None and board_error.active and residual == "range"
+        C_free = refinement_covariance(obs.scan_data, T, residual,
+                                       range_sigma(obs, range_sigma_m) if term else range_sigma_m,
+                                       basis=M[:, free], board_error=board_error if term else None)
     except UncertaintyError as err:
         names = ", ".join(n for n, f in zip(UNIT_NAMES, free, strict=True) if f)
         raise SolveFailure(f"the free parameters ({names}) are still not determined with the others fixed: {err}",

@@ -20,8 +20,8 @@ on ``2N - 6`` degrees of freedom (none at three boards). The prior enters as a n
 PRIOR_LOG_SD)^2``. Unlike a scaled inverse chi-square it lets boards that show no systematic error (a renderer's)
 bring the estimate near zero, and it keeps the estimate near the prior where the boards have few degrees of
 freedom.
-The estimate is each scale's posterior mean over a grid of ``log theta`` (``estimate_scale``), its
-1-sigma the posterior std. With
+The estimate is the square root of each variance's posterior mean over a grid of ``log theta``
+(``estimate_scale``), its 1-sigma the scale's posterior std. With
 ``ESTIMATE_MIN_BOARDS`` boards or more the estimate is used; below, the prior (3-4 boards: 0-2 degrees of freedom
 for two components).
 
@@ -118,6 +118,19 @@ def _camera_part(obs: Observations, T: np.ndarray, B: np.ndarray, Gi: np.ndarray
     return Cb @ Sb @ np.swapaxes(Cb, 1, 2)
 
 
+ESTIMABLE_RCOND = 1e-9
+"""Relative eigenvalue of ``sum C_i^T C_i`` below which a direction of the extrinsic is not in the coefficients at
+all (the boards leave it free): ``_estimable`` drops it from what the restricted likelihood integrates out."""
+
+
+def _estimable(C: np.ndarray) -> np.ndarray:
+    """The coefficients' extrinsic Jacobian ``C`` (N,2,6) on the directions of the extrinsic it sees (N,2,r): the
+    eigen-directions of ``sum C_i^T C_i`` above ``ESTIMABLE_RCOND`` of the largest. A direction the boards leave
+    free moves no coefficient, so it is no parameter of theirs to integrate out (with it ``A`` is singular)."""
+    w, U = np.linalg.eigh(np.einsum("nap,naq->pq", C, C))
+    return C @ U[:, w > ESTIMABLE_RCOND * max(float(w[-1]), 1e-300)]
+
+
 def restricted_loglik(theta: np.ndarray, co: BoardCoefficients) -> np.ndarray:
     """``l_R(theta)`` (module docstring) at the variances ``theta`` (..., 2) (m^2), without the prior."""
     theta = np.asarray(theta, float)
@@ -125,8 +138,9 @@ def restricted_loglik(theta: np.ndarray, co: BoardCoefficients) -> np.ndarray:
     th = theta.reshape(-1, 1, 2)
     V = co.K[None] + th[..., :, None] * np.eye(2)                                     # (M,N,2,2)
     Vi = np.linalg.inv(V)
-    A = np.einsum("nap,mnab,nbq->mpq", co.C, Vi, co.C)
-    b = np.einsum("nap,mnab,nb->mp", co.C, Vi, co.c)
+    Cq = _estimable(co.C)
+    A = np.einsum("nap,mnab,nbq->mpq", Cq, Vi, Cq)
+    b = np.einsum("nap,mnab,nb->mp", Cq, Vi, co.c)
     sA, ldA = np.linalg.slogdet(A)
     quad = np.einsum("na,mnab,nb->m", co.c, Vi, co.c) - np.einsum("mp,mp->m", b,
                                                                    np.linalg.solve(A, b[..., None])[..., 0])
@@ -141,11 +155,15 @@ GRID_SCALES_M = np.geomspace(5e-5, 0.05, 61)
 
 def estimate_scale(co: BoardCoefficients, prior: BoardErrorScale = DEFAULT_PRIOR,
                    prior_sd: float = PRIOR_LOG_SD) -> tuple[BoardErrorScale, np.ndarray]:
-    """The scale's estimate (module docstring): the posterior mean of each scale under the restricted likelihood
-    and the prior (``prior_sd`` its width in ``log theta``, ``inf``: the boards alone), over ``GRID_SCALES_M``
-    each; and its 1-sigma (2,) (metres), the posterior std. The mean, not the mode: with few degrees of freedom the
-    restricted likelihood is wide and skewed, and its mode falls near zero by chance on a set of boards that agree;
-    the mean keeps that uncertainty in the scale the covariance uses."""
+    """The scale's estimate (module docstring): the square root of each variance's posterior mean under the
+    restricted likelihood and the prior (``prior_sd`` its width in ``log theta``, ``inf``: the boards alone), over
+    ``GRID_SCALES_M`` each; and the scale's 1-sigma (2,) (metres), its posterior std. A posterior mean, not the
+    mode: with few degrees of freedom the restricted likelihood is wide and skewed, and its mode falls near zero by
+    chance on a set of boards that agree. Of the variance, not of the scale: the covariances that hold the term
+    (the sandwiches of ``with_systematic`` and ``uncertainty.refinement_covariance``) are linear in the variances,
+    so the covariance at the variances' posterior mean is the covariance averaged over what the boards leave
+    uncertain in the scale (the scale's posterior mean would drop its spread: ``E[s]^2 = E[s^2] - sd^2``, 2x too
+    small a variance at 6 boards on EdenShin)."""
     g = np.log(GRID_SCALES_M**2)
     X = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1)                             # (G,G,2) log theta
     logp = restricted_loglik(np.exp(X), co)
@@ -154,9 +172,10 @@ def estimate_scale(co: BoardCoefficients, prior: BoardErrorScale = DEFAULT_PRIOR
     w = np.exp(logp - np.max(logp))
     w /= w.sum()
     s = np.exp(0.5 * X)
-    mean = np.einsum("ij,ijc->c", w, s)
-    sd = np.sqrt(np.maximum(np.einsum("ij,ijc->c", w, s**2) - mean**2, 0.0))
-    return BoardErrorScale(float(mean[0]), float(mean[1])), sd
+    mean, var = np.einsum("ij,ijc->c", w, s), np.einsum("ij,ijc->c", w, s**2)
+    sd = np.sqrt(np.maximum(var - mean**2, 0.0))
+    rms = np.sqrt(var)
+    return BoardErrorScale(float(rms[0]), float(rms[1])), sd
 
 
 def board_error_estimate(obs: Observations, T: np.ndarray, range_sigma_m: float | None = None,
@@ -172,6 +191,22 @@ def board_error_estimate(obs: Observations, T: np.ndarray, range_sigma_m: float 
     scale, se = estimate_scale(board_coefficients(obs, T, range_sigma_m), prior)
     se = [float(v) if np.isfinite(v) else None for v in se]
     return BoardErrorEstimate(scale, ESTIMATED, dof, se[0], se[1], prior)
+
+
+def fold_noise_ratio(data: ScanData, T: np.ndarray, scale: BoardErrorScale, range_sigma_m: float) -> float:
+    """How much the per-board systematic error ``scale`` adds to what the beams' noise (std ``range_sigma_m``)
+    leaves in the boards' offsets and tilts at the extrinsic ``T``: ``sum_i tr(sigma^2 G_i^-1 + P) / sum_i
+    tr(sigma^2 G_i^-1)`` (module docstring; 1 without the term). At a fold of three boards' solutions the answer
+    along the fold moves with these coefficients at second order (its profile likelihood is quartic there), so
+    the fold's profile 1-sigma, computed under the beams' noise alone, grows by this ratio's fourth root
+    (``methods.last_steps.fold_covariance``): the ratio of the effective noise's variance to the beams', taken
+    over the boards alike since the fold's own combination of them is not at hand."""
+    if not scale.active:
+        return 1.0
+    B = systematic_basis(data, data.normals @ np.asarray(T, float)[:3, :3].T)
+    G = _per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, len(data.normals))
+    known = float(range_sigma_m) ** 2 * np.trace(np.linalg.inv(G), axis1=1, axis2=2)
+    return float((known.sum() + len(known) * scale.variances.sum()) / known.sum())
 
 
 def with_systematic(C: np.ndarray, scale: BoardErrorScale | None, data: ScanData, T_e: np.ndarray, lin: tuple,

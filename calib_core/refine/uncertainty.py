@@ -149,6 +149,22 @@ def normal_spread_deg(obs: Observations) -> float:
     return float(np.degrees(np.arcsin(np.sqrt(np.clip(2 * lam[0], 0.0, 1.0)))))
 
 
+def systematic_sandwich(Ai: np.ndarray, data: ScanData, T_lidar_cam: np.ndarray, J: np.ndarray,
+                        board_error: BoardErrorScale, range_sigma_m: float) -> np.ndarray:
+    """The covariance ``Ai`` (k,k) of a per-beam range estimator (the inverse of its information ``J^T J /
+    sigma^2``, or any stand-in for it, e.g. ``methods.last_steps.fold_covariance``'s) with the per-board
+    systematic error ``board_error`` (``model.board_error``) held: the sandwich ``Ai + Ai M Ai``, ``M = sum_i
+    V_i^T P V_i / sigma^4``, ``V_i = B_i^T J_i`` (``J`` (K,k) the range residuals' Jacobian in the estimator's
+    parameters, ``B`` the term's columns at ``T_lidar_cam``, ``P`` its variances, ``sigma = range_sigma_m`` the
+    beams' noise). ``Ai`` itself when the term holds no error."""
+    if not board_error.active:
+        return Ai
+    V = _per_board_sum(np.einsum("ka,kp->kap", systematic_basis(data, data.normals @ T_lidar_cam[:3, :3].T), J),
+                       data.board, len(data.normals))                                       # (N,2,k)
+    C = Ai + Ai @ np.einsum("nap,a,naq->pq", V, board_error.variances, V) @ Ai / float(range_sigma_m) ** 4
+    return 0.5 * (C + C.T)
+
+
 def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str = "range",
                           range_sigma_m: float | None = None, basis: np.ndarray | None = None,
                           board_error: BoardErrorScale | None = None) -> np.ndarray:
@@ -173,11 +189,8 @@ def refinement_covariance(data: ScanData, T_lidar_cam: np.ndarray, residual: str
         if range_sigma_m is None:
             raise UncertaintyError("the per-board systematic term needs the beams' range noise std")
         s2 = float(range_sigma_m) ** 2
-        Ai = inverse_information(J_r.T @ J_r / s2, 1e-12)
-        V = _per_board_sum(np.einsum("ka,kp->kap", systematic_basis(data, data.normals @ T[:3, :3].T), J_r),
-                           data.board, len(data.normals))                                   # (N,2,k)
-        C = Ai + Ai @ np.einsum("nap,a,naq->pq", V, board_error.variances, V) @ Ai / s2**2
-        return 0.5 * (C + C.T)
+        return systematic_sandwich(inverse_information(J_r.T @ J_r / s2, 1e-12), data, T, J_r, board_error,
+                                   float(range_sigma_m))
     if residual == "range":
         return covariance(J_r, e_r, range_sigma_m)
     if residual != "plane":

@@ -73,7 +73,16 @@ def linear_subsets(obs: Observations, subsets: np.ndarray, *, rank_tol: float = 
     GS = GS / scale[:, :, None] / scale[:, None, :]
     ev = np.linalg.eigvalsh(GS)                                             # squared singular values, ascending
     full = np.sqrt(np.maximum(ev[:, 0], 0.0)) >= rank_tol * np.sqrt(ev[:, -1])
-    h = np.linalg.solve(np.where(full[:, None, None], GS, np.eye(9)), (gS / scale)[..., None])[..., 0] / scale
+    A = np.where(full[:, None, None], GS, np.eye(9))
+    try:
+        h = np.linalg.solve(A, (gS / scale)[..., None])[..., 0] / scale
+    except np.linalg.LinAlgError:   # a subset past the rank test yet exactly singular: not of full rank after all
+        h = np.zeros((len(A), 9))
+        for s, (a, b) in enumerate(zip(A, gS / scale, strict=True)):
+            try:
+                h[s] = np.linalg.solve(a, b) / scale[s]
+            except np.linalg.LinAlgError:
+                full[s], h[s] = False, np.eye(3).ravel()
     H = h.reshape(-1, 3, 3)
     phi1, phi2, Delta = H[..., 0], H[..., 1], H[..., 2]
     Phi = project_to_so3(np.stack([phi1, phi2, np.cross(phi1, phi2)], axis=-1))

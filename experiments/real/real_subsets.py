@@ -218,3 +218,54 @@ def fig8(gray: np.ndarray, camera, board, answers: dict[str, np.ndarray], path: 
     fig.text(0.01, 1 - 4 / (h + head), "\n".join(lines), fontsize=TITLE_PT, va="top")
     fig.savefig(path)
     return fig
+
+
+def own_nees(name: str, obs: Observations, method: str = PRIOR_METHOD, n: int = N_SUBSETS,
+             seed: int = 0) -> pd.DataFrame:
+    """``method`` on all boards and on each subset of ``subsets(...)``, judged against its own all-board answer:
+    one row per subset with ``ok``, the errors ``e_R_deg``/``e_t_m``, ``valid`` (8 deg / 0.8 m), ``valid_3sigma``
+    (within ``SIGMAS`` of the all-board answer's 1-sigma, as ``valid_columns``), ``nees`` (the subset's covariance
+    against the all-board answer, ``geometry.metrics.nees``; the all-board answer's own error left out, so the
+    NEES is an upper bound where the subset shares boards with it), ``own_3sigma`` (within ``SIGMAS`` of the
+    subset's own 1-sigma, rotation and translation) and the verdict's warnings that flag a weak choice
+    (``weak``: runners-up or a fold)."""
+    from calib_core.geometry.metrics import nees
+
+    ref = calib_core.calibrate(obs, method)
+    if not ref.ok:
+        raise RuntimeError(f"{name}: {method} refuses all {obs.n_boards} boards: {ref.reason}")
+    rows = []
+    for s in subsets(name, obs.n_boards, n=n, seed=seed):
+        res = calib_core.calibrate(obs.subset(list(s)), method)
+        row = {"set": name, "n_boards": len(s), "subset": " ".join(map(str, s)), "ok": res.ok,
+               "e_R_deg": math.nan, "e_t_m": math.nan, "nees": math.nan, "own_3sigma": False,
+               "weak": any(w.startswith("weakly decided") or "fold" in w for w in res.warnings),
+               "reason": "" if res.ok else str(res.reason)[:120]}
+        if res.ok:
+            row["e_R_deg"], row["e_t_m"] = pose_errors(res.T_lidar_cam, ref.T_lidar_cam)
+            if res.covariance is not None:
+                row["nees"] = nees(res.T_lidar_cam, ref.T_lidar_cam, res.covariance)
+            if res.sigma_rot_deg and res.sigma_trans_mm:
+                row["own_3sigma"] = bool(row["e_R_deg"] < SIGMAS * res.sigma_rot_deg and
+                                         row["e_t_m"] < SIGMAS * res.sigma_trans_mm / 1000)
+        rows.append(row)
+    df = pd.DataFrame(rows)
+    df["valid"] = (df["e_R_deg"] < VALID_DEG) & (df["e_t_m"] < VALID_M)
+    df["valid_3sigma"] = (df["e_R_deg"] < SIGMAS * ref.sigma_rot_deg) & \
+        (df["e_t_m"] < SIGMAS * ref.sigma_trans_mm / 1000)
+    return df
+
+
+def own_nees_table(df: pd.DataFrame) -> list[str]:
+    """Markdown of ``own_nees`` rows: per set and board count the NEES median (answered subsets), the valid rate,
+    the rate within 3 of the all-board answer's sigmas and within 3 of the subset's own, and the weak-choice
+    warnings' rate among the invalid answers."""
+    rows = []
+    for (s, k), d in df.groupby(["set", "n_boards"]):
+        bad = d[d["ok"] & ~d["valid"]]
+        rows.append([s, str(k), f"{np.nanmedian(d['nees']):.1f}", f"{100 * d['ok'].mean():.0f}%",
+                     f"{100 * d['valid'].mean():.0f}%", f"{100 * d['valid_3sigma'].mean():.0f}%",
+                     f"{100 * d['own_3sigma'].mean():.0f}%",
+                     f"{int(bad['weak'].sum())}/{len(bad)}"])
+    return md_table(["set", "boards", "NEES median", "answered", "valid", "within 3 sigma (all-board's)",
+                     "within 3 own sigma", "invalid with a weak-choice warning"], rows, "llrrrrrr")
