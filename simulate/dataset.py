@@ -18,7 +18,7 @@ import numpy as np
 from calib_core.geometry.transforms import invert_T, make_T
 
 from . import trial_rngs
-from .camera import BACKGROUND, BoardSpec, camera_matrix, checkerboard_corners, render_board_image
+from .camera import BACKGROUND, BoardSpec, camera_matrix, checkerboard_corners, render_board_image, undistort_points
 from .lens import is_default, true_camera
 from .lens_render import render_board_lens
 from .lidar import beam_bearings, board_ranges, scan_chords
@@ -80,16 +80,12 @@ def room_ranges(bearings: np.ndarray, walls: np.ndarray, yaw: float, room: RoomO
     return np.minimum(r, np.where(rp > 0, rp, np.inf))
 
 
-UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-
-
 def distortion_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int):
     """Where each pixel of a distorted (width x height) image lies in a pinhole canvas: (K_big, W_big, H_big,
     map_x, map_y). Render the pinhole view with ``K_big`` on ``W_big x H_big``, then ``cv2.remap`` it with the
     maps (see ``distort_image``)."""
     v, u = np.mgrid[0:height, 0:width].astype(np.float64)
-    und = cv2.undistortPoints(np.column_stack([u.ravel(), v.ravel()]).reshape(-1, 1, 2), K, dist, None, K,
-                              criteria=UNDISTORT_CRITERIA).reshape(-1, 2)
+    und = undistort_points(np.column_stack([u.ravel(), v.ravel()]), K, dist)
     lo = np.floor(und.min(axis=0)) - 2
     hi = np.ceil(und.max(axis=0)) + 2
     Kb = np.asarray(K, float).copy()
