@@ -20,7 +20,7 @@ from calib_core.geometry.transforms import invert_T, make_T
 from . import trial_rngs
 from .camera import BACKGROUND, BoardSpec, camera_matrix, checkerboard_corners, render_board_image, undistort_points
 from .lens import is_default, true_camera
-from .lens_render import render_board_lens
+from .lens_render import render_lens_view
 from .lidar import beam_bearings, board_ranges, scan_chords
 from .options import SimOptions
 from .patterns import Pattern, texture_source
@@ -228,10 +228,7 @@ def _renderer(o: SimOptions, K: np.ndarray, dist: np.ndarray, lens, pattern: Pat
     def render(T_cam_board: np.ndarray) -> np.ndarray:
         def ideal(Kr, W, H):
             if lens is not None:
-                corners = np.column_stack([spec.outline(), np.zeros(4)]) @ T_cam_board[:3, :3].T + T_cam_board[:3, 3]
-                d = np.linalg.norm(corners, axis=1).min()   # texels of at most half a supersampled pixel there
-                tex = None if pattern is None else texture(lens.K[0, 0] * o.render_supersample / max(d, 0.05) / 0.5)
-                img = render_board_lens(lens, T_cam_board, spec, o.render_supersample, texture=tex)
+                img = render_lens_view(lens, T_cam_board, spec, o.render_supersample, texture)
             else:
                 img = render_board_image(Kr, T_cam_board, spec, W, H, o.render_supersample,
                                          texture=None if pattern is None else texture)
