@@ -24,6 +24,21 @@ from calib_core.geometry.transforms import make_T
 WHITE, BLACK, BACKGROUND = 230.0, 25.0, 110.0  # grey levels of the board, its black squares, the world
 
 
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+"""Undistortion's iterations and tolerance (OpenCV's default of 5 iterations is too few for strong distortion)."""
+
+
+def undistort_points(px: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """(N,2) pixels ``px`` undistorted (OpenCV's model, coefficients ``dist``) into the pinhole ``K``'s pixels, with
+    ``UNDISTORT_CRITERIA``: ``cv2.undistortPointsIter`` in OpenCV 4 (whose ``undistortPoints`` takes no criteria),
+    ``cv2.undistortPoints(criteria=)`` in OpenCV 5. The same fallback as ``lidarcam.rig.detect.undistort_points``
+    (simulate and lidarcam.rig may not import each other: tests/test_layers.py)."""
+    pts = np.asarray(px, np.float64).reshape(-1, 1, 2)
+    if hasattr(cv2, "undistortPointsIter"):
+        return cv2.undistortPointsIter(pts, K, dist, None, K, UNDISTORT_CRITERIA).reshape(-1, 2)
+    return cv2.undistortPoints(pts, K, dist, P=K, criteria=UNDISTORT_CRITERIA).reshape(-1, 2)
+
+
 class CameraError(RuntimeError):
     """The simulated camera could not produce a board pose (no detection, PnP failure)."""
 

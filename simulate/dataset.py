@@ -18,9 +18,9 @@ import numpy as np
 from calib_core.geometry.transforms import invert_T, make_T
 
 from . import trial_rngs
-from .camera import BACKGROUND, BoardSpec, camera_matrix, checkerboard_corners, render_board_image
+from .camera import BACKGROUND, BoardSpec, camera_matrix, checkerboard_corners, render_board_image, undistort_points
 from .lens import is_default, true_camera
-from .lens_render import render_board_lens
+from .lens_render import render_lens_view
 from .lidar import beam_bearings, board_ranges, scan_chords
 from .options import SimOptions
 from .patterns import Pattern, texture_source
@@ -80,16 +80,12 @@ def room_ranges(bearings: np.ndarray, walls: np.ndarray, yaw: float, room: RoomO
     return np.minimum(r, np.where(rp > 0, rp, np.inf))
 
 
-UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-
-
 def distortion_maps(K: np.ndarray, dist: np.ndarray, width: int, height: int):
     """Where each pixel of a distorted (width x height) image lies in a pinhole canvas: (K_big, W_big, H_big,
     map_x, map_y). Render the pinhole view with ``K_big`` on ``W_big x H_big``, then ``cv2.remap`` it with the
     maps (see ``distort_image``)."""
     v, u = np.mgrid[0:height, 0:width].astype(np.float64)
-    und = cv2.undistortPoints(np.column_stack([u.ravel(), v.ravel()]).reshape(-1, 1, 2), K, dist, None, K,
-                              criteria=UNDISTORT_CRITERIA).reshape(-1, 2)
+    und = undistort_points(np.column_stack([u.ravel(), v.ravel()]), K, dist)
     lo = np.floor(und.min(axis=0)) - 2
     hi = np.ceil(und.max(axis=0)) + 2
     Kb = np.asarray(K, float).copy()
@@ -232,10 +228,7 @@ def _renderer(o: SimOptions, K: np.ndarray, dist: np.ndarray, lens, pattern: Pat
     def render(T_cam_board: np.ndarray) -> np.ndarray:
         def ideal(Kr, W, H):
             if lens is not None:
-                corners = np.column_stack([spec.outline(), np.zeros(4)]) @ T_cam_board[:3, :3].T + T_cam_board[:3, 3]
-                d = np.linalg.norm(corners, axis=1).min()   # texels of at most half a supersampled pixel there
-                tex = None if pattern is None else texture(lens.K[0, 0] * o.render_supersample / max(d, 0.05) / 0.5)
-                img = render_board_lens(lens, T_cam_board, spec, o.render_supersample, texture=tex)
+                img = render_lens_view(lens, T_cam_board, spec, o.render_supersample, texture)
             else:
                 img = render_board_image(Kr, T_cam_board, spec, W, H, o.render_supersample,
                                          texture=None if pattern is None else texture)

@@ -86,3 +86,16 @@ def image_corners(camera, T_cam_board: np.ndarray, spec, rng: np.random.Generato
     if uv is None or len(uv) != len(checkerboard_corners(spec)):
         raise CameraError("checkerboard not detected in the image rendered through the lens")
     return uv
+
+
+def render_lens_view(camera, T_cam_board: np.ndarray, spec, supersample: int, texture=None) -> np.ndarray:
+    """``render_board_lens`` of the checkerboard or of a pattern (``texture(ppm) -> (image, ppm)``,
+    ``simulate.patterns.texture_source``), its texture fine enough for half a supersampled pixel at the board's
+    nearest corner (at least 0.05 m away). Grey uint8 image; CameraError as ``render_board_lens``."""
+    from .camera import BoardSpec
+
+    outline = BoardSpec.of(spec).outline()
+    corners = np.column_stack([outline, np.zeros(len(outline))]) @ T_cam_board[:3, :3].T + T_cam_board[:3, 3]
+    d = np.linalg.norm(corners, axis=1).min()
+    tex = None if texture is None else texture(camera.K[0, 0] * supersample / max(d, 0.05) / 0.5)
+    return render_board_lens(camera, T_cam_board, spec, supersample, texture=tex)

@@ -6,8 +6,10 @@ every still pose detected in its rendered image), then plays a timeline: still a
 eased move (slerp + linear, zero speed at both ends) to pose 1 over ``move_s``, still at pose 1, ... Images
 (``sensor_msgs/Image`` mono8 or ``CompressedImage`` png/jpeg) are stamped with the true time; scans
 (``sensor_msgs/LaserScan``, one full sweep of ``lidar_fov_deg``) with the true time plus ``time_offset_s``;
-a ``CameraInfo`` message precedes them. The truth (extrinsic, still intervals, offset) is returned; the board
-is written next to the bag as ``<bag stem>.board.yaml`` (the dataset layout's board.yaml).
+a ``CameraInfo`` message precedes them (``plumb_bob`` with zero D for the pinhole; ``equidistant`` with k1..k4
+for a fisheye, ``cam_model`` ``pinhole-equidistant``, whose images are rendered through the lens). The truth
+(extrinsic, still intervals, offset) is returned; the board is written next to the bag as
+``<bag stem>.board.yaml`` (the dataset layout's board.yaml).
 Units: metres, radians, seconds; stamps in nanoseconds.
 """
 
@@ -25,6 +27,8 @@ from calib_core.geometry.transforms import invert_T
 from . import trial_rngs
 from .camera import BoardSpec, CameraError, camera_matrix, render_board_image
 from .dataset import RoomOptions, room_ranges, write_board_yaml
+from .lens import is_default, true_camera
+from .lens_render import render_lens_view
 from .lidar import beam_bearings, board_ranges
 from .options import SimOptions
 from .patterns import Pattern, texture_source
@@ -137,14 +141,19 @@ class _BagOut:
         data = self.ts.serialize_ros1(msg, typ) if self.ros1 else self.ts.serialize_cdr(msg, typ)
         self.w.write(self.conns[topic], t_ns, data)
 
-    def camera_info(self, topic: str, t_ns: int, K: np.ndarray, width: int, height: int) -> None:
+    def camera_info(self, topic: str, t_ns: int, K: np.ndarray, width: int, height: int, lens=None) -> None:
+        """The CameraInfo of the pinhole ``K`` (``plumb_bob``, zero D) or of ``lens``: ``equidistant`` with its
+        k1..k4 (as ROS's camera_calibration writes a fisheye)."""
+        model, D = "plumb_bob", np.zeros(5)
+        if lens is not None:
+            model, D, K = "equidistant", np.asarray(lens.dist, float).ravel()[:4], np.asarray(lens.K, float)
         P = np.hstack([K, np.zeros((3, 1))])
         names = ("D", "K", "R", "P") if self.ros1 else ("d", "k", "r", "p")
-        vals = (np.zeros(5), K.ravel(), np.eye(3).ravel(), P.ravel())
+        vals = (D, K.ravel(), np.eye(3).ravel(), P.ravel())
         T = self.ts.types
         roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
         msg = T["sensor_msgs/msg/CameraInfo"](header=self.header(t_ns, "camera"), height=height, width=width,
-                                              distortion_model="plumb_bob", binning_x=0, binning_y=0, roi=roi,
+                                              distortion_model=model, binning_x=0, binning_y=0, roi=roi,
                                               **{n: np.asarray(v, np.float64) for n, v in zip(names, vals,
                                                                                             strict=True)})
         self.write(topic, msg, t_ns)
@@ -175,15 +184,18 @@ class _BagOut:
         self.w.close()
 
 
-def _renderer(o: SimOptions, K: np.ndarray, rng: np.random.Generator, pattern: Pattern | None = None):
-    """render(T_cam_board, key) -> noisy uint8 image (the checkerboard, or ``pattern``); the noise-free render is
-    cached per ``key`` (still poses)."""
+def _renderer(o: SimOptions, K: np.ndarray, rng: np.random.Generator, pattern: Pattern | None = None, lens=None):
+    """render(T_cam_board, key) -> noisy uint8 image (the checkerboard, or ``pattern``; through the pinhole ``K`` or
+    through ``lens``, a ``calib_core.data.cameras`` model); the noise-free render is cached per ``key`` (still
+    poses)."""
     spec = BoardSpec.of(o)
     cache: dict = {}
     texture = None if pattern is None else texture_source(pattern, spec.size_m)
 
     def ideal(T_cam_board):
         try:
+            if lens is not None:
+                return render_lens_view(lens, T_cam_board, spec, o.render_supersample, texture).astype(np.float32)
             return render_board_image(K, T_cam_board, spec, o.cam_width, o.cam_height,
                                       o.render_supersample, texture=texture).astype(np.float32)
         except CameraError:
@@ -205,7 +217,9 @@ def write_recording_bag(options: SimOptions, seed: int, path, rec: RecordingOpti
                         trial: int = 0, pattern: Pattern | None = None) -> RecordingTruth:
     """Write a simulated calibration recording (module docstring) to ``path`` (a ``.bag`` file for ROS 1, a
     folder for ROS 2) and ``board.yaml`` beside it; return its truth. ``options.n_boards`` still poses.
-    ``pattern``: a ChArUco board or an AprilGrid (``simulate.patterns``) instead of the checkerboard."""
+    ``pattern``: a ChArUco board or an AprilGrid (``simulate.patterns``) instead of the checkerboard. A lens
+    (``cam_model`` ``pinhole-equidistant``, ``simulate.lens``) renders through the model and its CameraInfo is
+    ``equidistant`` with k1..k4; other lenses are refused (ValueError)."""
     rec = rec or RecordingOptions()
     o = options
     refuse_rig_conditions(o, "write_recording_bag")
@@ -214,10 +228,14 @@ def write_recording_bag(options: SimOptions, seed: int, path, rec: RecordingOpti
     K = camera_matrix(o.focal_px, o.cam_width, o.cam_height)
     spec = BoardSpec.of(o)
     cols, rows = spec.squares_x - 1, spec.squares_y - 1
-    render = _renderer(o, K, rng_cam, pattern)
+    lens = None if is_default(o) else true_camera(o, K)
+    if lens is not None and lens.name != "pinhole-equidistant":
+        raise ValueError(f"write_recording_bag: a CameraInfo holds no {lens.name} lens (only pinhole-equidistant, "
+                         "as 'equidistant')")
+    render = _renderer(o, K, rng_cam, pattern, lens)
 
     def accept(T_lidar_cam, T_lidar_board) -> bool:
-        if pattern is not None:
+        if pattern is not None or lens is not None:
             return True
         img = render(invert_T(T_lidar_cam) @ T_lidar_board)
         return bool(cv2.findChessboardCornersSB(img, (cols, rows), flags=cv2.CALIB_CB_ACCURACY)[0])
@@ -242,7 +260,7 @@ def write_recording_bag(options: SimOptions, seed: int, path, rec: RecordingOpti
     ns = int(round(rec.start_s * 1e9))
     out = _BagOut(path, rec)
     try:
-        out.camera_info(rec.info_topic, ns - 10**6, K, o.cam_width, o.cam_height)
+        out.camera_info(rec.info_topic, ns - 10**6, K, o.cam_width, o.cam_height, lens)
         for t, kind in events:
             t_ns = ns + int(round(t * 1e9))
             if kind == 0:

@@ -22,7 +22,8 @@ DEMO_FISHEYE = dict(n_boards=12, cam_model="pinhole-equidistant", cam_params="-0
 (``DEMO_CHARUCO``) at 0.7-1.6 m, every third board cut by the image edge."""
 DEMO_CHARUCO = dict(kind="charuco", cols=6, rows=5, square=0.15, marker=0.11, dictionary="DICT_5X5_100")
 """The fisheye rig's board: 6 x 5 squares of 0.15 m with 0.11 m markers (``simulate.patterns.Pattern``)."""
-DEMO_ENTRIES = frozenset({"dataset", "recording", "recording.board.yaml", "truth.json", "fisheye_charuco"})
+DEMO_ENTRIES = frozenset({"dataset", "recording", "recording.board.yaml", "truth.json", "fisheye_charuco",
+                          "fisheye_recording", "fisheye_recording.board.yaml"})
 """What ``write_demo`` writes into its folder."""
 TOPICS = {"image": "/camera/image_raw", "scan": "/scan", "info": "/camera/camera_info"}
 
@@ -39,6 +40,11 @@ def demo_commands(out: Path) -> list[list[str]]:
         ["calibrate", f"{o}/bag_obs.json", "--out", f"{o}/bag_result.json"],
         ["extract", f"{o}/fisheye_charuco", "--out", f"{o}/fisheye_obs.json"],
         ["calibrate", f"{o}/fisheye_obs.json", "--out", f"{o}/fisheye_result.json"],
+        ["bag", f"{o}/fisheye_recording", "--image-topic", TOPICS["image"], "--scan-topic", TOPICS["scan"],
+         "--camera-info-topic", TOPICS["info"], "--board", f"{o}/fisheye_recording.board.yaml", "--out",
+         f"{o}/fisheye_bag_dataset"],
+        ["extract", f"{o}/fisheye_bag_dataset", "--out", f"{o}/fisheye_bag_obs.json", "--range-sigma", "0.005"],
+        ["calibrate", f"{o}/fisheye_bag_obs.json", "--out", f"{o}/fisheye_bag_result.json"],
     ]
 
 
@@ -51,7 +57,8 @@ def is_demo_folder(folder: Path) -> bool:
 def write_demo(out, seed: int = 1) -> dict:
     """Write ``out/dataset/`` (images, scans, board, camera: ``simulate.dataset``), ``out/recording/`` (a ROS 2
     sqlite3 bag of about 11 s: ``simulate.recording``), ``out/fisheye_charuco/`` (a fisheye and a ChArUco board,
-    some boards cut by the image edge) and ``out/truth.json`` (the true extrinsics)."""
+    some boards cut by the image edge), ``out/fisheye_recording/`` (a ROS 2 bag of that fisheye rig, its CameraInfo
+    ``equidistant``) and ``out/truth.json`` (the true extrinsics)."""
     import yaml
 
     from simulate import SimOptions
@@ -71,8 +78,11 @@ def write_demo(out, seed: int = 1) -> dict:
     fe = write_dataset(SimOptions(**DEMO_FISHEYE), seed, out / "fisheye_charuco", pattern=Pattern(**DEMO_CHARUCO),
                        cut_every=3)
     T_fe = yaml.safe_load((fe / "ground_truth.yaml").read_text())["T_lidar_cam"]
+    fe_truth = write_recording_bag(SimOptions(**DEMO_FISHEYE), seed, out / "fisheye_recording", rec,
+                                   pattern=Pattern(**DEMO_CHARUCO))
     doc = {"dataset": {"T_lidar_cam": T_ds}, "recording": {"T_lidar_cam": truth.T_lidar_cam.tolist()},
            "fisheye_charuco": {"T_lidar_cam": T_fe},
+           "fisheye_recording": {"T_lidar_cam": fe_truth.T_lidar_cam.tolist()},
            "note": "T_lidar_cam maps camera points into the lidar frame (metres)"}
     (out / "truth.json").write_text(json.dumps(doc, indent=1) + "\n")
     return doc
@@ -87,7 +97,8 @@ def cmd_demo(args) -> int:
         write_demo(scratch, args.seed)
     print(f"wrote {out}/dataset (a dataset folder: camera.yaml, board.yaml, NNN.png + NNN.csv), {out}/recording "
           f"(a ROS 2 bag), {out}/fisheye_charuco (a fisheye camera and a ChArUco board, some boards cut by the "
-          f"image edge) and {out}/truth.json (the simulated extrinsics)")
+          f"image edge), {out}/fisheye_recording (a ROS 2 bag of the fisheye + ChArUco rig) and {out}/truth.json "
+          "(the simulated extrinsics)")
     print("calibrate the folder:")
     cmds = demo_commands(out)
     for c in cmds[:2]:
@@ -96,7 +107,11 @@ def cmd_demo(args) -> int:
     for c in cmds[2:5]:
         print("  lidarcam " + shlex.join(c))
     print("calibrate the fisheye + ChArUco folder:")
-    for c in cmds[5:]:
+    for c in cmds[5:7]:
+        print("  lidarcam " + shlex.join(c))
+    print("calibrate the fisheye + ChArUco bag (its CameraInfo is 'equidistant', as ROS's camera_calibration "
+          "writes a fisheye):")
+    for c in cmds[7:]:
         print("  lidarcam " + shlex.join(c))
     return 0
 
@@ -120,8 +135,9 @@ def add_parsers(subparsers) -> None:
         "demo", help="write sample data (simulated dataset folders and a ROS 2 bag) and print how to calibrate them",
         description="Write OUT/dataset (rendered images, scans, board.yaml, camera.yaml), OUT/recording (a short "
                     "ROS 2 bag of the board moving and resting in front of the rig), OUT/fisheye_charuco (a fisheye "
-                    "camera and a ChArUco board, some boards cut by the image edge) and OUT/truth.json, then print "
-                    "the lidarcam commands that calibrate each.")
+                    "camera and a ChArUco board, some boards cut by the image edge), OUT/fisheye_recording (a ROS 2 "
+                    "bag of that fisheye rig) and OUT/truth.json, then print the lidarcam commands that calibrate "
+                    "each.")
     p.add_argument("out", help="folder to write (new, empty, or an earlier demo's, which is replaced; written "
                    "whole or not at all)")
     from .argtypes import seed_type

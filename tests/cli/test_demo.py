@@ -1,6 +1,7 @@
 """``lidarcam demo OUT``: the sample folders (a pinhole + checkerboard, a fisheye + ChArUco with boards cut by the
-image edge) and bag it writes, calibrated by the very commands it prints, give the simulated extrinsic within 0.5 deg
-and 20 mm; ``lidarcam bag --list-topics`` lists the bag's topics."""
+image edge) and bags (the pinhole rig's, the fisheye + ChArUco rig's with an ``equidistant`` CameraInfo) it writes,
+calibrated by the very commands it prints, give the simulated extrinsic within 0.5 deg and 20 mm;
+``lidarcam bag --list-topics`` lists the bag's topics."""
 
 from __future__ import annotations
 
@@ -8,9 +9,11 @@ import json
 import shlex
 
 import numpy as np
+import yaml
 
 from calib_core.geometry.metrics import pose_errors
 from lidarcam.cli import main
+from lidarcam.cli.demo import DEMO_FISHEYE
 
 
 def test_demo_then_its_printed_commands_calibrate_the_folder_and_the_bag(tmp_path, capsys):
@@ -18,16 +21,22 @@ def test_demo_then_its_printed_commands_calibrate_the_folder_and_the_bag(tmp_pat
     assert main(["demo", str(out)]) == 0
     printed = capsys.readouterr().out
     commands = [shlex.split(ln.strip())[1:] for ln in printed.splitlines() if ln.startswith("  lidarcam ")]
-    assert len(commands) == 7
+    assert len(commands) == 10
     for argv in commands:
         assert main(argv) == 0, argv
     capsys.readouterr()
     truth = json.loads((out / "truth.json").read_text())
     for part, result in (("dataset", "dataset_result.json"), ("recording", "bag_result.json"),
-                         ("fisheye_charuco", "fisheye_result.json")):
+                         ("fisheye_charuco", "fisheye_result.json"),
+                         ("fisheye_recording", "fisheye_bag_result.json")):
         res = json.loads((out / result).read_text())
         e_R, e_t = pose_errors(np.array(res["T_lidar_cam"]), np.array(truth[part]["T_lidar_cam"]))
         assert res["ok"] and float(e_R) < 0.5 and float(e_t) < 0.020, (part, float(e_R), float(e_t))
+    cam = yaml.safe_load((out / "fisheye_bag_dataset" / "camera.yaml").read_text())   # from the bag's CameraInfo
+    assert cam["distortion_model"] == "equidistant"
+    k1_k4 = [float(v) for v in DEMO_FISHEYE["cam_params"].split(",")]
+    np.testing.assert_allclose(cam["distortion_coefficients"], k1_k4)
+    assert cam["camera_matrix"][0][0] == DEMO_FISHEYE["focal_px"] and cam["image_width"] == DEMO_FISHEYE["cam_width"]
     assert main(["bag", "--list-topics", str(out / "recording")]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split() == ["topic", "messages", "type"]

@@ -278,3 +278,14 @@ def test_a_charuco_recording_goes_through_bag_extract_and_calibrate(tmp_path):
     res = calibrate(obs)
     e_R, e_t = pose_errors(res.T_lidar_cam, truth.T_lidar_cam)
     assert res.ok and float(e_R) < 1.0 and float(e_t) < 0.04, (float(e_R), float(e_t))
+
+
+def test_a_recording_through_a_lens_a_camera_info_cannot_hold_is_refused(tmp_path):
+    """A CameraInfo holds a pinhole or ROS's ``equidistant`` fisheye: a double-sphere lens is refused in one line
+    before anything is written."""
+    from simulate.lens import LENSES
+
+    sim = SimOptions(**{**SIM.to_dict(), **LENSES["ds180"]})
+    with pytest.raises(ValueError, match="CameraInfo holds no ds lens") as err:
+        write_recording_bag(sim, 5, tmp_path / "rec", RecordingOptions(ros=2))
+    assert len(str(err.value).splitlines()) == 1 and not (tmp_path / "rec").exists()

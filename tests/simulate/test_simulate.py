@@ -311,3 +311,31 @@ def test_cli_writes_a_valid_observation_file(tmp_path):
     assert np.array_equal(obs.T_lidar_cam_true, generate(
         SimOptions(n_boards=3, max_tilt_deg=30.0, pose_mode="pixel"), seed=1).T_lidar_cam_true)
     assert main(["simulate", "--max-tilt-deg", "100", "--out", str(tmp_path / "bad.json")]) == 2
+
+
+def test_undistort_points_inverts_strong_distortion_on_either_opencv_api(monkeypatch):
+    """``simulate.camera.undistort_points`` undoes ``cv2.projectPoints``'s distortion to 1e-6 px, through
+    ``undistortPoints(criteria=)`` (OpenCV 5) and through ``undistortPointsIter`` where ``undistortPoints`` takes no
+    criteria (OpenCV 4.8, emulated)."""
+    import cv2
+
+    from simulate.camera import undistort_points
+
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    dist = np.array([-0.35, 0.15, 0.001, -0.002, -0.03])
+    xy = np.random.default_rng(0).uniform(-0.5, 0.5, (50, 2))
+    px, _ = cv2.projectPoints(np.column_stack([xy, np.ones(50)]), np.zeros(3), np.zeros(3), K, dist)
+    truth = xy * 500 + [320, 240]
+    assert np.abs(undistort_points(px.reshape(-1, 2), K, dist) - truth).max() < 1e-6
+    plain = cv2.undistortPoints
+
+    def no_criteria(src, cameraMatrix, distCoeffs, R=None, P=None, **kw):
+        if kw:
+            raise TypeError("undistortPoints() takes no criteria (OpenCV 4.8)")
+        return plain(src, cameraMatrix, distCoeffs, R=R, P=P)
+
+    monkeypatch.setattr(cv2, "undistortPoints", no_criteria, raising=True)
+    monkeypatch.setattr(cv2, "undistortPointsIter", lambda src, Km, d, R, P, crit: plain(src, Km, d, R=R, P=P,
+                                                                                          criteria=crit),
+                        raising=False)
+    assert np.abs(undistort_points(px.reshape(-1, 2), K, dist) - truth).max() < 1e-6
