@@ -66,8 +66,12 @@ def as_pair(information: np.ndarray) -> np.ndarray:
 
 def sandwich(H_inv: np.ndarray, M: np.ndarray) -> np.ndarray:
     """``H^-1 + H^-1 M H^-1`` (..., 6, 6): the covariance of the per-beam-weighted answer under the systematic
-    part ``M`` (module docstring)."""
-    C = H_inv + H_inv @ M @ H_inv
+    part ``M`` (module docstring). The second term as the Gram matrix of ``H^-1 M^(1/2)`` (``M``'s eigenvalues
+    clipped at zero): on an ill-conditioned ``H`` the plain triple product loses its diagonal to cancellation and
+    can turn it negative; this keeps it a sum of squares."""
+    m, U = np.linalg.eigh(0.5 * (M + np.swapaxes(M, -1, -2)))
+    A = H_inv @ (U * np.sqrt(np.clip(m, 0.0, None))[..., None, :])
+    C = H_inv + A @ np.swapaxes(A, -1, -2)
     return 0.5 * (C + np.swapaxes(C, -1, -2))
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import re
 
+from rigs import vertical_rig
+
 import calib_core
 from calib_core.data.io import save_observations
 from lidarcam.cli import main, parse_fix
@@ -12,7 +14,7 @@ from simulate import SimOptions, generate
 
 
 def test_the_undetermined_hint_is_the_fix_option_for_cli_users(tmp_path, capsys):
-    obs = generate(SimOptions(n_boards=6, max_tilt_deg=0.0), seed=1)  # vertical boards: roll, pitch, z undetermined
+    obs = vertical_rig(11)  # boards exactly vertical: z's profile is flat, so roll, pitch and z are refused together
     res = calib_core.calibrate(obs)
     assert not res.ok and "fixed={" in res.reason  # the library's users get calibrate()'s keyword
     save_observations(obs, tmp_path / "vert.json")
