@@ -33,6 +33,7 @@ from ..engine.store import load_cell
 from ..summary.aggregate import write_tables
 from ..summary.figures import save_figure
 from ..summary.intervals import wilson_interval
+from ..summary.tables import refusal_table, refusals
 from .claim_stats import claim_values, sweep_arrays
 from .claims import claim_holds, claim_value_text, paper_claims
 
@@ -142,6 +143,12 @@ def report(df: pd.DataFrame, r: pd.DataFrame, command: str) -> str:
     md += [f"`lidarcam` valid at least as often as every other method at {lv or 'no'} boards, accurate at least as "
            f"often at {la or 'no'} boards (point estimates). NEES is `e^T P^-1 e` with the method's reported "
            "covariance (6 is honest for a 6-dof pose).", "",
+           "## `lidarcam`'s refusals and NEES per board count", "",
+           "How often `lidarcam` refuses naming an axis as not determined by the trial's boards (its reason, in the "
+           "wording of `calib_core.checks.degeneracy`; the axes named, counted over the trials; the other runs "
+           "not answered failed otherwise, e.g. no real solution of the minimal solver or a tie it cannot "
+           "decide), and its NEES median against the truth over the answers with a covariance:", "",
+           *refusal_table(refusals(df, "lidarcam")), "",
            "## The paper's board-sweep claims under rig conditions", ""] + claims_lines(df)
     return "\n".join(md) + "\n"
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -218,10 +219,31 @@ def _subset_md(rs, obs, rows, out: Path, images: dict, n_subsets: int, n_jobs: i
                f"alone, the guess is within {sub.VALID_DEG:g} deg / {sub.VALID_M:g} m of the reference in "
                f"{100 * sub.guesses_valid(SHORT[rs.name], df, T_prior):.0f}% of the subsets.", ""]
     md += ["References:", ""] + md_table(["method judged", "reference", "its 1-sigma"], ref_rows, "lll") + [""]
+    own = next((r for r in rows if r["method"] == sub.PRIOR_METHOD and r["ok"]), None)
+    T_own = None if own is None else np.asarray(own["T_lidar_cam"])
+    unc_md, unc = sub.uncertainty_table(df, sub.PRIOR_METHOD, T_own)
+    md += [f"`{sub.PRIOR_METHOD}` per board count: how often it refuses, naming an axis as not determined by the "
+           "subset's boards (`calib_core.checks.degeneracy`; the axes named, counted over the subsets), its NEES "
+           f"(`e^T P^-1 e` with the subset's own covariance, 6 when honest) against its own all-board answer "
+           "(that answer's error left out: an upper bound where the subset shares boards with it), and its valid "
+           "and within-3-sigma rates from the table above with their ratio (1 when every valid answer is also "
+           "within 3 sigmas):", ""] + unc_md + [""]
     md += _fig8(rs, obs, df, out, images)
     rates = {m: {int(k): float(d["valid"].mean()) for k, d in df[df["method"] == m].groupby("n_boards")}
              for m in judged}
-    return md, {"reference": {m: r["method"] for m, r in refs.items()}, "valid": rates}
+    return md, {"reference": {m: r["method"] for m, r in refs.items()}, "valid": rates,
+                "per_count": {"method": sub.PRIOR_METHOD, **_per_count(unc)}}
+
+
+def _per_count(r: pd.DataFrame) -> dict:
+    """``uncertainty_table``'s rows as JSON: per board count, its columns (None for NaN)."""
+    def val(v):
+        if isinstance(v, str):
+            return v
+        return None if not math.isfinite(float(v)) else (int(v) if float(v).is_integer() and not
+                                                          isinstance(v, float) else float(v))
+
+    return {str(int(x.pop("n_boards"))): {k: val(v) for k, v in x.items()} for x in r.to_dict("records")}
 
 
 def _fig8(rs, obs, df, out: Path, images: dict) -> list[str]:

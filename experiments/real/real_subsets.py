@@ -27,6 +27,7 @@ from calib_core.geometry.transforms import rotvec_to_matrix
 from lidarcam.rig.markdown import md_table
 
 from ..summary.intervals import wilson_interval
+from ..summary.tables import refusal_table, refusals, refused_axes
 
 BOARD_COUNTS = (3, 4, 5, 6, 7, 8)
 N_SUBSETS = 50
@@ -84,12 +85,35 @@ def _run(obs: Observations, subset: tuple[int, ...], methods, prior: MountingPri
     for label, m, p in runs:
         res = calib_core.calibrate(sub, m) if p is None else calib_core.calibrate(sub, m, prior=p)
         row = {"n_boards": len(subset), "subset": " ".join(map(str, subset)), "method": label, "ok": res.ok,
-               "seconds": res.seconds, "theta_R_deg": math.nan, "mu_t_m": math.nan, "T": ""}
+               "seconds": res.seconds, "theta_R_deg": math.nan, "mu_t_m": math.nan, "T": "",
+               "refused_axes": "" if res.ok else " ".join(refused_axes(res.reason)), "cov": ""}
         if res.ok:
             row["theta_R_deg"], row["mu_t_m"] = theta_mu(res.T_lidar_cam)
             row["T"] = json.dumps(np.round(res.T_lidar_cam, 9).tolist())
+            if res.covariance is not None:
+                row["cov"] = cov_text(res.covariance)
         out.append(row)
     return out
+
+
+ROW_COLUMNS = ("n_boards", "subset", "method", "ok", "seconds", "theta_R_deg", "mu_t_m", "T", "refused_axes", "cov")
+"""The columns of a subset row (part of the stored rows' key: rows stored without one are recomputed).
+``refused_axes``: the axes a refusal names as not determined (``summary.tables.refused_axes``), space-separated;
+``cov``: the answer's 6x6 covariance (``cov_text``), empty without one."""
+
+
+def cov_text(C: np.ndarray) -> str:
+    """A 6x6 covariance as text: its upper triangle row by row, 7 significant digits, space-separated."""
+    return " ".join(f"{v:.7g}" for v in np.asarray(C, float)[np.triu_indices(6)])
+
+
+def cov_from_text(text) -> np.ndarray | None:
+    """The 6x6 covariance of ``cov_text``; None for an empty or missing cell."""
+    if not isinstance(text, str) or not text.strip():
+        return None
+    C = np.zeros((6, 6))
+    C[np.triu_indices(6)] = [float(v) for v in text.split()]
+    return C + np.triu(C, 1).T
 
 
 def run_subsets(name: str, obs: Observations, methods, out: Path, n_jobs: int = 2, n: int = N_SUBSETS,
@@ -105,7 +129,8 @@ def run_subsets(name: str, obs: Observations, methods, out: Path, n_jobs: int = 
     prior = None if T_prior is None else [np.round(np.asarray(T_prior, float), 12).tolist(), PRIOR_METHOD,
                                           PRIOR_SIGMA_DEG, PRIOR_SIGMA_MM]
     key = hashlib.sha256(json.dumps([observations_to_dict(obs)["boards"], list(methods), n, seed,
-                                     list(BOARD_COUNTS), package_hash("calib_core"), prior], sort_keys=True,
+                                     list(BOARD_COUNTS), package_hash("calib_core"), prior,
+                                     list(ROW_COLUMNS)], sort_keys=True,
                                     default=str).encode()).hexdigest()[:16]
     path = out / f"subsets_{name}.csv"
     if path.exists():
@@ -269,3 +294,33 @@ def own_nees_table(df: pd.DataFrame) -> list[str]:
                      f"{int(bad['weak'].sum())}/{len(bad)}"])
     return md_table(["set", "boards", "NEES median", "answered", "valid", "within 3 sigma (all-board's)",
                      "within 3 own sigma", "invalid with a weak-choice warning"], rows, "llrrrrrr")
+
+
+def nees_column(df: pd.DataFrame, T_ref: np.ndarray) -> pd.Series:
+    """Each row's NEES against ``T_ref`` (4,4, ``T_lidar_cam``; ``geometry.metrics.nees`` with the row's own
+    covariance, ``cov``); NaN where the row has no answer or no covariance."""
+    from calib_core.geometry.metrics import nees
+
+    out = [nees(np.array(json.loads(T)), T_ref, C) if ok and isinstance(T, str) and T and
+           (C := cov_from_text(c)) is not None else math.nan
+           for ok, T, c in zip(df["ok"].astype(bool), df["T"], df.get("cov", pd.Series("", index=df.index)),
+                               strict=True)]
+    return pd.Series(out, index=df.index, dtype=float)
+
+
+def uncertainty_table(df: pd.DataFrame, method: str, T_own: np.ndarray | None) -> tuple[list[str], pd.DataFrame]:
+    """(Markdown, its rows) for ``method``'s subset rows of ``df`` (with ``valid``, ``valid_3sigma`` from
+    ``valid_columns``): per board count, refusals naming an axis (``summary.tables.refusals``), the NEES
+    median against ``T_own`` (``method``'s all-board answer; none without it), the valid rate, the rate within
+    3 sigmas and their ratio."""
+    d = df[df["method"] == method]
+    d = d.assign(nees=nees_column(d, np.asarray(T_own, float)) if T_own is not None else math.nan)
+    r = refusals(d, method)
+    by = d.groupby("n_boards")
+    r["valid_rate"] = r["n_boards"].map(by["valid"].mean()).astype(float)
+    r["within_3sigma_rate"] = r["n_boards"].map(by["valid_3sigma"].mean()).astype(float)
+    r["ratio_3sigma_valid"] = r["within_3sigma_rate"] / r["valid_rate"].where(r["valid_rate"] > 0)
+    pct = [f"{100 * v:.0f}%" if np.isfinite(v) else "-" for v in r["valid_rate"]]
+    within = [f"{100 * v:.0f}%" if np.isfinite(v) else "-" for v in r["within_3sigma_rate"]]
+    ratio = [f"{v:.2f}" if np.isfinite(v) else "-" for v in r["ratio_3sigma_valid"]]
+    return refusal_table(r, {"valid": pct, "within 3 sigma": within, "3 sigma / valid": ratio}), r

@@ -325,3 +325,48 @@ def test_rig_like_rates_and_leaders_from_rows():
         assert (x.median_nees == 5.0) if x.method == "lidarcam" else np.isnan(x.median_nees)
     best = {nb: g.set_index("method")["valid_rate"] for nb, g in r.groupby("n_boards")}
     assert leaders(r, "valid") == [nb for nb, s in best.items() if s["lidarcam"] >= s["peng2022"]]
+
+
+def _refusal_reason(axes: tuple[str, ...], geometric: bool) -> str:
+    """A reason in the library's own wording (``Degeneracy.message``) for directions along ``axes``."""
+    from calib_core.checks.degeneracy import AXES, Degeneracy
+
+    dirs = np.eye(6)[[AXES.index(a) for a in axes]]
+    deg = Degeneracy(dirs, np.full(len(axes), 0.5), axes, True, geometric, "every board stands vertical", 2.0,
+                     0.01)
+    return f"refinement: {deg.message()}"
+
+
+def test_refused_axes_read_from_the_library_wording():
+    from experiments.summary.tables import refused_axes
+
+    assert refused_axes(_refusal_reason(("roll", "pitch", "z"), True)) == ("roll", "pitch", "z")
+    assert refused_axes(_refusal_reason(("yaw",), True)) == ("yaw",)
+    assert refused_axes(_refusal_reason(("x",), False)) == ()              # "poorly determined": answered
+    assert refused_axes("no candidate: minimal solver: 1 triples, no real solution") == ()
+    assert refused_axes("") == () and refused_axes(np.nan) == ()
+
+
+def test_refusals_per_board_count_from_hand_made_rows():
+    from experiments.summary.tables import refusal_table, refusals
+
+    roll_pitch = _refusal_reason(("roll", "pitch"), True)
+    rows = [  # 3 boards: 2 answers (NEES 2 and 10), one refusal naming roll and pitch, one other failure
+        ("lidarcam", 3, True, "", 2.0), ("lidarcam", 3, True, "", 10.0), ("lidarcam", 3, False, roll_pitch, np.nan),
+        ("lidarcam", 3, False, "no candidate: no real solution", np.nan),
+        # 4 boards: 3 answers (NEES 3, 5, 100; one without a covariance), one refusal naming z
+        ("lidarcam", 4, True, "", 3.0), ("lidarcam", 4, True, "", 5.0), ("lidarcam", 4, True, "", 100.0),
+        ("lidarcam", 4, True, "", np.nan), ("lidarcam", 4, False, _refusal_reason(("z",), True), np.nan),
+        ("peng2022", 3, False, roll_pitch, np.nan)]                          # another method: not counted
+    df = pd.DataFrame(rows, columns=["method", "n_boards", "ok", "reason", "nees"])
+    r = refusals(df, "lidarcam").set_index("n_boards")
+    assert r.loc[3, ["n", "answered", "axis_refused", "n_nees"]].tolist() == [4, 2, 1, 2]
+    assert r.loc[4, ["n", "answered", "axis_refused", "n_nees"]].tolist() == [5, 4, 1, 3]
+    assert r.loc[3, "axes"] == "roll 1, pitch 1" and r.loc[4, "axes"] == "z 1"
+    assert r.loc[3, "median_nees"] == 6.0 and r.loc[4, "median_nees"] == 5.0
+    # the stored-axes column of the real experiment's rows gives the same counts
+    stored = df.assign(refused_axes=["", "", "roll pitch", "", "", "", "", "", "z", "roll pitch"]).drop(
+        columns="reason")
+    assert refusals(stored, "lidarcam").equals(refusals(df, "lidarcam"))
+    md = refusal_table(refusals(df, "lidarcam"), {"extra": ["a", "b"]})
+    assert len(md) == 4 and md[2].startswith("| 3 | 4 | 2 (50%) | 1 (25%) | roll 1, pitch 1 | 6.0 (2) | a |")

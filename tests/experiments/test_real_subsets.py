@@ -145,3 +145,43 @@ def test_subset_run_with_a_prior_adds_its_labelled_row():
     if res.ok:
         assert json.loads(rows[1]["T"]) == np.round(res.T_lidar_cam, 9).tolist()
     assert [r["method"] for r in sub._run(obs, (0, 1, 2), ["peng2022"])] == ["peng2022"]
+
+
+def test_cov_text_round_trip():
+    A = np.random.default_rng(2).normal(size=(6, 6))
+    C = A @ A.T * 1e-5
+    assert np.allclose(sub.cov_from_text(sub.cov_text(C)), C, rtol=1e-6)
+    assert sub.cov_from_text("") is None and sub.cov_from_text(np.nan) is None
+
+
+def test_uncertainty_table_from_hand_made_rows():
+    s_r, s_t = np.radians(0.5), 0.01
+    C = sub.cov_text(np.diag([s_r ** 2] * 3 + [s_t ** 2] * 3))
+    rot = make_T(rotvec_to_matrix([2 * s_r, 0, 0]), [0, 0, 0])            # 2 sigma in roll: NEES 4
+    shift = make_T(np.eye(3), [0, 3 * s_t, 0])                              # 3 sigma along y: NEES 9
+    rows = [(3, True, json.dumps(rot.tolist()), C, "", True, True),
+            (3, True, json.dumps(shift.tolist()), C, "", True, False),
+            (3, False, "", "", "roll pitch", False, False),
+            (4, True, json.dumps(rot.tolist()), "", "", False, False)]     # no covariance: no NEES
+    df = pd.DataFrame(rows, columns=["n_boards", "ok", "T", "cov", "refused_axes", "valid", "valid_3sigma"])
+    df["method"] = "lidarcam"
+    md, r = sub.uncertainty_table(df, "lidarcam", np.eye(4))
+    r = r.set_index("n_boards")
+    assert np.isclose(r.loc[3, "median_nees"], 6.5) and r.loc[3, "n_nees"] == 2 and r.loc[4, "n_nees"] == 0
+    assert r.loc[3, "axis_refused"] == 1 and r.loc[3, "axes"] == "roll 1, pitch 1"
+    assert np.isclose(r.loc[3, "valid_rate"], 2 / 3) and np.isclose(r.loc[3, "ratio_3sigma_valid"], 0.5)
+    assert np.isnan(r.loc[4, "ratio_3sigma_valid"])                       # no valid answer: no ratio
+    assert md[2].endswith("| 67% | 33% | 0.50 |") and md[3].endswith("| 0% | 0% | - |")
+    assert np.isnan(sub.uncertainty_table(df, "lidarcam", None)[1]["median_nees"]).all()
+
+
+def test_subset_rows_store_the_covariance_and_refused_axes():
+    from calib_core import calibrate
+
+    obs = generate(SimOptions(n_boards=5), seed=11, trial=0)
+    row = sub._run(obs, (0, 1, 2, 3), ["lidarcam"])[0]
+    assert tuple(row) == sub.ROW_COLUMNS
+    res = calibrate(obs.subset([0, 1, 2, 3]), "lidarcam")
+    assert row["ok"] == res.ok and row["refused_axes"] == ""
+    if res.ok and res.covariance is not None:
+        assert np.allclose(sub.cov_from_text(row["cov"]), res.covariance, rtol=1e-6)
