@@ -227,7 +227,8 @@ def _subset_md(rs, obs, rows, out: Path, images: dict, n_subsets: int, n_jobs: i
            f"(`e^T P^-1 e` with the subset's own covariance, 6 when honest) against its own all-board answer "
            "(that answer's error left out: an upper bound where the subset shares boards with it), and its valid "
            "and within-3-sigma rates from the table above with their ratio (1 when every valid answer is also "
-           "within 3 sigmas):", ""] + unc_md + [""]
+           "within 3 sigmas), then the same against its own all-board answer with each subset's own 1-sigma (the "
+           "test of the subset's reported uncertainty):", ""] + unc_md + [""]
     md += _fig8(rs, obs, df, out, images)
     rates = {m: {int(k): float(d["valid"].mean()) for k, d in df[df["method"] == m].groupby("n_boards")}
              for m in judged}

@@ -21,7 +21,7 @@ import pandas as pd
 import calib_core
 from calib_core.data.io import observations_to_dict
 from calib_core.data.observations import Observations
-from calib_core.geometry.metrics import is_valid, pose_errors
+from calib_core.geometry.metrics import is_valid, pose_errors, sigma_rot_deg, sigma_trans_m
 from calib_core.geometry.mounting import MountingPrior
 from calib_core.geometry.transforms import rotvec_to_matrix
 from lidarcam.rig.markdown import md_table
@@ -320,7 +320,36 @@ def uncertainty_table(df: pd.DataFrame, method: str, T_own: np.ndarray | None) -
     r["valid_rate"] = r["n_boards"].map(by["valid"].mean()).astype(float)
     r["within_3sigma_rate"] = r["n_boards"].map(by["valid_3sigma"].mean()).astype(float)
     r["ratio_3sigma_valid"] = r["within_3sigma_rate"] / r["valid_rate"].where(r["valid_rate"] > 0)
-    pct = [f"{100 * v:.0f}%" if np.isfinite(v) else "-" for v in r["valid_rate"]]
-    within = [f"{100 * v:.0f}%" if np.isfinite(v) else "-" for v in r["within_3sigma_rate"]]
-    ratio = [f"{v:.2f}" if np.isfinite(v) else "-" for v in r["ratio_3sigma_valid"]]
-    return refusal_table(r, {"valid": pct, "within 3 sigma": within, "3 sigma / valid": ratio}), r
+    own = own_sigma_columns(d, T_own).groupby(d["n_boards"])
+    r["valid_own_rate"] = r["n_boards"].map(own["valid_own"].mean()).astype(float)
+    r["own_3sigma_rate"] = r["n_boards"].map(own["own_3sigma"].mean()).astype(float)
+    r["ratio_own_3sigma_valid"] = r["own_3sigma_rate"] / r["valid_own_rate"].where(r["valid_own_rate"] > 0)
+
+    def pct(col):
+        return [f"{100 * v:.0f}%" if np.isfinite(v) else "-" for v in r[col]]
+
+    def ratio(col):
+        return [f"{v:.2f}" if np.isfinite(v) else "-" for v in r[col]]
+
+    return refusal_table(r, {"valid": pct("valid_rate"), "within 3 sigma": pct("within_3sigma_rate"),
+                             "3 sigma / valid": ratio("ratio_3sigma_valid"),
+                             "valid vs own": pct("valid_own_rate"), "within 3 own sigma": pct("own_3sigma_rate"),
+                             "own 3 sigma / valid vs own": ratio("ratio_own_3sigma_valid")}), r
+
+
+def own_sigma_columns(d: pd.DataFrame, T_own: np.ndarray | None) -> pd.DataFrame:
+    """Per row of ``d`` (``ok``, ``T``, ``cov``) against ``T_own`` (the method's own all-board answer): ``valid_own``
+    (within 8 deg / 0.8 m of it) and ``own_3sigma`` (within ``SIGMAS`` of the row's own 1-sigma, rotation and
+    translation, ``geometry.metrics.sigma_rot_deg`` / ``sigma_trans_m`` of the row's covariance; False without
+    one); both False where the row has no answer or there is no ``T_own``."""
+    valid, within = [], []
+    for ok, T, c in zip(d["ok"].astype(bool), d["T"], d.get("cov", pd.Series("", index=d.index)), strict=True):
+        if not (ok and isinstance(T, str) and T and T_own is not None):
+            valid.append(False)
+            within.append(False)
+            continue
+        e_R, e_t = pose_errors(np.array(json.loads(T)), np.asarray(T_own, float))
+        C = cov_from_text(c)
+        valid.append(bool(e_R < VALID_DEG and e_t < VALID_M))
+        within.append(C is not None and bool(e_R < SIGMAS * sigma_rot_deg(C) and e_t < SIGMAS * sigma_trans_m(C)))
+    return pd.DataFrame({"valid_own": valid, "own_3sigma": within}, index=d.index)

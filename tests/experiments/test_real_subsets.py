@@ -171,7 +171,13 @@ def test_uncertainty_table_from_hand_made_rows():
     assert r.loc[3, "axis_refused"] == 1 and r.loc[3, "axes"] == "roll 1, pitch 1"
     assert np.isclose(r.loc[3, "valid_rate"], 2 / 3) and np.isclose(r.loc[3, "ratio_3sigma_valid"], 0.5)
     assert np.isnan(r.loc[4, "ratio_3sigma_valid"])                       # no valid answer: no ratio
-    assert md[2].endswith("| 67% | 33% | 0.50 |") and md[3].endswith("| 0% | 0% | - |")
+    # against the method's own all-board answer (identity here): both answers within 3 of their own 1-sigma
+    # (roll 1 deg < 3 x 0.87 deg, y 30 mm < 3 x 17 mm); the 4-board answer is valid but has no covariance
+    assert np.isclose(r.loc[3, "valid_own_rate"], 2 / 3) and np.isclose(r.loc[3, "own_3sigma_rate"], 2 / 3)
+    assert np.isclose(r.loc[3, "ratio_own_3sigma_valid"], 1.0)
+    assert r.loc[4, "valid_own_rate"] == 1.0 and r.loc[4, "own_3sigma_rate"] == 0.0
+    assert md[2].endswith("| 67% | 33% | 0.50 | 67% | 67% | 1.00 |")
+    assert md[3].endswith("| 0% | 0% | - | 100% | 0% | 0.00 |")
     assert np.isnan(sub.uncertainty_table(df, "lidarcam", None)[1]["median_nees"]).all()
 
 
