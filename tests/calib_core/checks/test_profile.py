@@ -25,7 +25,7 @@ from calib_core.model.residuals import range_linearised
 from calib_core.refine.uncertainty import typical_range
 
 SEEDS = range(12)
-NOWICKI = Path(__file__).resolve().parents[3] / "results" / "real" / "obs" / "nowicki.json"
+NOWICKI = Path(__file__).resolve().parents[3] / "tests" / "fixtures" / "nowicki" / "observations.json"
 
 
 def _scaled_information(obs, T):

@@ -23,7 +23,7 @@ from calib_core.model.residuals import perturb
 from calib_core.refine.systematic import DEFAULT_PRIOR, fold_noise_ratio
 from simulate import SimOptions, generate
 
-NOWICKI = Path(__file__).resolve().parents[3] / "results" / "real" / "obs" / "nowicki.json"
+NOWICKI = Path(__file__).resolve().parents[3] / "tests" / "fixtures" / "nowicki" / "observations.json"
 
 
 def _offset_boards(obs, sigma_m: float, rng):

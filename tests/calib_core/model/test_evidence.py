@@ -28,7 +28,7 @@ from calib_core.model.score import lidarcam_residuals
 from simulate import SimOptions, generate
 
 REPO = Path(__file__).resolve().parents[3]
-NOWICKI = REPO / "results" / "real" / "obs" / "nowicki.json"
+NOWICKI = REPO / "tests" / "fixtures" / "nowicki" / "observations.json"
 
 
 def lower_bound(obs: Observations, factor) -> Observations:

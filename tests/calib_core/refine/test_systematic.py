@@ -29,7 +29,7 @@ from simulate import SimOptions, generate
 
 SLACK = 0.95
 """How much the 1-sigma may fall when the intrinsics are freed: the re-estimated answer's own change."""
-NOWICKI = Path(__file__).resolve().parents[3] / "results" / "real" / "obs" / "nowicki.json"
+NOWICKI = Path(__file__).resolve().parents[3] / "tests" / "fixtures" / "nowicki" / "observations.json"
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -124,7 +124,7 @@ def test_more_stated_intrinsics_uncertainty_never_gives_a_smaller_sigma(seed):
         assert b.sigma_rot_deg >= SLACK * a.sigma_rot_deg and b.sigma_trans_mm >= SLACK * a.sigma_trans_mm
 
 
-@pytest.mark.skipif(not NOWICKI.exists(), reason="results/real/obs/nowicki.json not present")
+@pytest.mark.skipif(not NOWICKI.exists(), reason="tests/fixtures/nowicki/observations.json not present")
 def test_nowicki_sigma_does_not_shrink_with_the_readmes_std_intrinsics():
     obs = load_observations(NOWICKI)
     a, b = calibrate(_with_std(obs, 0, 0), "lidarcam"), calibrate(_with_std(obs, 0.003, 2.0), "lidarcam")
