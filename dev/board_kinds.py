@@ -1,4 +1,5 @@
-"""Corner error of each board kind against the rendered truth, and the calibration of rendered rigs (issue 42).
+"""Corner error of each board kind against the rendered truth, and the calibration of rendered rigs (the
+measurement behind docs/dataset.md's table of board kinds).
 
 Per rig (a lens and a board kind, ``RIGS``) and seed: ``simulate.dataset.write_dataset`` renders a dataset folder with
 every third board slid out of the image (``cut_every=3``); every pose's corners are detected as ``lidarcam extract``

@@ -1,5 +1,5 @@
-"""Boards in three kinds (issue 42): board.yaml's forms, detection with identities through cv2.aruco, the corner
-error on a rendered board, partial views and the PnP's spread rule."""
+"""Boards in three kinds (checkerboard, Kalibr targets, ChArUco): board.yaml's forms, detection with identities
+through cv2.aruco, the corner error on a rendered board, partial views and the PnP's spread rule."""
 
 from __future__ import annotations
 
