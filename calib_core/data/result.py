@@ -17,7 +17,8 @@ from .outcome import Outcome
 RESULT_SCHEMA = "lidarcam.result/1"
 
 JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior",
-             "intrinsics", "board_dispersion", "covariance_bend", "residual_rms", "observations", "noise_model",
+             "intrinsics", "board_dispersion", "covariance_bend", "covariance_modes", "residual_rms", "observations",
+             "noise_model",
              "board_error")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters

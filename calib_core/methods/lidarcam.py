@@ -24,6 +24,7 @@ from ..model.intrinsics import ESTIMATED_INTRINSICS, RANGE_ONLY_INTRINSICS
 from ..model.residuals import range_linearised
 from ..model.score import evidence_cost
 from ..refine.joint import RANGE_ONLY_MODEL
+from ..refine.modes import mixture_covariance
 from ..refine.systematic import ESTIMATED, BoardErrorEstimate, board_error_estimate
 from ..refine.uncertainty import conditioning
 from ..registry import Method
@@ -146,14 +147,20 @@ def named(alts: list[dict]) -> str:
                      for a in alts)
 
 
-def runner_up_warning(best: Choice) -> tuple[list[str], dict]:
+def runner_up_warning(best: Choice, modes: dict | None = None) -> tuple[list[str], dict]:
     """A warning naming the distinct answers nearly as likely as ``best`` (``choose.WEAK_LOG_LIKELIHOOD``) and
-    the ``alternatives`` entry (the answer first), or nothing when the data prefer it clearly."""
+    the ``alternatives`` entry (the answer first), or nothing when the data prefer it clearly; ``modes``: the
+    covariance that holds them (``refine.modes.mixture_covariance``'s report), named in the warning."""
     if not best.runners_up:
         return [], {}
     alts = alternatives([(best.T, best.cost), *best.runners_up])
+    held = "" if not modes else \
+        (f"; the 1-sigma holds them (likelihood-weighted mixture of the {modes['n_modes']} answers: "
+         f"{modes['sigma_rot_deg']:.3g} deg, {modes['sigma_trans_mm']:.3g} mm; the answer's own mode: "
+         f"{modes['sigma_rot_deg_mode']:.3g} deg, {modes['sigma_trans_mm_mode']:.3g} mm)")
     return [f"weakly decided: distinct answers nearly as likely (within {WEAK_LOG_LIKELIHOOD:g} in log-likelihood; "
-            f"the answer first): {named(alts)}; a mounting prior or more boards would decide"], {"alternatives": alts}
+            f"the answer first): {named(alts)}; a mounting prior or more boards would decide{held}"], \
+        {"alternatives": alts, **({"covariance_modes": modes} if modes else {})}
 
 
 def tie_failure(best: Choice, candidates: np.ndarray, with_prior: bool,
@@ -204,7 +211,9 @@ def finish(found: Found, opts: LidarcamOptions):
             cov = with_prior(T, cov, prior)
         if why is not None and why != NO_CORNERS:
             jinfo["warnings"].append(f"{why}; covariance of the range model only")
-    weak, alts = runner_up_warning(found.first) if not tests.changed else ([], {})
+    first = found.first if not tests.changed else None  # its runners-up were scored on these boards
+    cov, modes = mixture_covariance(T, cov, first.cost, first.runners_up) if first is not None else (cov, {})
+    weak, alts = runner_up_warning(first, modes) if first is not None else ([], {})
     warnings = tests.warnings + jinfo.pop("warnings", []) + degeneracy_warnings(obs_u, T) + \
         ([deg.message()] if len(deg.directions) else []) + weak
     return T, C, {"cost": best.cost, "polished": best.polished, "score_start": found.score_start,
