@@ -28,7 +28,13 @@ from ..refine.modes import mixture_covariance
 from ..refine.systematic import ESTIMATED, BoardErrorEstimate, board_error_estimate
 from ..refine.uncertainty import conditioning
 from ..registry import Method
-from ..robust.choose import TIE_LOG_LIKELIHOOD, WEAK_LOG_LIKELIHOOD, Choice, choose_and_refine
+from ..robust.choose import (
+    TIE_LOG_LIKELIHOOD,
+    WEAK_LOG_LIKELIHOOD,
+    Choice,
+    carried_runners_up,
+    choose_and_refine,
+)
 from ..robust.final import FinalTests, final_tests
 from ..robust.inliers import trim
 from ..robust.search import Search, consensus_search
@@ -101,9 +107,10 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
 
 @dataclass(frozen=True, eq=False)
 class Found:
-    """Steps 1-4 of ``lidarcam``: the search, the chosen and refined answer, its final tests, the score of the
-    start it was refined from, and ``first``: the choice before the final tests (its ``runners_up`` were scored on
-    the same boards when the tests changed nothing)."""
+    """Steps 1-4 of ``lidarcam``: the search, the chosen and refined answer (its ``runners_up`` scored on the
+    boards and points it was chosen on: those of the choice before the final tests, refined again after them where
+    the tests changed the boards or points), its final tests, the score of the start it was refined from, and
+    ``first``: the choice before the final tests."""
 
     search: Search
     best: Choice
@@ -132,6 +139,7 @@ def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
     first = best
     if tests.changed:  # boards or points left out (or taken back) at the refined pose: refine on what is left
         best = choose_and_refine(tests.obs_used, best.T, sigma, score, opts.choose, n_refine=1)
+        best = carried_runners_up(tests.obs_used, best, first.runners_up, sigma, score, opts.choose)
     return Found(search, best, tests, start, first)
 
 
@@ -211,9 +219,8 @@ def finish(found: Found, opts: LidarcamOptions):
             cov = with_prior(T, cov, prior)
         if why is not None and why != NO_CORNERS:
             jinfo["warnings"].append(f"{why}; covariance of the range model only")
-    first = found.first if not tests.changed else None  # its runners-up were scored on these boards
-    cov, modes = mixture_covariance(T, cov, first.cost, first.runners_up) if first is not None else (cov, {})
-    weak, alts = runner_up_warning(first, modes) if first is not None else ([], {})
+    cov, modes = mixture_covariance(T, cov, best.cost, best.runners_up)  # last: it composes the modes
+    weak, alts = runner_up_warning(best, modes)
     warnings = tests.warnings + jinfo.pop("warnings", []) + degeneracy_warnings(obs_u, T) + \
         ([deg.message()] if len(deg.directions) else []) + weak
     return T, C, {"cost": best.cost, "polished": best.polished, "score_start": found.score_start,
