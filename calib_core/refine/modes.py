@@ -15,6 +15,10 @@ radians; ``t_i - t_0``, metres), ``cost_i`` its negative log-likelihood (``score
 so ``exp(-cost)`` is the likelihood). ``P_i`` is the answer's covariance for every mode (a runner-up's own is not
 computed: it would need the joint model at each): ``P = P_0 + sum_{i>0} w_i d_i d_i^T``, never smaller than
 ``P_0`` and equal to it without runners-up. The answer does not change.
+
+``methods.lidarcam.finish`` applies it last: the profile floor, the per-board error's sandwich, the likelihood's bend,
+the dispersion widening and a mounting prior's information all describe the answer's own mode (``P_0``); the mixture
+composes the modes (with a prior, the runners-up were scored on the posterior).
 """
 
 from __future__ import annotations
