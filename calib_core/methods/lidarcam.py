@@ -166,8 +166,10 @@ def runner_up_warning(best: Choice, modes: dict | None = None) -> tuple[list[str
         (f"; the 1-sigma holds them (likelihood-weighted mixture of the {modes['n_modes']} answers: "
          f"{modes['sigma_rot_deg']:.3g} deg, {modes['sigma_trans_mm']:.3g} mm; the answer's own mode: "
          f"{modes['sigma_rot_deg_mode']:.3g} deg, {modes['sigma_trans_mm_mode']:.3g} mm)")
+    better = "" if min(c for _, c in best.runners_up) >= best.cost else \
+        " (refined again after the final tests, one fits these boards better than the answer chosen before them)"
     return [f"weakly decided: distinct answers nearly as likely (within {WEAK_LOG_LIKELIHOOD:g} in log-likelihood; "
-            f"the answer first): {named(alts)}; a mounting prior or more boards would decide{held}"], \
+            f"the answer first): {named(alts)}{better}; a mounting prior or more boards would decide{held}"], \
         {"alternatives": alts, **({"covariance_modes": modes} if modes else {})}
 
 
