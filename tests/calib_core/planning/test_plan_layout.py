@@ -10,7 +10,7 @@ import pytest
 from calib_core import calibrate
 from calib_core.data.observations import BoardObservation, Observations
 from calib_core.model.board_error import BoardErrorScale
-from calib_core.planning.capture import plan_capture, plan_summary, separation_m
+from calib_core.planning.capture import REPEAT_ANGLE_DEG, plan_capture, plan_summary, separation_m
 from calib_core.planning.observed import plan_from_observations
 from lidarcam.rig.plan_figure import LABEL_MERGE_M
 from lidarcam.rig.plan_rig import load_plan_rig
@@ -112,3 +112,24 @@ def test_the_rig_files_systematic_error_defaults_to_the_calibrations_prior(tmp_p
     bare = replace(rig, board_error=BoardErrorScale())
     # the term costs information: the same boards predict a larger 1-sigma with it
     assert plan_capture(rig, 4).after[-1].rot_sigma_deg > plan_capture(bare, 4).after[-1].rot_sigma_deg
+
+
+def _repeats(plan, rig) -> int:
+    """Pairs of proposed boards within the separation of each other whose normals are within REPEAT_ANGLE_DEG."""
+    T = plan.T_lidar_board
+    c = T[:, :3, :3] @ np.r_[rig.outline.mean(axis=0), 0.0] + T[:, :3, 3]
+    near = np.linalg.norm(c[:, None] - c[None], axis=-1) < separation_m(rig)
+    same = np.abs(T[:, :3, 2] @ T[:, :3, 2].T) > np.cos(np.radians(REPEAT_ANGLE_DEG))
+    return int(np.triu(near & same, 1).sum())
+
+
+def test_a_compact_workspace_gets_distinct_poses_not_near_repeats():
+    """A workspace with room for few places (as a captured set's, a metre away): after every place has a board,
+    the next ones turn or lean differently from the boards already there instead of repeating them."""
+    base = load_plan_rig(RIG_FILE)
+    rig = replace(base, workspace=replace(base.workspace, distance_m=(3.0, 3.6), bearing_deg=(-6.0, 6.0)))
+    plan = plan_capture(rig, 8)
+    T = plan.T_lidar_board
+    c = T[:, :3, :3] @ np.r_[rig.outline.mean(axis=0), 0.0] + T[:, :3, 3]
+    assert np.linalg.norm(c[:, None] - c[None], axis=-1)[np.triu_indices(8, 1)].min() < separation_m(rig)  # shared
+    assert _repeats(plan, rig) == 0
