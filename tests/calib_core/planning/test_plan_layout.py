@@ -133,3 +133,27 @@ def test_a_compact_workspace_gets_distinct_poses_not_near_repeats():
     c = T[:, :3, :3] @ np.r_[rig.outline.mean(axis=0), 0.0] + T[:, :3, 3]
     assert np.linalg.norm(c[:, None] - c[None], axis=-1)[np.triu_indices(8, 1)].min() < separation_m(rig)  # shared
     assert _repeats(plan, rig) == 0
+
+
+def _behind(obs: Observations) -> Observations:
+    """The same rig with the lidar turned half a turn about its z axis: the boards stand behind it, around 180 deg
+    (as on EdenShin's rig), where the bearings run past +-180."""
+    half = np.diag([-1.0, -1.0, 1.0, 1.0])
+    boards = tuple(replace(b, scan=-b.scan) for b in obs.boards)
+    return Observations(boards, half @ obs.T_lidar_cam_true, dict(obs.meta), obs.camera, obs.board_range_sigma_m)
+
+
+def test_boards_behind_the_lidar_plan_as_in_front():
+    """Turning the lidar about its own z axis does not change the plan: the workspace follows the boards across
+    +-180 deg (not the whole circle between the two ends)."""
+    obs = generate(SimOptions(n_boards=8, pose_mode="pixel", max_roll_deg=10.0, noise_mm=10.0), 6)
+    plans = []
+    for o in (obs, _behind(obs)):
+        r = calibrate(o)
+        assert r.ok
+        plans.append(plan_from_observations(o, r.T_lidar_cam, 4, covariance=r.covariance, info=r.info).plan)
+    a, b = plans
+    assert np.all(np.abs(b.poses[:, 1]) > 90.0)
+    for pa, pb in zip(a.after, b.after, strict=True):
+        assert pb.rot_sigma_deg == pytest.approx(pa.rot_sigma_deg, rel=0.1)
+        assert pb.trans_sigma_mm == pytest.approx(pa.trans_sigma_mm, rel=0.1)
