@@ -47,7 +47,8 @@ def one_seed(seed: int, work: Path) -> dict:
     if res.ok:
         e = pose_error_vector(res.T_lidar_cam, obs.T_lidar_cam_true)
         row.update(nees=nees(res.T_lidar_cam, obs.T_lidar_cam_true, res.covariance),
-                   err_rot_deg=float(np.degrees(np.linalg.norm(e[:3]))), err_trans_mm=1e3 * float(np.linalg.norm(e[3:])),
+                   err_rot_deg=float(np.degrees(np.linalg.norm(e[:3]))),
+                   err_trans_mm=1e3 * float(np.linalg.norm(e[3:])),
                    sigma_rot_deg=res.sigma_rot_deg, sigma_trans_mm=res.sigma_trans_mm)
     be = info.get("board_error") or {}
     row.update({f"board_{k}": be.get(k) for k in ("offset_m", "tilt_m", "se_offset_m", "se_tilt_m", "source")})
@@ -64,8 +65,9 @@ def summary(df: pd.DataFrame) -> str:
             f"with any warning {df['n_warnings'].gt(0).mean():.0%}; board offset median "
             f"{1e3 * df['board_offset_m'].median():.2f} mm (se {1e3 * df['board_se_offset_m'].median():.2f}), tilt "
             f"{1e3 * df['board_tilt_m'].median():.2f} mm (se {1e3 * df['board_se_tilt_m'].median():.2f}); dispersion "
-            f"p median {df['dispersion_p_value'].median():.3f}, p < 0.01 in {df['dispersion_p_value'].lt(0.01).mean():.0%},"
-            f" widened {df['dispersion_widened'].eq(True).mean():.0%}; corner sigma median "
+            f"p median {df['dispersion_p_value'].median():.3f}, p < 0.01 in "
+            f"{df['dispersion_p_value'].lt(0.01).mean():.0%}, widened "
+            f"{df['dispersion_widened'].eq(True).mean():.0%}; corner sigma median "
             f"{df['corner_sigma_px'].median():.3f} px; error median {ok['err_rot_deg'].median():.3f} deg / "
             f"{ok['err_trans_mm'].median():.2f} mm, 1-sigma median {ok['sigma_rot_deg'].median():.3f} deg / "
             f"{ok['sigma_trans_mm'].median():.2f} mm")
