@@ -99,7 +99,8 @@ def test_bend_reaches_the_result_json_and_the_summary(tmp_path):
 
     for t in range(20):
         res = calibrate(generate(SimOptions(n_boards=3, **RIG_LIKE), seed=0, trial=t), "lidarcam")
-        if res.ok and res.info.get("covariance_bend", {}).get("departure_sigmas", 0.0) >= BEND_REPORTED:
+        if res.ok and res.info.get("covariance_bend", {}).get("departure_sigmas", 0.0) >= BEND_REPORTED \
+                and "covariance_modes" not in res.info:     # the modes' mixture widens it further
             break
     else:
         pytest.fail("no bent three-board answer in 20 rig-like trials")
