@@ -131,9 +131,7 @@ def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, 
     if not obs.has_corners:
         return None, NO_CORNERS
     try:
-        return joint_step(obs, T, corner_sigma_px=options.corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
-                          f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter, widen=options.widen,
-                          names=names, outline=options.outline, mounting=mounting, bend=options.bend,
+        return joint_step(obs, T, options, range_sigma_m=range_sigma_m, loss=loss, names=names, mounting=mounting,
                           board_error=board_error, spread_held=spread_held), None
     except (JointError, UncertaintyError) as err:
         return None, f"joint refinement failed ({err})"
