@@ -217,9 +217,9 @@ def with_systematic(C: np.ndarray, scale: BoardErrorScale | None, data: ScanData
     sandwich ``C + C M C``, ``M = sum_i w_i P w_i^T / sr^2`` the term's part of the profiled score covariance,
     ``w_i = V_g,i^T - H_gb,i H_bb,i^-1 V_b,i^T`` (G,2) with ``V_i = B_i^T J_i`` the term's columns
     (``model.board_error.systematic_basis`` on ``data``, the scan points with the current board planes) on the
-    board's normalised range rows (``lin``: ``joint._weighted``'s output, ``Je`` (K,6) extrinsic and ``Jb`` (K,6)
-    board pose columns; the intrinsics' are zero on range rows; rows of board i from ``starts[i]``) and ``P`` the
-    term's variances. Linear in the boards."""
+    board's normalised range rows (``lin``: ``model.corners.normalised_rows``' output, ``Je`` (K,6) extrinsic and
+    ``Jb`` (K,6) board pose columns; the intrinsics' are zero on range rows; rows of board i from ``starts[i]``) and
+    ``P`` the term's variances. Linear in the boards."""
     if scale is None or not scale.active:
         return C
     Je, Jb = lin[2], lin[3]
