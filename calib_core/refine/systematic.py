@@ -37,7 +37,7 @@ import numpy as np
 from ..data.lines import range_sigma, residual_sigma
 from ..data.observations import Observations, ScanData
 from ..errors import JointError
-from ..model.board_error import BoardErrorScale, _per_board_sum, systematic_basis
+from ..model.board_error import BoardErrorScale, per_board_sum, systematic_basis
 from ..model.corners import board_poses, corner_residuals, joint_range_residuals
 from ..model.residuals import range_linearised
 
@@ -92,9 +92,9 @@ def board_coefficients(obs: Observations, T: np.ndarray, range_sigma_m: float | 
     data, N = obs.scan_data, obs.n_boards
     e, J = range_linearised(T, data)
     B = systematic_basis(data, data.normals @ T[:3, :3].T)
-    Gi = np.linalg.inv(_per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, N))
-    c = np.einsum("nab,nb->na", Gi, _per_board_sum(B * e[:, None], data.board, N))
-    C = Gi @ _per_board_sum(np.einsum("ka,kp->kap", B, J), data.board, N)
+    Gi = np.linalg.inv(per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, N))
+    c = np.einsum("nab,nb->na", Gi, per_board_sum(B * e[:, None], data.board, N))
+    C = Gi @ per_board_sum(np.einsum("ka,kp->kap", B, J), data.board, N)
     K = range_sigma(obs, range_sigma_m) ** 2 * Gi
     if obs.has_corners and obs.camera is not None:
         try:
@@ -111,10 +111,10 @@ def _camera_part(obs: Observations, T: np.ndarray, B: np.ndarray, Gi: np.ndarray
     ec, Jc = corner_residuals(obs, Tb, jacobian=True)
     sc = residual_sigma(ec, 6 * N)
     idx = np.concatenate([np.full(len(b.corners_px), i) for i, b in enumerate(obs.boards)])
-    H = _per_board_sum(np.einsum("jca,jcb->jab", Jc, Jc), idx, N)          # (N,6,6)
+    H = per_board_sum(np.einsum("jca,jcb->jab", Jc, Jc), idx, N)          # (N,6,6)
     Sb = sc**2 * np.linalg.inv(H)
     _, _, Jb = joint_range_residuals(obs, T, Tb, jacobian=True)
-    Cb = Gi @ _per_board_sum(np.einsum("ka,kp->kap", B, Jb), obs.scan_data.board, N)       # (N,2,6)
+    Cb = Gi @ per_board_sum(np.einsum("ka,kp->kap", B, Jb), obs.scan_data.board, N)       # (N,2,6)
     return Cb @ Sb @ np.swapaxes(Cb, 1, 2)
 
 
@@ -204,7 +204,7 @@ def fold_noise_ratio(data: ScanData, T: np.ndarray, scale: BoardErrorScale, rang
     if not scale.active:
         return 1.0
     B = systematic_basis(data, data.normals @ np.asarray(T, float)[:3, :3].T)
-    G = _per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, len(data.normals))
+    G = per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, len(data.normals))
     known = float(range_sigma_m) ** 2 * np.trace(np.linalg.inv(G), axis1=1, axis2=2)
     return float((known.sum() + len(known) * scale.variances.sum()) / known.sum())
 
