@@ -4,12 +4,13 @@ answer, its covariance corrected for the likelihood's bend (``refine.bend``) and
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..data.lines import range_sigma
 from ..data.observations import Observations
+from ..data.outcome import CovariancePart, JointFitPart
 from ..errors import JointError, UncertaintyError
 from ..geometry.mounting import MountingPrior
 from ..model.board_error import BoardErrorScale
@@ -29,27 +30,37 @@ from .joint import (
 )
 
 
+@dataclass(frozen=True, eq=False)
+class JointStep:
+    """``joint_step``'s answer: the extrinsic ``T_lidar_cam`` (4x4), its covariance with the model it comes from
+    (``data.outcome.CovariancePart``), the joint model's fit (``data.outcome.JointFitPart``) and the warnings."""
+
+    T_lidar_cam: np.ndarray
+    covariance: CovariancePart
+    fit: JointFitPart
+    warnings: list[str]
+
+
 def joint_step(obs: Observations, T0: np.ndarray, options: JointOptions | None = None, *,
                range_sigma_m: float | None = None, loss: str = "linear", names=None,
                mounting: MountingPrior | None = None, board_error: BoardErrorScale | None = None,
-               spread_held: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
+               spread_held: bool = False) -> JointStep:
     """A method's final step when the boards carry image corners: ``joint_refine`` from ``T0`` under the joint
     ``options`` (``refine.joint.JointOptions``: the corner noise, the robust scale, the iterations, the outline
     terms, ``widen``, ``bend``; default the defaults; its ``use_corners`` and ``board_error`` are the caller's, who
-    decides whether to take this step and passes the per-board term's scale as ``board_error``); returns
-    (T_lidar_cam, covariance, info) with ``info["covariance_model"]`` (``JOINT_MODEL``, or
-    ``JOINT_INTRINSICS_MODEL`` when the camera's ``std_intrinsics`` made the intrinsics unknowns),
-    ``info["intrinsics"]`` (``EXACT_INTRINSICS`` or ``ESTIMATED_INTRINSICS``) and the noise figures. With
-    ``options.widen``, ``info["board_dispersion"]`` holds the boards' dispersion test (``refine.dispersion``; boards
-    named by ``names``, default their index) and where it fails the covariance is widened to the boards' spread,
-    with a warning that says so. With ``options.bend`` (and no mounting prior, whose rows cut the ridge to the
-    prior's width) the covariance first takes the likelihood's bend along its weakest direction (``refine.bend``:
-    two re-fits), reported in ``info["covariance_bend"]``. ``board_error``: the per-board systematic error the model
-    holds (``model.board_error``, ``refine.systematic``); the dispersion test is then of the model with it, and with
-    ``spread_held`` (its scale estimated from these boards) the test is reported without widening. The range noise
-    is then the scan lines' (``data.lines``) unless ``range_sigma_m``, not re-estimated from residuals that hold the
-    boards' own errors. ``loss``: the robust loss (``refine.Loss``), its scale ``options.f_scale_sigmas`` noise
-    stds.
+    decides whether to take this step and passes the per-board term's scale as ``board_error``); returns a
+    ``JointStep`` whose covariance's model is ``JOINT_MODEL`` (or ``JOINT_INTRINSICS_MODEL`` when the camera's
+    ``std_intrinsics`` made the intrinsics unknowns), its intrinsics ``EXACT_INTRINSICS`` or
+    ``ESTIMATED_INTRINSICS``, with the noise figures in its fit. With ``options.widen``, the covariance's
+    ``dispersion`` holds the boards' dispersion test (``refine.dispersion``; boards named by ``names``, default
+    their index) and where it fails the covariance is widened to the boards' spread, with a warning that says so.
+    With ``options.bend`` (and no mounting prior, whose rows cut the ridge to the prior's width) the covariance
+    first takes the likelihood's bend along its weakest direction (``refine.bend``: two re-fits), reported as the
+    covariance's ``bend``. ``board_error``: the per-board systematic error the model holds (``model.board_error``,
+    ``refine.systematic``); the dispersion test is then of the model with it, and with ``spread_held`` (its scale
+    estimated from these boards) the test is reported without widening. The range noise is then the scan lines'
+    (``data.lines``) unless ``range_sigma_m``, not re-estimated from residuals that hold the boards' own errors.
+    ``loss``: the robust loss (``refine.Loss``), its scale ``options.f_scale_sigmas`` noise stds.
 
     Raises JointError (no corners, a board behind the camera) and UncertaintyError (singular information).
     """
@@ -79,17 +90,14 @@ def joint_step(obs: Observations, T0: np.ndarray, options: JointOptions | None =
         cov, disp = widened_covariance(cov, *board_scores(obs, j.T_lidar_cam, j.T_cam_board, sc, sr, j.camera),
                                        extra_params=intrinsics_parameters(obs, j, o.outline), held=spread_held)
         warnings += [disp.warning(names)] if disp.widened else []
-    info = {"covariance_model": JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
-            "intrinsics": EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
-            "corner_sigma_px": j.corner_sigma_px, "range_sigma_m": j.range_sigma_m, "corner_rms_px": j.corner_rms_px,
-            "range_rms_m": j.range_rms_m, "joint_cost": j.cost, "joint_iterations": j.iterations,
-            "joint_converged": j.converged, **({"board_dispersion": disp.to_dict(names)} if widen else {}),
-            **({"covariance_bend": bent} if bent else {})}
     if not j.converged:
         warnings.insert(0, f"joint refinement stopped after {o.max_iter} iterations without converging")
-    if warnings:
-        info["warnings"] = warnings
-    return j.T_lidar_cam, cov, info
+    part = CovariancePart(cov, JOINT_MODEL if exact else JOINT_INTRINSICS_MODEL,
+                          EXACT_INTRINSICS if exact else ESTIMATED_INTRINSICS,
+                          dispersion=disp.to_dict(names) if widen else None, bend=bent or None)
+    fit = JointFitPart(j.corner_sigma_px, j.range_sigma_m, j.corner_rms_px, j.range_rms_m, j.cost, j.iterations,
+                       j.converged)
+    return JointStep(j.T_lidar_cam, part, fit, warnings)
 
 
 def bent_joint_covariance(obs: Observations, j, loss: str,
