@@ -31,6 +31,11 @@ leave z free at every order, and roll and pitch with fourth-order information on
 (``fixed=``) needs all three. The warning then says that the lean is all that fixes them, so that board-pose
 errors of the lean's order are not in the range model's sigma (the joint model's board-pose covariance holds
 the corners' share of them).
+
+A refusal names as not determined only the axes whose own profile likelihood (that axis moved, the other five
+re-fitted) stays flat across the span (``Degeneracy.free_axes``): every named axis is free. The other weak axes
+are said with their profile 1-sigma (they are refused with the set, since the answer needs every direction, but
+not called free), and the hint lists what a calibration with given axes needs (``axes``).
 """
 
 from __future__ import annotations
@@ -48,7 +53,8 @@ from ..model.residuals import range_linearised
 from ..refine.partial import vertical_start
 from ..refine.uncertainty import conditioning, normal_spread_deg, typical_range
 from ..solvers._common import MIN_BOARDS
-from .profile import fold_sigmas, free_span, marginal_sigmas, vertical_sigmas
+from .axis_words import AXES, AXIS_WORDS, FOLD_WORDS, LEAN_WORDS, describe, fixed_key, flat_words, join_words
+from .profile import fold_sigmas, free_span, marginal_sigmas, profile_extent, vertical_sigmas
 
 WARN_BELOW_BOARDS = 4
 """Fewer boards than this is warned about: with 3 the minimal solver's candidates all fit the scan lines exactly
@@ -100,32 +106,12 @@ VERTICAL_TOL_DEG = 10.0
 VERTICAL_MISFIT_DEG = 2.5
 """Or: one rotation turns every board normal onto its scan line's normal in the scan plane within this (RMS)."""
 
-FOLD_WORDS = (" from the profile likelihood: the range residuals change only at second order along it here, where "
-              "two of the boards' solutions meet")
-"""How a fold direction's sigma (``FOLD_SPAN``) is named in the message."""
-
-AXES = ("roll", "pitch", "yaw", "x", "y", "z")
-AXIS_WORDS = {"roll": "roll (rotation about the lidar x axis)", "pitch": "pitch (about the lidar y axis)",
-              "yaw": "yaw (about the lidar z axis)", "x": "x (translation along the lidar x axis)",
-              "y": "y (along the lidar y axis)", "z": "z (height, along the lidar z axis)"}
-
-
 def origin_jacobian(J: np.ndarray, T_lidar_cam: np.ndarray) -> np.ndarray:
     """A (K,6) residual Jacobian in the parameters of ``calib_core.model.residuals`` (rotation about the camera centre)
     turned into the lidar-origin axes of this module: ``d_t(residuals) = w x t + dt``."""
     J = np.asarray(J, float)
     t = np.asarray(T_lidar_cam, float)[:3, 3]
     return np.concatenate([J[:, :3] - J[:, 3:] @ skew(t), J[:, 3:]], axis=1)
-
-
-def _describe(v: np.ndarray, min_share: float = 0.1) -> str:
-    """``0.71 roll - 0.70 y`` of a unit 6-vector (components whose square is at least ``min_share``)."""
-    keep = [j for j in np.argsort(-np.abs(v)) if v[j] ** 2 >= min_share] or [int(np.argmax(np.abs(v)))]
-    return " ".join(f"{'-' if v[j] < 0 else '+'} {abs(v[j]):.2f} {AXES[j]}" for j in keep).lstrip("+ ")
-
-
-def _join(words: list[str]) -> str:
-    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,6 +134,12 @@ class Degeneracy:
         floors: (k,) bool, the directions whose sigma the profile likelihood raised above the linear one (the
             vertical axes of boards that lean a little): the covariance is widened to it along them
             (``methods.last_steps.profile_floor``); empty when none.
+        free_axes: where the set is refused (``geometric``) at the range optimum, the axes of ``axes`` that the
+            refusal names as not determined: those whose own profile likelihood (the other five re-fitted) stays
+            flat across ``profile.free_span``; ``axis_sigmas`` (len(axes),) each axis's profile 1-sigma (scaled;
+            inf: flat), the others' said in ``cause``; ``free_directions`` (m,6) the directions left free. Empty
+            otherwise (a set that is answered, or judged without a profile: ``axes`` are then named). ``axes``
+            stays what a calibration with given axes needs (``fixed=``).
     """
 
     directions: np.ndarray
@@ -160,19 +152,27 @@ class Degeneracy:
     range_sigma_m: float
     profile: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     floors: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    free_axes: tuple[str, ...] = ()
+    free_directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    axis_sigmas: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def determined(self) -> bool:
         """No direction is left free by the geometry (weak ones for lack of data may remain)."""
         return not (len(self.directions) and self.geometric)
 
-    def _what(self) -> str:
-        words = _join([AXIS_WORDS[a] for a in self.axes])
-        if self.aligned:
-            return words
-        k = len(self.directions)
+    def _what(self, free: bool = False) -> tuple[str, int]:
+        """What is named (the free axes with ``free`` where known, else ``axes``) and how many things it counts."""
+        axes, dirs, aligned = self.axes, self.directions, self.aligned
+        if free and self.free_axes:
+            axes, dirs = self.free_axes, self.free_directions
+            aligned = len(dirs) == len(axes)
+        words = join_words([AXIS_WORDS[a] for a in axes])
+        if aligned:
+            return words, len(axes)
+        k = len(dirs)
         return (f"{'a combination' if k == 1 else f'{k} combinations'} of {words} "
-                f"({'; '.join(_describe(v) for v in self.directions)}; translations in units of {self.scale_m:.2f} m)")
+                f"({'; '.join(describe(v) for v in dirs)}; translations in units of {self.scale_m:.2f} m)"), k
 
     def _sigma_words(self) -> str:
         out = []
@@ -188,16 +188,19 @@ class Degeneracy:
         with ``from_prior`` that the answer takes them from the mounting prior."""
         if not len(self.directions):
             return "every direction of the extrinsic is determined"
-        verb = "is" if len(self.directions) == 1 else "are"
+        what, n = self._what(free=self.geometric and not from_prior)
+        verb = "is" if n == 1 else "are"
         if from_prior:
-            return (f"{self._what()} {verb} not determined by these boards ({self.cause}): the answer takes "
+            return (f"{what} {verb} not determined by these boards ({self.cause}): the answer takes "
                     f"{'it' if len(self.directions) == 1 else 'them'} from the mounting prior, with the prior's "
                     "uncertainty")
         if not self.geometric:
-            return (f"{self._what()} {verb} poorly determined (1-sigma {self._sigma_words()}): {self.cause}; "
+            return (f"{what} {verb} poorly determined (1-sigma {self._sigma_words()}): {self.cause}; "
                     "add board poses")
         keys = ", ".join(f"{fixed_key(a)!r}: ..." for a in self.axes)
-        return (f"{self._what()} {verb} not determined by these boards: {self.cause}; give their values "
+        give = "their values" if set(self.free_axes or self.axes) == set(self.axes) else \
+            f"the values of {join_words(list(self.axes))}"
+        return (f"{what} {verb} not determined by these boards: {self.cause}; give {give} "
                 f"and calibrate the rest with fixed={{{keys}}}")
 
     def to_dict(self) -> dict:
@@ -207,12 +210,8 @@ class Degeneracy:
                 "cause": self.cause, "message": self.message(), "directions": np.round(self.directions, 6).tolist(),
                 "sigmas_scaled": [None if not np.isfinite(s) else float(s) for s in self.sigmas],
                 "profile": [bool(p) for p in self.profile], "floors": [bool(p) for p in self.floors],
-                "scale_m": self.scale_m, "range_sigma_m": self.range_sigma_m}
-
-
-def fixed_key(axis: str) -> str:
-    """The ``calibrate(..., fixed=...)`` key of a lidar axis name (``"z"`` -> ``"z_m"``)."""
-    return f"{axis}_deg" if axis in AXES[:3] else f"{axis}_m"
+                "scale_m": self.scale_m, "range_sigma_m": self.range_sigma_m, "free_axes": list(self.free_axes),
+                "axis_sigmas_scaled": [None if not np.isfinite(s) else float(s) for s in self.axis_sigmas]}
 
 
 def board_set_cause(obs: Observations, T_lidar_cam: np.ndarray) -> str:
@@ -309,28 +308,29 @@ def undetermined_directions(obs: Observations, T_lidar_cam: np.ndarray, range_si
     k = len(U)
     order = np.argsort(-np.sum(U**2, axis=0), kind="stable")
     n_axes = next((n for n in range(k, 6) if np.all(np.sum(U[:, order[:n]] ** 2, axis=1) >= ALIGNED_SHARE)), 6)
+    axes = tuple(AXES[j] for j in sorted(order[:n_axes]))
     geometric = bool(k and (free_vertical or null_u.any()))
     cause = "" if not k else board_set_cause(obs, T) if lean is None else \
         f"every board stands vertical (normals {lean:.1f} deg RMS from the scan plane)"
-    if vertical and profile_vertical:
-        cause += LEAN_WORDS if not free_vertical else _flat_words(prof_e, L)
-    return Degeneracy(U, sig_u, tuple(AXES[j] for j in sorted(order[:n_axes])), bool(k and n_axes == k), geometric,
-                      cause, L, sigma, fold_u, floor_u)
+    free = {"free_axes": (), "free_directions": np.zeros((0, 6)), "axis_sigmas": np.zeros(0)}
+    if geometric and profile_vertical:
+        known = dict(zip(VERTICAL_AXES, prof_e, strict=True)) if vertical else {}
+        prof = axis_profiles(obs.scan_data, T, axes, known, span, L, sigma)
+        cause += flat_words(axes, prof, L, vertical)
+        free = {"free_axes": tuple(a for a, p in zip(axes, prof, strict=True) if not np.isfinite(p)),
+                "free_directions": np.concatenate([U[null_u]] + ([E[~np.isfinite(prof_e)]] if vertical else [])),
+                "axis_sigmas": prof}
+    elif vertical and profile_vertical:
+        cause += LEAN_WORDS
+    return Degeneracy(U, sig_u, axes, bool(k and n_axes == k), geometric, cause, L, sigma, fold_u, floor_u, **free)
 
 
-LEAN_WORDS = (": only their lean fixes these, so that board-pose errors of the lean's order are not in this "
-              "1-sigma")
-"""How an answered vertical-board set's cause goes on (``undetermined_directions``)."""
-
-
-def _flat_words(prof: np.ndarray, scale_m: float) -> str:
-    """What leaves a vertical set free, for its cause: the axes whose profile stays flat across ``free_span``, and
-    the profile 1-sigma of the others (fixed beyond first order only, named with them for the planar calibration)."""
-    flat = [a for a, p in zip(VERTICAL_AXES, prof, strict=True) if not np.isfinite(p)]
-    rest = [f"{a} {np.degrees(p):.1f} deg" if AXES.index(a) < 3 else f"{a} {1000 * p * scale_m:.0f} mm"
-            for a, p in zip(VERTICAL_AXES, prof, strict=True) if np.isfinite(p)]
-    return (f": {_join(flat)} {'stays' if len(flat) == 1 else 'stay'} flat across the physically possible span"
-            + (f" ({', '.join(rest)}: profile 1-sigma, beyond first order only)" if rest else ""))
+def axis_profiles(data, T: np.ndarray, axes: tuple[str, ...], known: dict, span: float, scale_m: float,
+                  sigma_m: float) -> np.ndarray:
+    """(len(axes),) each lidar axis's own profile-likelihood 1-sigma (``profile.profile_extent`` along the axis,
+    the other five re-fitted; scaled units; ``inf``: flat across ``span``), ``known[axis]`` where given."""
+    return np.array([known[a] if a in known else
+                     profile_extent(data, T, np.eye(6)[AXES.index(a)], span, scale_m, sigma_m) for a in axes])
 
 
 def pair_angle_deg(obs: Observations) -> float:
@@ -371,7 +371,7 @@ def degeneracy_warnings(obs: Observations, T_lidar_cam: np.ndarray | None = None
             Js = origin_jacobian(J, T) * np.r_[np.ones(3), np.full(3, typical_range(obs))]
             v = np.linalg.eigh(Js.T @ Js)[1][:, 0]
             out.append(f"poorly conditioned board set (inverse condition number {c:.1e} < {MIN_CONDITIONING:g}): "
-                       f"the weakest direction is {_describe(v * np.sign(v[np.argmax(np.abs(v))]))} "
+                       f"the weakest direction is {describe(v * np.sign(v[np.argmax(np.abs(v))]))} "
                        "(lidar axes, translation in units of the typical range)")
     return out
 

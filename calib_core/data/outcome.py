@@ -217,8 +217,8 @@ class CovariancePart:
     """A method's covariance as it hands it over: the 6x6 ``matrix`` (rotation rad then translation m, the left
     perturbation of ``model.residuals``), the ``model`` it comes from, how the camera's ``intrinsics`` entered
     (``model.intrinsics``' wording), the answer's ``conditioning`` (``refine.uncertainty.conditioning``), the
-    boards' dispersion test (``refine.dispersion``) and the likelihood's bend (``refine.bend``), each as the file
-    writes it; None: no entry."""
+    boards' dispersion test (``refine.dispersion``), the likelihood's bend (``refine.bend``) and the nearly tied
+    answers it holds (``refine.modes``), each as the file writes it; None: no entry."""
 
     matrix: np.ndarray
     model: CovarianceModel
@@ -226,11 +226,13 @@ class CovariancePart:
     conditioning: float | None = None
     dispersion: dict | None = None
     bend: dict | None = None
+    modes: dict | None = None
 
     def entries(self) -> dict:
         d = {"covariance": self.matrix, "covariance_model": self.model, "intrinsics": self.intrinsics}
         d.update({k: v for k, v in (("conditioning", self.conditioning), ("board_dispersion", self.dispersion),
-                                     ("covariance_bend", self.bend)) if v is not None})
+                                     ("covariance_bend", self.bend), ("covariance_modes", self.modes))
+                       if v is not None})
         return d
 
 

@@ -17,8 +17,8 @@ from .outcome import Outcome
 RESULT_SCHEMA = "lidarcam.result/1"
 
 JSON_INFO = ("warnings", "degeneracy", "mounting", "mounting_sigma", "fixed", "note", "alternatives", "prior",
-             "intrinsics", "board_dispersion", "covariance_bend", "residual_rms", "observations", "noise_model",
-             "board_error")
+             "intrinsics", "board_dispersion", "covariance_bend", "covariance_modes", "residual_rms", "observations",
+             "noise_model", "board_error")
 """Optional ``info`` entries written to the result JSON when present (all JSON-able): the warnings, the
 directions a board set does not determine (``calib_core.checks.degeneracy``), and a calibration with fixed parameters
 (``calib_core.refine.partial``: all six mounting values, the 1-sigma of the free ones, the fixed ones, a note), the
@@ -26,7 +26,8 @@ answers a refused tie could not decide between (``alternatives``: each ``{"T_lid
 log-likelihood, "mounting": its parameters}``, best first), the mounting prior given (``prior``), how the joint
 model treated the camera's intrinsics (``calib_core.model.intrinsics``), and the boards' dispersion test
 (``board_dispersion``, ``calib_core.refine.dispersion``: whether the covariance was widened to the boards' spread), and
-the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.refine.bend``), the range
+the likelihood's bend the covariance holds (``covariance_bend``, ``calib_core.refine.bend``), the nearly tied
+answers it holds (``covariance_modes``, ``calib_core.refine.modes``), the range
 residuals' RMS over the boards used at the method's start and at its answer (``residual_rms``: ``start_m``,
 ``answer_m``, metres), and which observations the answer was computed from (``observations``:
 ``observations_fingerprint``). The file's ``noise`` field names each range-noise figure by its source
@@ -223,6 +224,10 @@ class CalibrationResult:
                 out.append(f"the likelihood bends along its weakest direction ({b['departure_sigmas']:.1f} sigma off "
                            f"the Gaussian 1.7 sigmas along it): the 1-sigma holds it (Gaussian alone: rotation "
                            f"{b['sigma_rot_deg_laplace']:.3f} deg, translation {b['sigma_trans_mm_laplace']:.1f} mm)")
+            if (m := self.info.get("covariance_modes")) is not None:
+                out.append(f"the 1-sigma holds the {m['n_modes'] - 1} other answer(s) nearly as likely "
+                           f"(likelihood-weighted mixture; the answer's own mode alone: rotation "
+                           f"{m['sigma_rot_deg_mode']:.3f} deg, translation {m['sigma_trans_mm_mode']:.1f} mm)")
         if (rms := self.info.get("residual_rms")) is not None:
             start = "" if rms.get("start_m") is None else f"{1000 * rms['start_m']:.1f} mm at the start, "
             out.append(f"range residual RMS (all scan points of the boards used): {start}"

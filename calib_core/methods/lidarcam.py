@@ -24,10 +24,17 @@ from ..model.intrinsics import ESTIMATED_INTRINSICS, RANGE_ONLY_INTRINSICS
 from ..model.residuals import range_linearised
 from ..model.score import evidence_cost
 from ..refine.joint import RANGE_ONLY_MODEL
+from ..refine.modes import mixture_covariance
 from ..refine.systematic import ESTIMATED, BoardErrorEstimate, board_error_estimate
 from ..refine.uncertainty import conditioning
 from ..registry import Method
-from ..robust.choose import TIE_LOG_LIKELIHOOD, WEAK_LOG_LIKELIHOOD, Choice, choose_and_refine
+from ..robust.choose import (
+    TIE_LOG_LIKELIHOOD,
+    WEAK_LOG_LIKELIHOOD,
+    Choice,
+    carried_runners_up,
+    choose_and_refine,
+)
 from ..robust.final import FinalTests, final_tests
 from ..robust.inliers import trim
 from ..robust.search import Search, consensus_search
@@ -102,9 +109,10 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
 
 @dataclass(frozen=True, eq=False)
 class Found:
-    """Steps 1-4 of ``lidarcam``: the search, the chosen and refined answer, its final tests, the score of the
-    start it was refined from, and ``first``: the choice before the final tests (its ``runners_up`` were scored on
-    the same boards when the tests changed nothing)."""
+    """Steps 1-4 of ``lidarcam``: the search, the chosen and refined answer (its ``runners_up`` scored on the
+    boards and points it was chosen on: those of the choice before the final tests, refined again after them where
+    the tests changed the boards or points), its final tests, the score of the start it was refined from, and
+    ``first``: the choice before the final tests."""
 
     search: Search
     best: Choice
@@ -133,6 +141,7 @@ def search_and_refine(obs: Observations, opts: LidarcamOptions) -> Found:
     first = best
     if tests.changed:  # boards or points left out (or taken back) at the refined pose: refine on what is left
         best = choose_and_refine(tests.obs_used, best.T, sigma, score, opts.choose, n_refine=1)
+        best = carried_runners_up(tests.obs_used, best, first.runners_up, sigma, score, opts.choose)
     return Found(search, best, tests, start, first)
 
 
@@ -148,14 +157,22 @@ def named(alts: list[dict]) -> str:
                      for a in alts)
 
 
-def runner_up_warning(best: Choice) -> tuple[list[str], dict]:
+def runner_up_warning(best: Choice, modes: dict | None = None) -> tuple[list[str], dict]:
     """A warning naming the distinct answers nearly as likely as ``best`` (``choose.WEAK_LOG_LIKELIHOOD``) and
-    the ``alternatives`` entry (the answer first), or nothing when the data prefer it clearly."""
+    the ``alternatives`` entry (the answer first), or nothing when the data prefer it clearly; ``modes``: the
+    covariance that holds them (``refine.modes.mixture_covariance``'s report), named in the warning."""
     if not best.runners_up:
         return [], {}
     alts = alternatives([(best.T, best.cost), *best.runners_up])
+    held = "" if not modes else \
+        (f"; the 1-sigma holds them (likelihood-weighted mixture of the {modes['n_modes']} answers: "
+         f"{modes['sigma_rot_deg']:.3g} deg, {modes['sigma_trans_mm']:.3g} mm; the answer's own mode: "
+         f"{modes['sigma_rot_deg_mode']:.3g} deg, {modes['sigma_trans_mm_mode']:.3g} mm)")
+    better = "" if min(c for _, c in best.runners_up) >= best.cost else \
+        " (refined again after the final tests, one fits these boards better than the answer chosen before them)"
     return [f"weakly decided: distinct answers nearly as likely (within {WEAK_LOG_LIKELIHOOD:g} in log-likelihood; "
-            f"the answer first): {named(alts)}; a mounting prior or more boards would decide"], {"alternatives": alts}
+            f"the answer first): {named(alts)}{better}; a mounting prior or more boards would decide{held}"], \
+        {"alternatives": alts, **({"covariance_modes": modes} if modes else {})}
 
 
 def tie_failure(best: Choice, candidates: np.ndarray, with_prior: bool,
@@ -206,7 +223,8 @@ def finish(found: Found, opts: LidarcamOptions):
         if why is not None and why != NO_CORNERS:
             warned.append(f"{why}; covariance of the range model only")
         part = CovariancePart(cov, RANGE_ONLY_MODEL, RANGE_ONLY_INTRINSICS, dispersion=disp)
-    weak, alts = runner_up_warning(found.first) if not tests.changed else ([], {})
+    cov, modes = mixture_covariance(T, cov, best.cost, best.runners_up)  # last: it composes the modes
+    weak, alts = runner_up_warning(best, modes)
     warnings = tests.warnings + warned + degeneracy_warnings(obs_u, T) + \
         ([deg.message()] if len(deg.directions) else []) + weak
     choice = ChoicePart(best.cost, best.polished, found.score_start, opts.choose.n_refine, best.start,
@@ -214,7 +232,8 @@ def finish(found: Found, opts: LidarcamOptions):
     nm = noise_model(obs_u, T, fit, part.intrinsics, sigma_given, opts.joint.corner_sigma_px, est,
                      fold=joint is None and bool(deg.profile.any()))
     return T, C, InfoParts(choice=choice, consensus=tests.info, prior=None if prior is None else prior_info(prior),
-                           covariance=replace(part, matrix=cov, conditioning=conditioning(obs_u, T)), joint=fit,
+                           covariance=replace(part, matrix=cov, conditioning=conditioning(obs_u, T),
+                                              modes=alts.get("covariance_modes")), joint=fit,
                            alternatives=alts.get("alternatives"), board_error=None if est is None else est.to_dict(),
                            noise_model=nm, warnings=warnings).to_info()
 

@@ -66,7 +66,9 @@ def _refine_options(options: dict) -> dict:
 def refined_method(base: Method, residual: str, suffix: str) -> Method:
     """The method ``base.name + "+" + suffix``: run ``base``, then refine its answer on ``residual``
     (``"range"``: maximum likelihood under range noise; ``"plane"``: point-to-plane distances), with the
-    covariance of the refined extrinsic. Options ``loss``, ``f_scale_m`` (metres, default ``F_SCALE_SIGMAS`` x the
+    covariance of the refined extrinsic, holding the per-board systematic error on the range residual as
+    ``lidarcam`` does (``refine.systematic.board_error_estimate`` at the base's answer; ``info["board_error"]``).
+    Options ``loss``, ``f_scale_m`` (metres, default ``F_SCALE_SIGMAS`` x the
     noise std), ``range_sigma_m`` (default: estimated), ``max_nfev`` and ``fixed`` (mounting parameters held at
     given values, as for ``lidarcam``) go to the refinement, the rest to ``base``."""
     def func(obs: Observations, **options):
@@ -80,9 +82,13 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
             T0, cands, info = base.func(obs, **options)
         except SolveFailure as fail:
             raise explain_failure(obs, fail, ropts.get("range_sigma_m")) from None
-        r, parts = refine_and_cover(obs, np.asarray(T0, float), residual, **ropts)
+        T0 = np.asarray(T0, float)
+        est = board_error_estimate(obs, T0, ropts.get("range_sigma_m")) if residual == "range" else None
+        term = est.scale if est is not None and est.scale.active else None   # a zero one: the per-beam path
+        r, parts = refine_and_cover(obs, T0, residual, board_error=term, **ropts)
         warnings = info.get("warnings", []) + (parts.warnings or [])
-        return r.T_lidar_cam, cands, replace(parts, base=info, base_T_lidar_cam=np.asarray(T0, float),
+        return r.T_lidar_cam, cands, replace(parts, base=info, base_T_lidar_cam=T0,
+                                             board_error=None if est is None else est.to_dict(),
                                              warnings=warnings or None).to_info()
 
     what = "maximum-likelihood refinement on the range residuals" if residual == "range" else \

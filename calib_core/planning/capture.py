@@ -52,6 +52,9 @@ MAX_PLAN_BOARDS = 200
 """The most boards a plan (current + proposed) is extended to while it looks for the target."""
 DEFAULT_TARGET = (0.1, 5.0)
 """The 1-sigma target of a plan: rotation (deg), translation (mm)."""
+REPEAT_ANGLE_DEG = 15.0
+"""A candidate within the separation of a proposed board whose normal is within this of that board's repeats it:
+passed over in every round while another candidate remains (the workspace grid's turn and lean steps are larger)."""
 
 
 class PlanError(LidarcamError):
@@ -100,27 +103,32 @@ def _scores(S: np.ndarray, C: np.ndarray, criterion: str) -> np.ndarray:
 
 
 def greedy(S0: np.ndarray, candidates: np.ndarray, n: int, criterion: str = "D", centres: np.ndarray | None = None,
-           min_separation_m: float = 0.0) -> list[int]:
+           min_separation_m: float = 0.0, normals: np.ndarray | None = None) -> list[int]:
     """Indices of ``n`` candidates (each at most once) chosen one at a time to maximise ``criterion`` of
     ``S0 + sum of the chosen candidates' information`` (``candidates`` (M,6,6) or pairs (M,2,6,6), ``as_pair``).
     With ``centres`` (M,3, metres), a
     candidate closer than ``min_separation_m`` to a board chosen in the current round is passed over, so that the
-    proposed boards stand at distinct places; a round ends when every place is taken (boards may then share one)."""
+    proposed boards stand at distinct places; a round ends when every place is taken (boards may then share one).
+    With ``normals`` (M,3, unit) too, a candidate that repeats a chosen board (``REPEAT_ANGLE_DEG``) stays passed
+    over after a round ends, while any other remains: a compact workspace gets distinct poses, not near-repeats."""
     if criterion not in CRITERIA:
         raise PlanError(f"unknown criterion {criterion!r}; one of {', '.join(CRITERIA)}")
     candidates = as_pair(candidates)
     S, free, out = as_pair(np.array(S0, float)), np.ones(len(candidates), bool), []
-    taken = np.zeros(len(candidates), bool)
+    taken, repeats = np.zeros(len(candidates), bool), np.zeros(len(candidates), bool)
     for _ in range(min(n, len(candidates))):
         if not (free & ~taken).any():
-            taken[:] = False
+            taken = repeats.copy() if (free & ~repeats).any() else np.zeros(len(candidates), bool)
         sc = np.where(free & ~taken, _scores(S, candidates, criterion), -np.inf)
         k = int(np.argmax(sc))
         out.append(k)
         free[k] = False
         S = S + candidates[k]
         if centres is not None:
-            taken |= np.linalg.norm(centres - centres[k], axis=1) < min_separation_m
+            near = np.linalg.norm(centres - centres[k], axis=1) < min_separation_m
+            taken |= near
+            if normals is not None:
+                repeats |= near & (np.abs(normals @ normals[k]) > np.cos(np.radians(REPEAT_ANGLE_DEG)))
     return out
 
 
@@ -192,7 +200,8 @@ def plan_capture(rig: PlanRig, k: int, *, current: Observations | None = None, c
     more = max(k, MAX_PLAN_BOARDS - n0)
     T_pool = board_poses_lidar(rig, poses)
     centre = np.r_[np.asarray(rig.outline, float).mean(axis=0), 0.0]
-    order = greedy(S0, C, more, criterion, T_pool[:, :3, :3] @ centre + T_pool[:, :3, 3], separation_m(rig))
+    order = greedy(S0, C, more, criterion, T_pool[:, :3, :3] @ centre + T_pool[:, :3, 3], separation_m(rig),
+                   T_pool[:, :3, 2])
     cum = S0[None] + np.cumsum(C[order], axis=0)
     preds = [predict(F) for F in cum]
     now = predict(S0)

@@ -50,11 +50,14 @@ class Workspace:
     steps: tuple[int, ...] = (3, 7, 1, 5, 5, 1)
 
     def grid(self) -> np.ndarray:
-        """(M,6) every grid pose, in ``POSE_FIELDS`` units (metres, degrees)."""
+        """(M,6) every grid pose, in ``POSE_FIELDS`` units (metres, degrees; bearings wrapped into [-180, 180):
+        a range may run past 180 deg, behind the lidar)."""
         ranges = (self.distance_m, self.bearing_deg, self.height_m, self.turn_deg, self.lean_deg, self.roll_deg)
         axes = [np.unique(np.linspace(lo, hi, n if hi > lo else 1)) for (lo, hi), n in zip(ranges, self.steps,
                                                                                            strict=True)]
-        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 6)
+        out = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 6)
+        out[:, 1] = np.mod(out[:, 1] + 180.0, 360.0) - 180.0
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,12 +161,12 @@ def rig_from_observations(obs: Observations, T_lidar_cam: np.ndarray, range_sigm
                           base: PlanRig | None = None, board_error: BoardErrorScale = DEFAULT_PRIOR) -> PlanRig:
     """The planner's rig of a captured board set: its camera, board (outline and corners of its first board),
     the extrinsic ``T_lidar_cam`` (e.g. its calibration) and the noise stds and per-board systematic scale
-    ``board_error`` given. With ``base`` (a rig
-    description) the lidar, limits and workspace are ``base``'s; otherwise the lidar's resolution is the median
-    bearing step of the scans, and the workspace spans the captured boards' distances (-10 %, +10 %) and bearings
-    (+-10 deg) with the default tilts, the boards rolled in their plane as most captured ones are (to the nearest
-    quarter turn: ``captured_roll_deg``; so a grid written 5x8 instead of 8x5 gives the same plan). ValueError
-    without camera intrinsics."""
+    ``board_error`` given. With ``base`` (a rig description) the lidar, limits and workspace are ``base``'s;
+    otherwise the lidar's resolution is the median bearing step of the scans, and the workspace spans the captured
+    boards' distances (-10 %, +10 %) and bearings (+-10 deg, about their circular mean: boards around 180 deg,
+    behind the lidar, span that side only) with the default tilts, the boards rolled in their plane as most
+    captured ones are (to the nearest quarter turn: ``captured_roll_deg``; so a grid written 5x8 instead of 8x5
+    gives the same plan). ValueError without camera intrinsics."""
     if obs.camera is None and base is None:
         raise ValueError("the observations carry no camera intrinsics: give a rig description too")
     b0 = obs.boards[0]
@@ -186,10 +189,12 @@ def rig_from_observations(obs: Observations, T_lidar_cam: np.ndarray, range_sigm
     res_deg = float(np.degrees(np.median(steps[steps > 1e-6]))) if np.any(steps > 1e-6) else 0.25
     T_lb = T[None] @ np.array([bd.T_cam_board for bd in obs.boards])
     c = T_lb[:, :3, :3] @ np.r_[outline.mean(axis=0), 0.0] + T_lb[:, :3, 3]
-    dist, bearing = np.linalg.norm(c[:, :2], axis=1), np.degrees(np.arctan2(c[:, 1], c[:, 0]))
+    dist, bearing = np.linalg.norm(c[:, :2], axis=1), np.arctan2(c[:, 1], c[:, 0])
+    mid = np.degrees(np.arctan2(np.mean(np.sin(bearing)), np.mean(np.cos(bearing))))   # boards behind: near 180
+    rel = np.mod(np.degrees(bearing) - mid + 180.0, 360.0) - 180.0
     roll = captured_roll_deg(rig_roll_probe(camera, T, outline, corners), T_lb)
     ws = Workspace(distance_m=(0.9 * dist.min(), 1.1 * dist.max()),
-                   bearing_deg=(bearing.min() - 10.0, bearing.max() + 10.0), roll_deg=(roll, roll))
+                   bearing_deg=(mid + rel.min() - 10.0, mid + rel.max() + 10.0), roll_deg=(roll, roll))
     fov = min(360.0, 2.0 * max(abs(ws.bearing_deg[0]), abs(ws.bearing_deg[1])) + 40.0)
     return PlanRig(camera, T, outline, corners, fov, res_deg, 1.5 * float(dist.max()) + 5.0, range_sigma_m,
                    corner_sigma_px, workspace=ws, board_error=board_error)

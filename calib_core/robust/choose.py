@@ -249,3 +249,20 @@ def _refine_starts(obs: Observations, starts: np.ndarray, sigma_m: float, score:
             continue
         out.append(refine_start(obs, T0, sigma_m, score, opts, r))
     return out
+
+
+def carried_runners_up(obs: Observations, best: Choice, runners: tuple, sigma_m: float, score: ScoreOptions,
+                       opts: ChooseOptions, weak: float = WEAK_LOG_LIKELIHOOD) -> Choice:
+    """``best`` (chosen on ``obs``) with ``runners_up``: earlier runners-up ``runners`` ((T, cost) pairs, found on
+    other boards or points) refined again on ``obs`` (``refine_start``, polished where the outlines disagree), those
+    distinct from ``best`` and from each other (the distinct-start rule) whose cost is below ``best.cost + weak``,
+    best first. ``best`` itself and its ``ties`` are unchanged (one carried below it is a runner-up too: the answer
+    is the one chosen on ``obs``)."""
+    out: list[tuple] = []
+    for T0, _ in runners:
+        c, off = refine_start(obs, np.asarray(T0, float), sigma_m, score, opts)
+        c = polish_choice(obs, c, sigma_m, score, opts) if opts.polish and off else c
+        if np.isfinite(c.cost) and c.cost - best.cost < weak and not near_any(
+                c.T, np.array([best.T, *(T for T, _ in out)]), opts.distinct_rot_deg, opts.distinct_trans_m):
+            out.append((c.T, c.cost))
+    return replace(best, runners_up=tuple(sorted(out, key=lambda tc: tc[1])))

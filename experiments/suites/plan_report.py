@@ -110,6 +110,7 @@ def write_plan_report(out: Path, summary: dict) -> Path:
     v = summary["vertical"]
     md += ["", "## Vertical boards, before any data", "",
            f"The same rig with a workspace of vertical boards (lean 0, turn +-40 deg), {v['boards']} planned "
-           f"boards: the planner names **{', '.join(v['undetermined']) or 'nothing'}**:", "", f"> {v['message']}", ""]
+           f"boards: the planner names **{', '.join(v['undetermined']) or 'nothing'}** as not determined or weak:",
+           "", f"> {v['message']}", ""]
     write_stamped(out / "REPORT.md", "\n".join(md) + "\n")
     return out / "REPORT.md"

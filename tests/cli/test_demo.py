@@ -1,6 +1,6 @@
 """``lidarcam demo OUT``: the sample folders (a pinhole + checkerboard, a fisheye + ChArUco with boards cut by the
 image edge) and bags (the pinhole rig's, the fisheye + ChArUco rig's with an ``equidistant`` CameraInfo) it writes,
-calibrated by the very commands it prints, give the simulated extrinsic within 0.5 deg and 20 mm;
+calibrated by the very commands it prints, give the simulated extrinsic within 0.5 deg and 20 mm, with no warning;
 ``lidarcam bag --list-topics`` lists the bag's topics."""
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ def test_demo_then_its_printed_commands_calibrate_the_folder_and_the_bag(tmp_pat
         res = json.loads((out / result).read_text())
         e_R, e_t = pose_errors(np.array(res["T_lidar_cam"]), np.array(truth[part]["T_lidar_cam"]))
         assert res["ok"] and float(e_R) < 0.5 and float(e_t) < 0.020, (part, float(e_R), float(e_t))
+        assert not res["warnings"], (part, res["warnings"])    # a new user's first result: no false alarm
     cam = yaml.safe_load((out / "fisheye_bag_dataset" / "camera.yaml").read_text())   # from the bag's CameraInfo
     assert cam["distortion_model"] == "equidistant"
     k1_k4 = [float(v) for v in DEMO_FISHEYE["cam_params"].split(",")]

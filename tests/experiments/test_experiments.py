@@ -347,6 +347,22 @@ def test_refused_axes_read_from_the_library_wording():
     assert refused_axes("") == () and refused_axes(np.nan) == ()
 
 
+def test_refused_axes_are_the_free_ones_not_the_hint():
+    """A refusal whose analysis finds only z flat (roll and pitch rise within the span): the reason names z
+    alone before "not determined"; roll and pitch stay in its fixed= hint and are said with their sigma."""
+    from calib_core.checks.axis_words import flat_words
+    from calib_core.checks.degeneracy import AXES, Degeneracy
+    from experiments.summary.tables import refused_axes
+
+    axes, prof = ("roll", "pitch", "z"), np.array([0.09, 0.1, np.inf])
+    deg = Degeneracy(np.eye(6)[[AXES.index(a) for a in axes]], np.full(3, np.inf), axes, True, True,
+                     "every board stands vertical" + flat_words(axes, prof, 2.0, True), 2.0, 0.01,
+                     free_axes=("z",), free_directions=np.eye(6)[[5]], axis_sigmas=prof)
+    reason = f"lidarcam: {deg.message()}"
+    assert refused_axes(reason) == ("z",)
+    assert "'roll_deg'" in reason and "roll 5.2 deg" in reason and "pitch 5.7 deg" in reason
+
+
 def test_refusals_per_board_count_from_hand_made_rows():
     from experiments.summary.tables import refusal_table, refusals
 

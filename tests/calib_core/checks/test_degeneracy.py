@@ -1,6 +1,8 @@
 """The directions a board set cannot fix, named in lidar axes, and the one home of the board-set warnings
 (calib_core.checks.degeneracy)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from rigs import VERTICAL_OPTIONS, facing_board, general_rig, rig_from_boards, vertical_rig
@@ -8,6 +10,7 @@ from rigs import VERTICAL_OPTIONS, facing_board, general_rig, rig_from_boards, v
 from calib_core import calibrate
 from calib_core.checks.degeneracy import (
     AXES,
+    AXIS_WORDS,
     MIN_NORMAL_SPREAD_DEG,
     WARN_BELOW_BOARDS,
     board_set_warnings,
@@ -16,6 +19,7 @@ from calib_core.checks.degeneracy import (
     undetermined_directions,
 )
 from calib_core.checks.profile import MIN_FREE_SPAN_M, free_span, profile_extent
+from calib_core.data.io import load_observations
 from calib_core.geometry.metrics import pose_errors
 from calib_core.geometry.transforms import make_T, rotvec_to_matrix
 from calib_core.model.residuals import range_residuals
@@ -23,6 +27,7 @@ from calib_core.refine.uncertainty import normal_spread_deg, typical_range
 from lidarcam.rig.report import report_warnings
 
 SEEDS = range(5)
+NOWICKI = Path(__file__).resolve().parents[3] / "tests" / "fixtures" / "nowicki" / "observations.json"
 
 
 def _projector(U):
@@ -211,3 +216,52 @@ def test_vertical_boards_are_recognised_at_a_tilted_estimate():
     tilted = make_T(rotvec_to_matrix([np.radians(15), np.radians(-10), 0.0]), np.zeros(3)) @ obs.T_lidar_cam_true
     d = undetermined_directions(obs, tilted, 0.005)
     assert d.axes == ("roll", "pitch", "z") and "stands vertical" in d.cause
+
+
+def _named_before_refusal(reason: str) -> list[str]:
+    head = reason[:reason.index("not determined")]
+    return [a for a in AXES if AXIS_WORDS[a] in head]
+
+
+def _own_profile(obs, T, axis, sigma):
+    L = typical_range(obs)
+    return profile_extent(obs.scan_data, T, np.eye(6)[AXES.index(axis)], free_span(L), L, sigma)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_refusal_names_only_the_axes_whose_own_profile_stays_flat(seed):
+    """Boards exactly vertical: z is free at every order, roll and pitch rise (fourth order) within the span.
+    The refusal stands, names z, and says roll and pitch with their profile 1-sigma instead of calling them
+    free; the hint still lists all three (the planar calibration needs them)."""
+    obs = vertical_rig(seed)
+    T = obs.T_lidar_cam_true
+    d = undetermined_directions(obs, T, 0.005)
+    assert not d.determined and d.axes == ("roll", "pitch", "z") and "z" in d.free_axes
+    assert set(d.free_axes) < set(d.axes)                  # roll and pitch rise: they are not called free
+    msg = d.message()
+    assert _named_before_refusal(msg) == list(d.free_axes)
+    assert "'roll_deg'" in msg and "'pitch_deg'" in msg and "'z_m'" in msg
+    for a, s in zip(d.axes, d.axis_sigmas, strict=True):
+        own = _own_profile(obs, T, a, 0.005)               # computed again, independently of the analysis
+        assert (a in d.free_axes) == (not np.isfinite(own)) and np.isfinite(s) == np.isfinite(own), a
+        if np.isfinite(own):
+            assert f"{a} {np.degrees(own):.1f} deg" in msg
+    r = calibrate(obs, "lidarcam")
+    assert not r.ok and _named_before_refusal(r.reason) == list(d.free_axes)
+    assert r.info["degeneracy"]["free_axes"] == list(d.free_axes)
+
+
+@pytest.mark.skipif(not NOWICKI.exists(), reason="the committed Nowicki observations are not in this checkout")
+def test_a_real_refusal_names_no_axis_the_boards_fix():
+    """Three near-vertical Nowicki boards (the subset the real experiment refuses): every axis the reason names
+    as not determined has a profile flat across the span; the weak axis the boards do fix (its own profile
+    rises within it) is said with its sigma, not named."""
+    obs = load_observations(NOWICKI).subset([2, 3, 6])
+    r = calibrate(obs, "lidarcam")
+    deg = r.info["degeneracy"]
+    named = _named_before_refusal(r.reason)
+    assert not r.ok and named and set(named) < set(deg["axes"])
+    T = r.candidates[0]
+    for a in deg["axes"]:
+        own = _own_profile(obs, T, a, deg["range_sigma_m"])
+        assert (a in named) == (not np.isfinite(own)), a
