@@ -46,6 +46,7 @@ import numpy as np
 
 from ..data.lines import residual_sigma
 from ..data.observations import Observations
+from ..data.outcome import InfoParts
 from ..errors import SolveFailure
 from ..geometry.transforms import skew
 from ..model.residuals import range_linearised
@@ -391,4 +392,4 @@ def explain_failure(obs: Observations, fail: SolveFailure, range_sigma_m: float 
     if deg.determined:
         return fail
     return SolveFailure(f"{deg.message()} (the solvers: {fail.reason})", np.concatenate([T0[None], fail.candidates]),
-                        {**fail.info, "degeneracy": deg.to_dict(), "warnings": board_set_warnings(obs)})
+                        InfoParts(base=fail.info, degeneracy=deg.to_dict(), warnings=board_set_warnings(obs)).to_info())

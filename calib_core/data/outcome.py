@@ -1,13 +1,19 @@
 """The result's parts as types (``CalibrationResult.outcome``): the noise estimates named by their source, the
 consensus over boards, the selection, the covariance with its model as an enum, the verdict and the warnings; read
 from the same ``info`` that the ``lidarcam.result/1`` file holds, so a loaded file gives the same parts. Metres and
-radians, except where a name says otherwise."""
+radians, except where a name says otherwise.
+
+The other way, the parts a method hands over (``InfoParts``: its choice, the covariance with its model, the joint
+fit, the noise model, ...) become the ``info`` dict in one place, ``InfoParts.to_info``.
+"""
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 from typing import Any
+
+import numpy as np
 
 
 class CovarianceModel(StrEnum):
@@ -204,3 +210,118 @@ class Outcome:
                    Covariance.from_info(info), VerdictPart.from_info(info),
                    tuple(str(w) for w in info.get("warnings", [])), info.get("residual_rms"),
                    NoiseModel.from_info(info))
+
+
+@dataclass(frozen=True, eq=False)
+class CovariancePart:
+    """A method's covariance as it hands it over: the 6x6 ``matrix`` (rotation rad then translation m, the left
+    perturbation of ``model.residuals``), the ``model`` it comes from, how the camera's ``intrinsics`` entered
+    (``model.intrinsics``' wording), the answer's ``conditioning`` (``refine.uncertainty.conditioning``), the
+    boards' dispersion test (``refine.dispersion``), the likelihood's bend (``refine.bend``) and the nearly tied
+    answers it holds (``refine.modes``), each as the file writes it; None: no entry."""
+
+    matrix: np.ndarray
+    model: CovarianceModel
+    intrinsics: str
+    conditioning: float | None = None
+    dispersion: dict | None = None
+    bend: dict | None = None
+    modes: dict | None = None
+
+    def entries(self) -> dict:
+        d = {"covariance": self.matrix, "covariance_model": self.model, "intrinsics": self.intrinsics}
+        d.update({k: v for k, v in (("conditioning", self.conditioning), ("board_dispersion", self.dispersion),
+                                     ("covariance_bend", self.bend), ("covariance_modes", self.modes))
+                       if v is not None})
+        return d
+
+
+@dataclass(frozen=True)
+class JointFitPart:
+    """The joint model's fit at the answer (``refine.joint.JointResult``): the noise stds it used (given or
+    estimated; pixels, metres), its residuals' RMS, its cost, iterations and whether it converged."""
+
+    corner_sigma_px: float
+    range_sigma_m: float
+    corner_rms_px: float
+    range_rms_m: float
+    cost: float
+    iterations: int
+    converged: bool
+
+    def entries(self) -> dict:
+        return {"corner_sigma_px": self.corner_sigma_px, "range_sigma_m": self.range_sigma_m,
+                "corner_rms_px": self.corner_rms_px, "range_rms_m": self.range_rms_m, "joint_cost": self.cost,
+                "joint_iterations": self.iterations, "joint_converged": self.converged}
+
+
+@dataclass(frozen=True, eq=False)
+class ChoicePart:
+    """``lidarcam``'s choice: the answer's cost (negative log-likelihood), whether the polish moved it, the score of
+    the candidate it was refined from (``start_T_lidar_cam``, 4x4) and how many were refined, the range-noise std
+    the search scored with (metres), and the refinement's cost and function evaluations."""
+
+    cost: float
+    polished: bool
+    score_start: float
+    n_refined: int
+    start_T_lidar_cam: np.ndarray
+    sigma_m_selection: float
+    refine_cost: float
+    refine_nfev: int
+
+    def entries(self) -> dict:
+        return {"cost": self.cost, "polished": self.polished, "score_start": self.score_start,
+                "n_refined": self.n_refined, "start_T_lidar_cam": self.start_T_lidar_cam,
+                "sigma_m_selection": self.sigma_m_selection, "refine_cost": self.refine_cost,
+                "refine_nfev": self.refine_nfev}
+
+
+@dataclass(frozen=True, eq=False)
+class InfoParts:
+    """Everything a method reports beside the extrinsic and its candidates, as parts (None or empty: no entry).
+
+    Attributes:
+        base: the base method's info of a derived method (``X+ml``, ``X+joint``): every other part overrides it.
+        choice: ``lidarcam``'s choice (``ChoicePart``).
+        consensus: the boards used and left out, the points trimmed, the search (``robust.final``'s report).
+        refinement: a refinement's report (``refine.partial.refine_free``'s, or ``refine_cost`` and the like).
+        prior: the mounting prior given (``methods.last_steps.prior_info``).
+        covariance: the covariance with its model (``CovariancePart``).
+        joint: the joint model's fit (``JointFitPart``).
+        degeneracy: the directions the boards leave free (``checks.degeneracy.Degeneracy.to_dict``).
+        alternatives: the answers nearly as likely as the answer (``methods.lidarcam.alternatives``).
+        board_error: the per-board systematic error held (``refine.systematic.BoardErrorEstimate.to_dict``).
+        noise_model: the noise model the covariance holds (``NoiseModel``).
+        base_T_lidar_cam: a derived method's start, the base method's answer (4x4).
+        warnings: the method's warnings (None: no entry, as for a method that gives none).
+    """
+
+    base: dict = field(default_factory=dict)
+    choice: ChoicePart | None = None
+    consensus: dict = field(default_factory=dict)
+    refinement: dict = field(default_factory=dict)
+    prior: dict | None = None
+    covariance: CovariancePart | None = None
+    joint: JointFitPart | None = None
+    degeneracy: dict | None = None
+    alternatives: list | None = None
+    board_error: dict | None = None
+    noise_model: NoiseModel | None = None
+    base_T_lidar_cam: np.ndarray | None = None
+    warnings: list[str] | None = None
+
+    def to_info(self) -> dict:
+        """The ``info`` dict of ``Method.func`` (what ``CalibrationResult.info`` and the ``lidarcam.result/1``
+        file read): the one place the parts become entries."""
+        info = dict(self.base)
+        for part in (self.choice, self.covariance, self.joint):
+            info.update(part.entries() if part is not None else {})
+        info.update(self.consensus)
+        info.update(self.refinement)
+        single = {"prior": self.prior, "degeneracy": self.degeneracy, "alternatives": self.alternatives,
+                  "board_error": self.board_error, "base_T_lidar_cam": self.base_T_lidar_cam,
+                  "noise_model": None if self.noise_model is None else self.noise_model.to_dict(),
+                  "warnings": None if self.warnings is None else list(self.warnings)}
+        info.update({k: v for k, v in single.items() if v is not None})
+        return info

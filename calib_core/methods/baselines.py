@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..data.observations import Observations
+from ..data.outcome import InfoParts
 from ..errors import SolveFailure
 from ..refine.refine import refine
 from ..registry import Method
@@ -58,7 +59,7 @@ def peng2022(obs: Observations, **options):
     warnings = peng2022_outline_warnings(obs) if sel.get("error", "point_line") == "point_line" else []
     cands = minimal_candidates(obs, **options)
     T, info = select_candidate(obs, cands, "peng2022", **sel)
-    return T, cands.T_lidar_cam, {**info, "warnings": warnings} if warnings else info
+    return T, cands.T_lidar_cam, InfoParts(base=info, warnings=warnings or None).to_info()
 
 
 BASELINES = (

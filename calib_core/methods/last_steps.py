@@ -13,6 +13,7 @@ from scipy.stats import chi2
 from ..checks.degeneracy import Degeneracy, DegeneracyOptions, board_set_warnings, fixed_key, undetermined_directions
 from ..data.lines import range_sigma
 from ..data.observations import Observations
+from ..data.outcome import InfoParts
 from ..errors import JointError, SolveFailure, UncertaintyError
 from ..geometry.mounting import MountingPrior, params_from_T, parse_fixed, with_units
 from ..geometry.transforms import skew
@@ -20,7 +21,7 @@ from ..model.board_error import BoardErrorScale
 from ..model.residuals import range_linearised
 from ..refine.dispersion import widened_covariance
 from ..refine.joint import JointOptions
-from ..refine.joint_step import joint_step
+from ..refine.joint_step import JointStep, joint_step
 from ..refine.partial import fixed_starts, refine_free
 from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV
 from ..refine.systematic import fold_noise_ratio
@@ -118,8 +119,8 @@ def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, 
               options: JointOptions | None = None, names=None,
               mounting: MountingPrior | None = None,
               board_error: BoardErrorScale | None = None,
-              spread_held: bool = False) -> tuple[tuple | None, str | None]:
-    """The joint step (``refine.joint_step.joint_step``) from ``T``: ((T, covariance, info), None) when it applies and
+              spread_held: bool = False) -> tuple[JointStep | None, str | None]:
+    """The joint step (``refine.joint_step.joint_step``) from ``T``: (its ``JointStep``, None) when it applies and
     succeeds; (None, why) otherwise (``why`` None when the corners are switched off). ``names``: the boards' names
     in its warnings (default their index in ``obs``); ``mounting``: a mounting prior in its cost (the covariance
     stays the data's: ``with_prior`` adds the prior's information); ``board_error``: the per-board systematic error
@@ -131,9 +132,7 @@ def try_joint(obs: Observations, T: np.ndarray, *, range_sigma_m: float | None, 
     if not obs.has_corners:
         return None, NO_CORNERS
     try:
-        return joint_step(obs, T, corner_sigma_px=options.corner_sigma_px, range_sigma_m=range_sigma_m, loss=loss,
-                          f_scale_sigmas=options.f_scale_sigmas, max_iter=options.max_iter, widen=options.widen,
-                          names=names, outline=options.outline, mounting=mounting, bend=options.bend,
+        return joint_step(obs, T, options, range_sigma_m=range_sigma_m, loss=loss, names=names, mounting=mounting,
                           board_error=board_error, spread_held=spread_held), None
     except (JointError, UncertaintyError) as err:
         return None, f"joint refinement failed ({err})"
@@ -154,33 +153,33 @@ def range_covariance(obs: Observations, T: np.ndarray, candidates: np.ndarray, w
 
 def widened_range_covariance(obs: Observations, T: np.ndarray, cov: np.ndarray, range_sigma_m: float | None,
                              names=None, board_error: BoardErrorScale | None = None,
-                             spread_held: bool = False) -> tuple[np.ndarray, dict]:
+                             spread_held: bool = False) -> tuple[np.ndarray, dict | None, list[str]]:
     """The range model's covariance ``cov`` at ``T`` through the boards' dispersion test (``refine.dispersion``,
-    ranges in units of the scan lines' scatter): (covariance, info with ``board_dispersion`` and, where it was
-    widened, the warning); ``board_error``: the per-board systematic error the model holds, ``spread_held``: its
-    scale estimated from these boards (reported, not widened). Three boards or fewer leave nothing to test: ``cov``
-    and no entry."""
+    ranges in units of the scan lines' scatter): (covariance, the test as the result reports it, and the warning
+    where it was widened); ``board_error``: the per-board systematic error the model holds, ``spread_held``: its
+    scale estimated from these boards (reported, not widened). Three boards or fewer leave nothing to test: ``cov``,
+    None and no warning."""
     if obs.n_boards <= 3:
-        return cov, {}
+        return cov, None, []
     try:
         cov, disp = widened_covariance(cov, *range_board_scores(obs, T, range_sigma(obs, range_sigma_m)),
                                        held=spread_held)
     except np.linalg.LinAlgError:
-        return cov, {}
-    return cov, {"board_dispersion": disp.to_dict(names), "warnings": [disp.warning(names)] if disp.widened else []}
+        return cov, None, []
+    return cov, disp.to_dict(names), [disp.warning(names)] if disp.widened else []
 
 
 def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray], *,
                       residual: str = "range", loss: str = "linear", f_scale_m: float | None = None,
                       f_scale_sigmas: float = F_SCALE_SIGMAS, range_sigma_m: float | None = None,
                       max_nfev: int = MAX_NFEV, fixed_sigma: np.ndarray | None = None,
-                      board_error: BoardErrorScale | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+                      board_error: BoardErrorScale | None = None) -> tuple[np.ndarray, np.ndarray, InfoParts]:
     """Calibrate the free mounting parameters with ``fixed`` ones held (``refine.partial``): from the closed-form
     planar start when roll, pitch and z are given, else from ``full_start()`` (a full calibration's answer);
     refined on ``residual`` (robust scale ``f_scale_m``, default ``f_scale_sigmas`` noise stds); ``fixed_sigma``
     (6,): the given values' 1-sigma (radians, metres) where they are uncertain; ``board_error``: the per-board
-    systematic error the covariance holds (``refine.partial.refine_free``). Returns (T_lidar_cam, starts,
-    info)."""
+    systematic error the covariance holds (``refine.partial.refine_free``). Returns (T_lidar_cam, starts, the
+    info's parts: the refinement's report, covariance included, and the board set's warnings)."""
     mask, values = parse_fixed(fixed)
     sigma = range_sigma(obs, range_sigma_m)
     starts = fixed_starts(obs, mask, values, full_start)
@@ -188,8 +187,8 @@ def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], n
                               f_scale_m=f_scale_m if f_scale_m is not None else f_scale_sigmas * sigma,
                               range_sigma_m=range_sigma_m, max_nfev=max_nfev, fixed_sigma=fixed_sigma,
                               board_error=board_error)
-    return T, np.asarray(starts), {**info, "sigma_m_selection": sigma, "refine_residual": residual,
-                                   "refine_loss": str(loss), "warnings": board_set_warnings(obs)}
+    report = dict(info, sigma_m_selection=sigma, refine_residual=residual, refine_loss=str(loss))
+    return T, np.asarray(starts), InfoParts(refinement=report, warnings=board_set_warnings(obs))
 
 
 def with_prior(T: np.ndarray, cov: np.ndarray, prior: MountingPrior) -> np.ndarray:

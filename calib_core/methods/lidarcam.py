@@ -10,14 +10,14 @@ to bottom in ``search_and_refine`` (steps 1-4) and ``finish`` (steps 5-6); the t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..checks.degeneracy import Degeneracy, degeneracy_warnings, explain_failure
 from ..data.lines import range_sigma, residual_sigma
 from ..data.observations import Observations
-from ..data.outcome import BoardErrorPart, NoiseModel
+from ..data.outcome import BoardErrorPart, ChoicePart, CovariancePart, InfoParts, JointFitPart, NoiseModel
 from ..errors import CalibrationError, SolveFailure
 from ..geometry.mounting import params_from_T, with_units
 from ..model.intrinsics import ESTIMATED_INTRINSICS, RANGE_ONLY_INTRINSICS
@@ -95,9 +95,11 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
         raise CalibrationError("lidarcam: a mounting prior and fixed parameters do not go together (fix what "
                                "is known, or give it as the prior)")
     if opts.fixed is not None:
-        return fixed_calibration(obs, opts.fixed, lambda: search_and_refine(obs, opts).best.T, loss=opts.choose.loss,
-                                 f_scale_m=opts.choose.f_scale_m, f_scale_sigmas=opts.choose.f_scale_sigmas,
-                                 range_sigma_m=opts.range_sigma_m, max_nfev=opts.choose.max_nfev)
+        T, starts, parts = fixed_calibration(obs, opts.fixed, lambda: search_and_refine(obs, opts).best.T,
+                                             loss=opts.choose.loss, f_scale_m=opts.choose.f_scale_m,
+                                             f_scale_sigmas=opts.choose.f_scale_sigmas,
+                                             range_sigma_m=opts.range_sigma_m, max_nfev=opts.choose.max_nfev)
+        return T, starts, parts.to_info()
     try:
         found = search_and_refine(obs, opts)                                                     # 1-4
     except SolveFailure as fail:
@@ -202,61 +204,62 @@ def finish(found: Found, opts: LidarcamOptions):
     joint, why = try_joint(obs_u, best.T, range_sigma_m=sigma_given, loss=opts.choose.loss, options=opts.joint,
                            names=tests.info.get("boards_used"), mounting=prior, board_error=term, spread_held=held)
     if joint is not None:
-        T, cov, jinfo = joint
-        cov = profile_floor(T, cov, deg)
+        T, part, fit, warned = joint.T_lidar_cam, joint.covariance, joint.fit, joint.warnings
+        cov = profile_floor(T, part.matrix, deg)
         if prior is not None:  # the joint model's answer is the posterior's mode; its covariance the data's
-            jinfo.setdefault("warnings", []).extend(filter(None, [prior_contradiction(T, cov, prior)]))
+            warned.extend(filter(None, [prior_contradiction(T, cov, prior)]))
             cov = with_prior(T, cov, prior)
     else:
-        T, cov = best.T, fold_covariance(obs_u, best.T, deg, term) if deg.profile.any() else \
+        T, fit, cov = best.T, None, fold_covariance(obs_u, best.T, deg, term) if deg.profile.any() else \
             range_covariance(obs_u, best.T, C, "lidarcam", range_sigma_m=sigma_given, board_error=term)
-        jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS, "warnings": []}
+        disp, warned = None, []
         if opts.joint.widen:
-            cov, disp = widened_range_covariance(obs_u, T, cov, sigma_given, tests.info.get("boards_used"), term,
-                                                 held)
-            jinfo.update(disp)
+            cov, disp, warned = widened_range_covariance(obs_u, T, cov, sigma_given, tests.info.get("boards_used"),
+                                                         term, held)
         cov = profile_floor(T, cov, deg)
         if prior is not None:  # the refinement held the prior already: its information only
-            jinfo["warnings"].extend(filter(None, [prior_contradiction(T, cov, prior)]))
+            warned.extend(filter(None, [prior_contradiction(T, cov, prior)]))
             cov = with_prior(T, cov, prior)
         if why is not None and why != NO_CORNERS:
-            jinfo["warnings"].append(f"{why}; covariance of the range model only")
+            warned.append(f"{why}; covariance of the range model only")
+        part = CovariancePart(cov, RANGE_ONLY_MODEL, RANGE_ONLY_INTRINSICS, dispersion=disp)
     cov, modes = mixture_covariance(T, cov, best.cost, best.runners_up)  # last: it composes the modes
     weak, alts = runner_up_warning(best, modes)
-    warnings = tests.warnings + jinfo.pop("warnings", []) + degeneracy_warnings(obs_u, T) + \
+    warnings = tests.warnings + warned + degeneracy_warnings(obs_u, T) + \
         ([deg.message()] if len(deg.directions) else []) + weak
-    return T, C, {"cost": best.cost, "polished": best.polished, "score_start": found.score_start,
-                  "n_refined": opts.choose.n_refine,
-                  "start_T_lidar_cam": best.start, **({"prior": prior_info(prior)} if prior is not None else {}),
-                  "sigma_m_selection": found.search.sigma_m,
-                  "refine_cost": best.refined.cost, "refine_nfev": best.refined.nfev, **tests.info, "covariance": cov,
-                  "conditioning": conditioning(obs_u, T), "warnings": warnings, **jinfo, **alts,
-                  **({"board_error": est.to_dict()} if est is not None else {}),
-                  "noise_model": noise_model(obs_u, T, jinfo, sigma_given, opts.joint.corner_sigma_px, est,
-                                             fold=joint is None and bool(deg.profile.any())).to_dict()}
+    choice = ChoicePart(best.cost, best.polished, found.score_start, opts.choose.n_refine, best.start,
+                        found.search.sigma_m, best.refined.cost, best.refined.nfev)
+    nm = noise_model(obs_u, T, fit, part.intrinsics, sigma_given, opts.joint.corner_sigma_px, est,
+                     fold=joint is None and bool(deg.profile.any()))
+    return T, C, InfoParts(choice=choice, consensus=tests.info, prior=None if prior is None else prior_info(prior),
+                           covariance=replace(part, matrix=cov, conditioning=conditioning(obs_u, T),
+                                              modes=alts.get("covariance_modes")), joint=fit,
+                           alternatives=alts.get("alternatives"), board_error=None if est is None else est.to_dict(),
+                           noise_model=nm, warnings=warnings).to_info()
 
 
-def noise_model(obs: Observations, T: np.ndarray, jinfo: dict, sigma_given: float | None,
-                corner_given: float | None, est: BoardErrorEstimate | None, fold: bool = False) -> NoiseModel:
+def noise_model(obs: Observations, T: np.ndarray, fit: JointFitPart | None, intrinsics: str,
+                sigma_given: float | None, corner_given: float | None, est: BoardErrorEstimate | None,
+                fold: bool = False) -> NoiseModel:
     """``info["noise_model"]`` of ``finish`` and ``prior_decides``: the covariance's noise model, each scale with
-    its value and source."""
+    its value and source (``fit``: the joint model's, None for the range model; ``intrinsics``: how the camera's
+    intrinsics entered the covariance, ``model.intrinsics``' wording)."""
     term = est is not None and est.scale.active
-    joint = jinfo.get("corner_sigma_px") is not None
+    joint = fit is not None
     if sigma_given is not None:
         r, r_src = float(sigma_given), "stated"
     elif term or fold:
         r, r_src = range_sigma(obs), "scan lines"
     elif joint:
-        r, r_src = float(jinfo["range_sigma_m"]), "range residuals"
+        r, r_src = float(fit.range_sigma_m), "range residuals"
     else:
         r, r_src = residual_sigma(range_linearised(T, obs.scan_data)[0], 6), "range residuals"
     parts = ["per-beam range noise"] + (["a per-board offset and tilt of the lidar's plane"] if term else []) + \
         (["image-corner noise (board poses estimated)"] if joint else ["board poses taken as exact"])
-    if joint and jinfo.get("intrinsics") == ESTIMATED_INTRINSICS:
+    if joint and intrinsics == ESTIMATED_INTRINSICS:
         parts.append("the intrinsics' stated 1-sigma")
-    return NoiseModel(", ".join(parts), r, r_src, jinfo.get("corner_sigma_px"),
-                      None if not joint else "stated" if corner_given is not None else "estimated",
-                      jinfo.get("intrinsics"),
+    return NoiseModel(", ".join(parts), r, r_src, None if fit is None else fit.corner_sigma_px,
+                      None if not joint else "stated" if corner_given is not None else "estimated", intrinsics,
                       BoardErrorPart.from_info({"board_error": est.to_dict()}) if term else None)
 
 
@@ -271,15 +274,16 @@ def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy, est: Boa
         raise undetermined_failure(tests.obs_used, deg, np.concatenate([best.T[None], C]), "lidarcam")
     fixed, sigma = prior_fixed(prior, deg)
     r = opts.choose
-    T, _, info = fixed_calibration(tests.obs_used, fixed, lambda: best.T, loss=r.loss, f_scale_m=r.f_scale_m,
-                                   f_scale_sigmas=r.f_scale_sigmas, range_sigma_m=opts.range_sigma_m,
-                                   max_nfev=r.max_nfev, fixed_sigma=sigma,
-                                   board_error=None if est is None else est.scale)
-    warnings = tests.warnings + info.pop("warnings") + [deg.message(from_prior=True)]
-    jinfo = {"covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS}
-    return T, C, {**tests.info, **info, "prior": prior_info(prior), **jinfo, "degeneracy": deg.to_dict(),
-                  "warnings": warnings, **({"board_error": est.to_dict()} if est is not None else {}),
-                  "noise_model": noise_model(tests.obs_used, T, jinfo, opts.range_sigma_m, None, est).to_dict()}
+    T, _, parts = fixed_calibration(tests.obs_used, fixed, lambda: best.T, loss=r.loss, f_scale_m=r.f_scale_m,
+                                    f_scale_sigmas=r.f_scale_sigmas, range_sigma_m=opts.range_sigma_m,
+                                    max_nfev=r.max_nfev, fixed_sigma=sigma,
+                                    board_error=None if est is None else est.scale)
+    warnings = tests.warnings + parts.warnings + [deg.message(from_prior=True)]
+    cov = CovariancePart(parts.refinement["covariance"], RANGE_ONLY_MODEL, RANGE_ONLY_INTRINSICS)
+    nm = noise_model(tests.obs_used, T, None, RANGE_ONLY_INTRINSICS, opts.range_sigma_m, None, est)
+    return T, C, replace(parts, consensus=tests.info, prior=prior_info(prior), covariance=cov,
+                         degeneracy=deg.to_dict(), board_error=None if est is None else est.to_dict(),
+                         noise_model=nm, warnings=warnings).to_info()
 
 
 LIDARCAM = Method("lidarcam", lidarcam, MIN_BOARDS, "this project (lidarcam)",

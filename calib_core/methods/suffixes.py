@@ -4,11 +4,14 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..checks.degeneracy import explain_failure
 from ..data.lines import range_sigma
 from ..data.observations import Observations
+from ..data.outcome import CovariancePart, InfoParts
 from ..errors import SolveFailure
 from ..model.board_error import BoardErrorScale
 from ..model.intrinsics import RANGE_ONLY_INTRINSICS
@@ -35,7 +38,8 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
                      board_error: BoardErrorScale | None = None):
     """Refine ``T0`` on ``residual`` (robust scale ``f_scale_m`` metres, default ``F_SCALE_SIGMAS`` noise stds)
     and compute the covariance, holding the per-board systematic error ``board_error`` where given (range
-    residual; ``model.board_error``); returns (RefineResult, covariance, info).
+    residual; ``model.board_error``); returns (RefineResult, the info's parts: the refinement's report, the
+    covariance with its model, the warnings).
 
     Directions the board geometry leaves free (``calib_core.checks.degeneracy``) are not presented as estimated: a
     SolveFailure names them, with the analysis in its info."""
@@ -48,13 +52,10 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
     cov = fold_covariance(obs, r.T_lidar_cam, deg, term) if residual == "range" and deg.profile.any() else \
         range_covariance(obs, r.T_lidar_cam, T0[None], "refinement", residual, range_sigma_m, board_error=term)
     cov = profile_floor(r.T_lidar_cam, cov, deg)
-    info = {"refine_cost": r.cost, "refine_initial_cost": r.initial_cost, "refine_nfev": r.nfev,
-            "refine_residual": residual, "refine_loss": str(loss), "covariance": cov,
-            "covariance_model": RANGE_ONLY_MODEL, "intrinsics": RANGE_ONLY_INTRINSICS,
-            "conditioning": conditioning(obs, r.T_lidar_cam)}
-    if len(deg.directions):
-        info["warnings"] = [deg.message()]
-    return r, cov, info
+    report = {"refine_cost": r.cost, "refine_initial_cost": r.initial_cost, "refine_nfev": r.nfev,
+              "refine_residual": residual, "refine_loss": str(loss)}
+    part = CovariancePart(cov, RANGE_ONLY_MODEL, RANGE_ONLY_INTRINSICS, conditioning(obs, r.T_lidar_cam))
+    return r, InfoParts(refinement=report, covariance=part, warnings=[deg.message()] if len(deg.directions) else None)
 
 
 def _refine_options(options: dict) -> dict:
@@ -74,7 +75,9 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
         ropts = _refine_options(options)
         fixed = ropts.pop("fixed", None)
         if fixed is not None:
-            return fixed_calibration(obs, fixed, lambda: base.func(obs, **options)[0], residual=residual, **ropts)
+            T, starts, parts = fixed_calibration(obs, fixed, lambda: base.func(obs, **options)[0], residual=residual,
+                                                 **ropts)
+            return T, starts, parts.to_info()
         try:
             T0, cands, info = base.func(obs, **options)
         except SolveFailure as fail:
@@ -82,11 +85,11 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
         T0 = np.asarray(T0, float)
         est = board_error_estimate(obs, T0, ropts.get("range_sigma_m")) if residual == "range" else None
         term = est.scale if est is not None and est.scale.active else None   # a zero one: the per-beam path
-        r, _, rinfo = refine_and_cover(obs, T0, residual, board_error=term, **ropts)
-        warnings = info.get("warnings", []) + rinfo.pop("warnings", [])
-        return r.T_lidar_cam, cands, {**info, **rinfo, "base_T_lidar_cam": T0,
-                                      **({"board_error": est.to_dict()} if est is not None else {}),
-                                      **({"warnings": warnings} if warnings else {})}
+        r, parts = refine_and_cover(obs, T0, residual, board_error=term, **ropts)
+        warnings = info.get("warnings", []) + (parts.warnings or [])
+        return r.T_lidar_cam, cands, replace(parts, base=info, base_T_lidar_cam=T0,
+                                             board_error=None if est is None else est.to_dict(),
+                                             warnings=warnings or None).to_info()
 
     what = "maximum-likelihood refinement on the range residuals" if residual == "range" else \
         "refinement on the point-to-plane distances"
@@ -116,19 +119,19 @@ def joint_method(base: Method) -> Method:
         est = board_error_estimate(obs, T0, sigma) if jo.board_error else None
         term = est.scale if est is not None and est.scale.active else None   # a zero one: the per-beam path
         held = est is not None and est.source == ESTIMATED
-        berr = {"board_error": est.to_dict()} if est is not None else {}
+        berr = est.to_dict() if est is not None else None
         joint, why = try_joint(obs, T0, range_sigma_m=sigma, loss=loss, options=jo, board_error=term,
                                spread_held=held)
         if joint is not None:
-            T, cov, jinfo = joint
-            jinfo["conditioning"] = conditioning(obs, T)
-            warnings = [*info.get("warnings", []), *jinfo.pop("warnings", [])]
-            return T, cands, {**info, **jinfo, "covariance": cov, "base_T_lidar_cam": T0, **berr,
-                              **({"warnings": warnings} if warnings else {})}
-        r, _, rinfo = refine_and_cover(obs, T0, "range", loss=loss, range_sigma_m=sigma, board_error=term)
+            T = joint.T_lidar_cam
+            warnings = [*info.get("warnings", []), *joint.warnings]
+            cov = replace(joint.covariance, conditioning=conditioning(obs, T))
+            return T, cands, InfoParts(base=info, covariance=cov, joint=joint.fit, base_T_lidar_cam=T0,
+                                       board_error=berr, warnings=warnings or None).to_info()
+        r, parts = refine_and_cover(obs, T0, "range", loss=loss, range_sigma_m=sigma, board_error=term)
         warn = f"{why}: range-only maximum likelihood; its covariance ignores the camera's noise"
-        return r.T_lidar_cam, cands, {**info, **rinfo, "base_T_lidar_cam": T0, **berr,
-                                      "warnings": [*info.get("warnings", []), warn]}
+        return r.T_lidar_cam, cands, replace(parts, base=info, base_T_lidar_cam=T0, board_error=berr,
+                                             warnings=[*info.get("warnings", []), warn]).to_info()
 
     return derived(base, "joint", func, f"{base.name}, then joint maximum likelihood over image corners and "
                    "lidar ranges (board poses estimated), with covariance", JOINT_OPTIONS)

@@ -55,8 +55,9 @@ class BoardErrorScale:
         return np.array([self.offset_m, self.tilt_m], float) ** 2
 
 
-def _per_board_sum(values: np.ndarray, board: np.ndarray, n_boards: int) -> np.ndarray:
-    """Sum of ``values`` (K, ...) over each board's points -> (N, ...)."""
+def per_board_sum(values: np.ndarray, board: np.ndarray, n_boards: int) -> np.ndarray:
+    """Sum of ``values`` (K, ...; one per scan point, any units) over each board's points: (N, ...), board ``i``'s
+    row the sum over the points whose ``board`` (K,) index is ``i`` (zero for a board with none)."""
     out = np.zeros((n_boards,) + values.shape[1:])
     np.add.at(out, board, values)
     return out
@@ -70,13 +71,13 @@ def systematic_basis(data: ScanData, normals_lidar: np.ndarray) -> np.ndarray:
     N = len(normals_lidar)
     p = data.points[:, :2]
     cnt = np.bincount(data.board, minlength=N).astype(float)
-    centroid = _per_board_sum(p, data.board, N) / np.maximum(cnt, 1)[:, None]
+    centroid = per_board_sum(p, data.board, N) / np.maximum(cnt, 1)[:, None]
     d = p - centroid[data.board]
-    S = _per_board_sum(np.einsum("ka,kb->kab", d, d), data.board, N)            # (N,2,2) scatter
+    S = per_board_sum(np.einsum("ka,kb->kab", d, d), data.board, N)            # (N,2,2) scatter
     ang = 0.5 * np.arctan2(2 * S[:, 0, 1], S[:, 0, 0] - S[:, 1, 1])              # principal direction
     v = np.stack([np.cos(ang), np.sin(ang)], axis=1)
     t = np.einsum("ka,ka->k", d, v[data.board])
-    R = np.sqrt(_per_board_sum(t**2, data.board, N) / np.maximum(cnt, 1))
+    R = np.sqrt(per_board_sum(t**2, data.board, N) / np.maximum(cnt, 1))
     b = data.points / np.linalg.norm(data.points, axis=1, keepdims=True)
     mb = np.abs(np.einsum("kj,kj->k", normals_lidar[data.board], b))
     mb = np.maximum(mb, MIN_BEAM_INCIDENCE)

@@ -12,6 +12,7 @@ from ..data.camera import CameraModel, intrinsics_jacobian, project
 from ..data.observations import Observations, ScanData
 from ..errors import JointError
 from ..geometry.transforms import rotvec_to_matrix, skew
+from .intrinsics import IntrinsicsPrior
 from .residuals import MIN_BEAM_INCIDENCE, range_residuals
 
 
@@ -87,3 +88,39 @@ def joint_range_residuals(obs: Observations, T_lidar_cam: np.ndarray, T_cam_boar
     # dn = phi x n, d(offset) = phi . (n x Delta) + n . d
     J_b = np.concatenate([np.cross(n, g) + de_dd[:, None] * np.cross(n, Delta), de_dd[:, None] * n], axis=1)
     return e, J_e, J_b
+
+
+def normalised_rows(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
+                    range_sigma_m: float, jacobian: bool, prior: IntrinsicsPrior | None = None,
+                    k: np.ndarray | None = None):
+    """The joint model's residual rows divided by their noise stds (unitless): every corner's reprojection error
+    (``corner_residuals``, pixels, over ``corner_sigma_px``; 2J rows, u then v of each corner, grouped by board),
+    then every scan point's range residual (``joint_range_residuals``, metres, over ``range_sigma_m``; K rows,
+    grouped by board), at the extrinsic ``T_lidar_cam`` (4x4) and the board poses ``T_cam_board`` (N,4,4).
+
+    Without ``jacobian``: the residuals (2J+K,). With it: (residuals, the corner rows' Jacobian (2J,6) in their
+    own board's pose (``phi``, ``d``: left perturbation in the camera frame, rad and m), the range rows' Jacobian
+    (K,6) in the extrinsic (``w``, ``dt``: left perturbation in the lidar frame, rad and m) and (K,6) in their
+    board's pose), all divided by the same stds. With an intrinsics ``prior`` (``model.intrinsics``) the corners
+    go through the camera at its free intrinsics ``k`` (the prior's order and units), and with ``jacobian`` the
+    corner rows' Jacobian in them (2J,m) comes last. ``board_row_offsets`` gives each board's first rows."""
+    cam = None if prior is None else prior.camera_at(k)
+    sc, sr = corner_sigma_px, range_sigma_m
+    if not jacobian:
+        ec = corner_residuals(obs, T_cam_board, camera=cam)
+        return np.r_[ec.ravel() / sc, joint_range_residuals(obs, T_lidar_cam, T_cam_board) / sr]
+    er, Je, Jb = joint_range_residuals(obs, T_lidar_cam, T_cam_board, jacobian=True)
+    if prior is None:
+        ec, Jc = corner_residuals(obs, T_cam_board, jacobian=True)
+        return np.r_[ec.ravel() / sc, er / sr], Jc.reshape(-1, 6) / sc, Je / sr, Jb / sr
+    ec, Jc, Jk = corner_residuals(obs, T_cam_board, jacobian=True, camera=cam, free=prior.free)
+    return np.r_[ec.ravel() / sc, er / sr], Jc.reshape(-1, 6) / sc, Je / sr, Jb / sr, Jk.reshape(-1, prior.size) / sc
+
+
+def board_row_offsets(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+    """Each board's first row (N,) among the corner rows (2J, two per corner) and among the range rows (K, one per
+    scan point) of ``normalised_rows``, whose rows are grouped by board in ``obs.boards`` order: the ``indices``
+    of ``np.add.reduceat`` summing them per board."""
+    nc = np.array([2 * len(b.corners_px) for b in obs.boards])
+    ns = np.array([len(b.scan) for b in obs.boards])
+    return np.r_[0, np.cumsum(nc)[:-1]], np.r_[0, np.cumsum(ns)[:-1]]

@@ -28,7 +28,7 @@ from .residuals import (
     range_residuals,
     scan_points_in_boards,
 )
-from .score import DEFAULT_RANGE_SIGMA_M, EDGE_SIGMA_M, OUTLINE_SIGMA_M, _evidence_constants
+from .score import DEFAULT_RANGE_SIGMA_M, EDGE_SIGMA_M, OUTLINE_SIGMA_M, evidence_constants
 
 
 def lidarcam_linearised(obs: Observations, T_lidar_cam: np.ndarray, *, jacobian: bool | str = True, **options) -> tuple:
@@ -61,7 +61,7 @@ def lidarcam_linearised_many(obs: Observations, C: np.ndarray, *, range_sigma_m:
     residual; it is accepted for the scorer's keywords."""
     C = np.asarray(C, float).reshape(-1, 4, 4)
     M, data = len(C), obs.scan_data
-    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    exact, on_exact, _ = obs.derived("scorers.evidence_constants", evidence_constants)
     ends = obs.derived("scorers.linearised_rows", _linearised_rows)[0]
     rng, J_rng = range_residuals(C, data, jacobian="later")
     frames = board_frames(obs, C)                           # every board-frame map below, computed once
@@ -87,7 +87,7 @@ def _jacobians(obs: Observations, C: np.ndarray, frames: tuple, lazy: tuple, low
     rows' and the board-frame gradients' functions (``lazy``: ``range_residuals``, ``point_line_errors``,
     ``outside_outlines``, each computed for the whole batch), the lower-bound scales (chord sigma, cap, margin
     sigma, metres), the prior and the range, endpoint and outline sigmas (metres)."""
-    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    exact, on_exact, _ = obs.derived("scorers.evidence_constants", evidence_constants)
     lin_rows = obs.derived("scorers.linearised_rows", _linearised_rows)[1]
     points = obs.derived("scorers.linearised_points", _linearised_points)
     n_edge = 2 * len(exact)
@@ -128,5 +128,5 @@ def _linearised_rows(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
     of the endpoints of the exact-outline boards followed by those of their scan points."""
     stops = np.cumsum([len(b.scan) for b in obs.boards])
     ends = np.stack([stops - [len(b.scan) for b in obs.boards], stops - 1], axis=1)
-    exact, on_exact, _ = obs.derived("scorers.evidence_constants", _evidence_constants)
+    exact, on_exact, _ = obs.derived("scorers.evidence_constants", evidence_constants)
     return ends, np.concatenate([ends[exact].ravel(), np.flatnonzero(on_exact)])

@@ -66,8 +66,10 @@ LOWER_BOUND_KEYS = ("chord_sigma_m", "chord_cap", "margin_sigma_m", "prior")
 """The score's keywords beyond the exact-outline ones: the lower-bound terms and the mounting prior."""
 
 
-def _evidence_constants(obs: Observations):
-    """The exact-outline boards, the mask of their scan points and every board's scan centroid (N,3)."""
+def evidence_constants(obs: Observations):
+    """The constants of the score's evidence: the indices of the boards whose outline is exact
+    (``exact_outline_boards``), the mask (K,) of their scan points in ``obs.scan_data``, and every
+    board's scan centroid (N,3; lidar frame, metres)."""
     exact = exact_outline_boards(obs)
     return exact, np.isin(obs.scan_data.board, exact), np.array([b.scan_3d.mean(axis=0) for b in obs.boards])
 
@@ -78,7 +80,7 @@ def _evidence(obs: Observations, C: np.ndarray, range_sigma_m: float, edge_sigma
     distances of the boards with an exact outline (scan-data order), the chord, margin and prior residuals
     (``lower``: ``LOWER_BOUND_KEYS``), and the number of implausible boards (M,)."""
     data = obs.scan_data
-    exact, on_exact, _ = obs.derived("score.evidence_constants", _evidence_constants)
+    exact, on_exact, _ = obs.derived("score.evidence_constants", evidence_constants)
     rng = range_residuals(C, data) / range_sigma_m
     frames = board_frames(obs, C)
     edge = point_line_errors(obs, C, frames=frames)[:, exact].reshape(len(C), -1) / edge_sigma_m
@@ -139,7 +141,7 @@ def evidence_cost(obs: Observations, candidates: np.ndarray, *, range_sigma_m: f
 def outline_term(obs: Observations, candidates: np.ndarray, outline_sigma_m: float = OUTLINE_SIGMA_M) -> np.ndarray:
     """(M,) the outline term of the ``lidarcam`` cost alone, ``0.5 sum_k (o_k / outline_sigma)^2``: what the cost
     adds to its ``with_outline=False`` lower bound."""
-    _, on_exact, _ = obs.derived("score.evidence_constants", _evidence_constants)
+    _, on_exact, _ = obs.derived("score.evidence_constants", evidence_constants)
     out = in_chunks(lambda C: outside_outlines(obs, C)[:, on_exact], obs, candidates) / outline_sigma_m
     return 0.5 * np.sum(out**2, axis=1)
 

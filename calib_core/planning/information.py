@@ -15,9 +15,9 @@ from ..checks.degeneracy import NULL_CONDITIONING
 from ..data.observations import Observations
 from ..errors import UncertaintyError
 from ..model.board_error import BoardErrorScale, systematic_basis
-from ..model.corners import scan_data_at
+from ..model.corners import board_row_offsets, normalised_rows, scan_data_at
 from ..model.residuals import range_residuals
-from ..refine.joint import _row_offsets, _weighted, board_informations
+from ..refine.joint import board_informations
 from ..refine.uncertainty import inverse_information
 
 SIGMA_NAMES = ("roll_deg", "pitch_deg", "yaw_deg", "x_mm", "y_mm", "z_mm")
@@ -137,8 +137,8 @@ def set_systematic(obs: Observations, T_lidar_cam: np.ndarray, range_sigma_m: fl
         starts = np.r_[0, np.cumsum([len(b.scan) for b in obs.boards])[:-1]]
         V = np.add.reduceat(np.einsum("ka,kp->kap", B, J), starts)                      # (N,2,6)
         return np.einsum("nap,a,naq->npq", V, P, V) / float(range_sigma_m) ** 4
-    _, Jc, Je, Jb = _weighted(obs, T_e, T_b, float(corner_sigma_px), float(range_sigma_m), True)
-    oc, os = _row_offsets(obs)
+    _, Jc, Je, Jb = normalised_rows(obs, T_e, T_b, float(corner_sigma_px), float(range_sigma_m), True)
+    oc, os = board_row_offsets(obs)
     H_bb = np.add.reduceat(np.einsum("ra,rb->rab", Jc, Jc), oc) + np.add.reduceat(np.einsum("ra,rb->rab", Jb, Jb), os)
     H_eb = np.add.reduceat(np.einsum("ra,rb->rab", Je, Jb), os)
     Vx = np.add.reduceat(np.einsum("ka,kp->kap", B, Je), os)                             # (N,2,6)

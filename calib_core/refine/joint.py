@@ -31,7 +31,14 @@ from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
 from ..geometry.mounting import MountingPrior
 from ..geometry.transforms import rotvec_to_matrix
 from ..model.board_error import BoardErrorScale
-from ..model.corners import board_poses, corner_residuals, joint_range_residuals, scan_data_at
+from ..model.corners import (
+    board_poses,
+    board_row_offsets,
+    corner_residuals,
+    joint_range_residuals,
+    normalised_rows,
+    scan_data_at,
+)
 from ..model.intrinsics import IntrinsicsPrior, augmented_blocks
 from ..model.joint_outline import has_outline_rows, outline_cost, with_outline
 from ..model.prior import mounting_cost, with_mounting
@@ -87,34 +94,9 @@ class JointOptions:
     board_error: bool = True
 
 
-def _weighted(obs: Observations, T_e: np.ndarray, T_b: np.ndarray, sc: float, sr: float, jacobian: bool,
-              prior: IntrinsicsPrior | None = None, k: np.ndarray | None = None):
-    """Normalised residuals (corners (2J) then ranges (K)); with ``jacobian`` also the corner rows' board
-    Jacobian (2J,6), the range rows' extrinsic (K,6) and board (K,6) Jacobians, at the current poses. With an
-    intrinsics ``prior`` the corners go through the camera at its free intrinsics ``k``, and with ``jacobian``
-    the corner rows' intrinsics Jacobian (2J,m) comes last."""
-    cam = None if prior is None else prior.camera_at(k)
-    if not jacobian:
-        ec = corner_residuals(obs, T_b, camera=cam)
-        return np.r_[ec.ravel() / sc, joint_range_residuals(obs, T_e, T_b) / sr]
-    er, Je, Jb = joint_range_residuals(obs, T_e, T_b, jacobian=True)
-    if prior is None:
-        ec, Jc = corner_residuals(obs, T_b, jacobian=True)
-        return np.r_[ec.ravel() / sc, er / sr], Jc.reshape(-1, 6) / sc, Je / sr, Jb / sr
-    ec, Jc, Jk = corner_residuals(obs, T_b, jacobian=True, camera=cam, free=prior.free)
-    return np.r_[ec.ravel() / sc, er / sr], Jc.reshape(-1, 6) / sc, Je / sr, Jb / sr, Jk.reshape(-1, prior.size) / sc
-
-
 _DRHO = {"linear": lambda z: np.ones_like(z), "huber": lambda z: np.where(z <= 1, 1.0, 1 / np.sqrt(np.maximum(z, 1))),
          "soft_l1": lambda z: 1 / np.sqrt(1 + z), "cauchy": lambda z: 1 / (1 + z), "arctan": lambda z: 1 / (1 + z**2)}
 """rho'(z) of scipy's robust losses (``z`` the squared residual over the squared scale): the IRLS weights."""
-
-
-def _row_offsets(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
-    """First corner row (of 2J) and first range row (of K) of each board: rows are grouped by board."""
-    nc = np.array([2 * len(b.corners_px) for b in obs.boards])
-    ns = np.array([len(b.scan) for b in obs.boards])
-    return np.r_[0, np.cumsum(nc)[:-1]], np.r_[0, np.cumsum(ns)[:-1]]
 
 
 def _normal_equations(obs, offsets, e, Jc, Je, Jb):
@@ -149,8 +131,8 @@ def _apply(T_e, T_b, de, db):
 
 
 def _blocks(obs, offsets, weighted, w, prior, k):
-    """The (IRLS-weighted) Gauss-Newton blocks of the linearisation ``weighted`` (``_weighted``'s output), with
-    the free intrinsics appended to the global block when there is a ``prior``."""
+    """The (IRLS-weighted) Gauss-Newton blocks of the linearisation ``weighted`` (``model.corners.normalised_rows``'
+    output), with the free intrinsics appended to the global block when there is a ``prior``."""
     e, Jc, Je, Jb = weighted[:4]
     nc = len(Jc)
     blocks = _normal_equations(obs, offsets, e * w, Jc * w[:nc, None], Je * w[nc:, None], Jb * w[nc:, None])
@@ -167,16 +149,16 @@ def _solve(obs, T_e, T_b, sc, sr, loss, f_scale_sigmas, max_iter, tol=COST_RTOL,
     direction's rows are Gaussian, never reweighted). Returns (T_e, T_b, cost, iterations, converged, k) (``k``
     the free intrinsics; None without an intrinsics prior)."""
     drho = _DRHO[loss]
-    offsets = _row_offsets(obs)
+    offsets = board_row_offsets(obs)
 
     def cost_of(Te, Tb, kk):
-        c = robust_cost(_weighted(obs, Te, Tb, sc, sr, False, prior, kk), loss, f_scale_sigmas)
+        c = robust_cost(normalised_rows(obs, Te, Tb, sc, sr, False, prior, kk), loss, f_scale_sigmas)
         c += (outline_cost(obs, Te, Tb) if outline else 0.0) + mounting_cost(mounting, Te) + mounting_cost(hold, Te)
         return c if prior is None else c + 0.5 * float(np.sum(prior.residuals(kk) ** 2))
 
     cost, lam, it = cost_of(T_e, T_b, k), INITIAL_LAMBDA, 0
     for it in range(1, max_iter + 1):
-        lin = _weighted(obs, T_e, T_b, sc, sr, True, prior, k)
+        lin = normalised_rows(obs, T_e, T_b, sc, sr, True, prior, k)
         w = np.sqrt(drho((lin[0] / f_scale_sigmas) ** 2))
         blocks = _blocks(obs, offsets, lin, w, prior, k)
         blocks = with_outline(blocks, obs, T_e, T_b) if outline else blocks
@@ -312,9 +294,9 @@ def intrinsics_marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T
 
     UncertaintyError when a board's pose or the extrinsic is not determined.
     """
-    lin = _weighted(obs, np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float), float(corner_sigma_px),
+    lin = normalised_rows(obs, np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float), float(corner_sigma_px),
                     float(range_sigma_m), True, prior, k)
-    blocks = _blocks(obs, _row_offsets(obs), lin, np.ones(len(lin[0])), prior, k)
+    blocks = _blocks(obs, board_row_offsets(obs), lin, np.ones(len(lin[0])), prior, k)
     _, _, H_gg, H_gb, H_bb = with_outline(blocks, obs, T_lidar_cam, T_cam_board) if outline else blocks
     try:
         X = np.linalg.solve(H_bb, np.swapaxes(H_gb, 1, 2))
@@ -322,7 +304,7 @@ def intrinsics_marginal_covariance(obs: Observations, T_lidar_cam: np.ndarray, T
         raise UncertaintyError("a board's pose is not determined by its corners") from None
     return with_systematic(inverse_information(H_gg - np.einsum("nab,nbc->ac", H_gb, X), rcond), board_error,
                            scan_data_at(obs, T_cam_board), T_lidar_cam, lin, H_gb, H_bb, range_sigma_m,
-                           _row_offsets(obs)[1])
+                           board_row_offsets(obs)[1])
 
 
 def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.ndarray, corner_sigma_px: float,
@@ -339,8 +321,8 @@ def board_informations(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: 
         _, J = range_residuals(T_e, scan_data_at(obs, T_b), jacobian=True)
         starts = np.r_[0, np.cumsum([len(b.scan) for b in obs.boards])[:-1]]
         return np.add.reduceat(np.einsum("ka,kb->kab", J, J), starts) / float(range_sigma_m) ** 2
-    _, Jc, Je, Jb = _weighted(obs, T_e, T_b, float(corner_sigma_px), float(range_sigma_m), True)
-    oc, os = _row_offsets(obs)
+    _, Jc, Je, Jb = normalised_rows(obs, T_e, T_b, float(corner_sigma_px), float(range_sigma_m), True)
+    oc, os = board_row_offsets(obs)
     H_bb = np.add.reduceat(np.einsum("ra,rb->rab", Jc, Jc), oc) + np.add.reduceat(np.einsum("ra,rb->rab", Jb, Jb), os)
     H_eb = np.add.reduceat(np.einsum("ra,rb->rab", Je, Jb), os)
     H_ee = np.add.reduceat(np.einsum("ra,rb->rab", Je, Je), os)
@@ -359,8 +341,8 @@ def board_scores(obs: Observations, T_lidar_cam: np.ndarray, T_cam_board: np.nda
     if camera is not None:
         obs = replace(obs, camera=camera)
     T_e, T_b = np.asarray(T_lidar_cam, float), np.asarray(T_cam_board, float)
-    e, Jc, Je, Jb = _weighted(obs, T_e, T_b, float(corner_sigma_px), float(range_sigma_m), True)
-    offsets = _row_offsets(obs)
+    e, Jc, Je, Jb = normalised_rows(obs, T_e, T_b, float(corner_sigma_px), float(range_sigma_m), True)
+    offsets = board_row_offsets(obs)
     _, g_b, _, H_eb, H_bb = _normal_equations(obs, offsets, e, Jc, Je, Jb)
     H_ee = np.add.reduceat(np.einsum("ra,rb->rab", Je, Je), offsets[1])
     g_e = np.add.reduceat(Je * e[len(Jc):, None], offsets[1])

@@ -38,7 +38,7 @@ import numpy as np
 from ..data.lines import range_sigma, residual_sigma
 from ..data.observations import Observations, ScanData
 from ..errors import JointError
-from ..model.board_error import BoardErrorScale, _per_board_sum, systematic_basis
+from ..model.board_error import BoardErrorScale, per_board_sum, systematic_basis
 from ..model.corners import board_poses, corner_residuals, joint_range_residuals
 from ..model.residuals import range_linearised
 
@@ -102,9 +102,9 @@ def board_coefficients(obs: Observations, T: np.ndarray, range_sigma_m: float | 
     data, N = obs.scan_data, obs.n_boards
     e, J = range_linearised(T, data)
     B = systematic_basis(data, data.normals @ T[:3, :3].T)
-    Gi = np.linalg.inv(_per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, N))
-    c = np.einsum("nab,nb->na", Gi, _per_board_sum(B * e[:, None], data.board, N))
-    C = Gi @ _per_board_sum(np.einsum("ka,kp->kap", B, J), data.board, N)
+    Gi = np.linalg.inv(per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, N))
+    c = np.einsum("nab,nb->na", Gi, per_board_sum(B * e[:, None], data.board, N))
+    C = Gi @ per_board_sum(np.einsum("ka,kp->kap", B, J), data.board, N)
     K = range_sigma(obs, range_sigma_m) ** 2 * Gi
     if obs.has_corners and obs.camera is not None:
         try:
@@ -121,10 +121,10 @@ def _camera_part(obs: Observations, T: np.ndarray, B: np.ndarray, Gi: np.ndarray
     ec, Jc = corner_residuals(obs, Tb, jacobian=True)
     sc = residual_sigma(ec, 6 * N)
     idx = np.concatenate([np.full(len(b.corners_px), i) for i, b in enumerate(obs.boards)])
-    H = _per_board_sum(np.einsum("jca,jcb->jab", Jc, Jc), idx, N)          # (N,6,6)
+    H = per_board_sum(np.einsum("jca,jcb->jab", Jc, Jc), idx, N)          # (N,6,6)
     Sb = sc**2 * np.linalg.inv(H)
     _, _, Jb = joint_range_residuals(obs, T, Tb, jacobian=True)
-    Cb = Gi @ _per_board_sum(np.einsum("ka,kp->kap", B, Jb), obs.scan_data.board, N)       # (N,2,6)
+    Cb = Gi @ per_board_sum(np.einsum("ka,kp->kap", B, Jb), obs.scan_data.board, N)       # (N,2,6)
     return Cb @ Sb @ np.swapaxes(Cb, 1, 2)
 
 
@@ -225,7 +225,7 @@ def fold_noise_ratio(data: ScanData, T: np.ndarray, scale: BoardErrorScale, rang
     if not scale.active:
         return 1.0
     B = systematic_basis(data, data.normals @ np.asarray(T, float)[:3, :3].T)
-    G = _per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, len(data.normals))
+    G = per_board_sum(np.einsum("ka,kb->kab", B, B), data.board, len(data.normals))
     known = float(range_sigma_m) ** 2 * np.trace(np.linalg.inv(G), axis1=1, axis2=2)
     return float((known.sum() + len(known) * scale.variances.sum()) / known.sum())
 
@@ -238,9 +238,9 @@ def with_systematic(C: np.ndarray, scale: BoardErrorScale | None, data: ScanData
     sandwich ``C + C M C``, ``M = sum_i w_i P w_i^T / sr^2`` the term's part of the profiled score covariance,
     ``w_i = V_g,i^T - H_gb,i H_bb,i^-1 V_b,i^T`` (G,2) with ``V_i = B_i^T J_i`` the term's columns
     (``model.board_error.systematic_basis`` on ``data``, the scan points with the current board planes) on the
-    board's normalised range rows (``lin``: ``joint._weighted``'s output, ``Je`` (K,6) extrinsic and ``Jb`` (K,6)
-    board pose columns; the intrinsics' are zero on range rows; rows of board i from ``starts[i]``) and ``P`` the
-    term's variances. Linear in the boards."""
+    board's normalised range rows (``lin``: ``model.corners.normalised_rows``' output, ``Je`` (K,6) extrinsic and
+    ``Jb`` (K,6) board pose columns; the intrinsics' are zero on range rows; rows of board i from ``starts[i]``) and
+    ``P`` the term's variances. Linear in the boards."""
     if scale is None or not scale.active:
         return C
     Je, Jb = lin[2], lin[3]

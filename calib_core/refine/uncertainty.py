@@ -18,7 +18,7 @@ from ..data.lines import residual_sigma
 from ..data.observations import Observations, ScanData
 from ..errors import UncertaintyError
 from ..geometry.metrics import sigma_rot_deg, sigma_trans_m
-from ..model.board_error import BoardErrorScale, _per_board_sum, systematic_basis
+from ..model.board_error import BoardErrorScale, per_board_sum, systematic_basis
 from ..model.residuals import range_linearised, range_residuals
 
 
@@ -159,7 +159,7 @@ def systematic_sandwich(Ai: np.ndarray, data: ScanData, T_lidar_cam: np.ndarray,
     beams' noise). ``Ai`` itself when the term holds no error."""
     if not board_error.active:
         return Ai
-    V = _per_board_sum(np.einsum("ka,kp->kap", systematic_basis(data, data.normals @ T_lidar_cam[:3, :3].T), J),
+    V = per_board_sum(np.einsum("ka,kp->kap", systematic_basis(data, data.normals @ T_lidar_cam[:3, :3].T), J),
                        data.board, len(data.normals))                                       # (N,2,k)
     C = Ai + Ai @ np.einsum("nap,a,naq->pq", V, board_error.variances, V) @ Ai / float(range_sigma_m) ** 4
     return 0.5 * (C + C.T)

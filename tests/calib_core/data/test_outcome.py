@@ -9,7 +9,7 @@ import pytest
 from scenes import make_observations
 
 from calib_core import calibrate
-from calib_core.data.outcome import CovarianceModel
+from calib_core.data.outcome import CovarianceModel, CovariancePart, InfoParts, JointFitPart, NoiseModel
 from calib_core.data.result import CalibrationResult
 
 
@@ -54,3 +54,23 @@ def test_a_plugin_s_own_covariance_wording_is_kept_as_other():
     r = CalibrationResult("x", True, np.eye(4), covariance=np.eye(6) * 1e-6, info={"covariance_model": "my lab's"})
     assert r.outcome.covariance.model is CovarianceModel.OTHER and r.outcome.covariance.model_text == "my lab's"
     assert r.outcome.noise.to_dict() is None and "noise" not in r.to_dict()
+
+
+def test_info_parts_become_entries_in_one_place_and_override_a_base_method_s():
+    """``InfoParts.to_info``: a part left out gives no entry; every part overrides the base method's entry of the
+    same name (a derived method's covariance replaces its base's), the base's other entries stay; the typed parts
+    read back through ``Outcome`` as they went in."""
+    base = {"cost": 3.0, "covariance_model": CovarianceModel.RANGE_ONLY, "board_dispersion": {"widened": False},
+            "warnings": ["from the base"]}
+    cov = CovariancePart(np.eye(6), CovarianceModel.JOINT, "exact", conditioning=0.5, bend={"moved": 1.0})
+    fit = JointFitPart(0.4, 0.02, 0.41, 0.021, 10.0, 7, True)
+    info = InfoParts(base=base, covariance=cov, joint=fit, noise_model=NoiseModel("per-beam range noise", 0.02),
+                     warnings=["mine"]).to_info()
+    assert info["covariance_model"] is CovarianceModel.JOINT and info["covariance"] is cov.matrix
+    assert info["board_dispersion"] == {"widened": False} and info["cost"] == 3.0       # the base's, not replaced
+    assert info["covariance_bend"] == {"moved": 1.0} and info["conditioning"] == 0.5
+    assert info["joint_iterations"] == 7 and info["range_sigma_m"] == 0.02 and info["warnings"] == ["mine"]
+    assert not {"prior", "alternatives", "degeneracy", "board_error", "base_T_lidar_cam"} & set(info)
+    o = CalibrationResult("m", True, np.eye(4), covariance=np.eye(6), info=info).outcome
+    assert o.covariance.model is CovarianceModel.JOINT and o.noise_model.name == "per-beam range noise"
+    assert InfoParts(base=base).to_info() == base and "warnings" not in InfoParts().to_info()

@@ -5,11 +5,11 @@ the Gauss-Newton blocks against the dense normal equations, and exact recovery o
 import numpy as np
 import pytest
 
-from calib_core.model.corners import board_poses
+from calib_core.model.corners import board_poses, board_row_offsets, normalised_rows
 from calib_core.model.joint_outline import outline_cost, outline_residuals, outline_rows, with_outline
 from calib_core.model.lower_bound import CHORD_CAP, MARGIN_CAP, lower_bound_rows
 from calib_core.model.residuals import board_frames, perturb
-from calib_core.refine.joint import _blocks, _row_offsets, _weighted, joint_refine
+from calib_core.refine.joint import _blocks, joint_refine
 from simulate import SimOptions, generate
 
 RIG = dict(pose_mode="pixel", dist_min_m=1.0, dist_max_m=4.0, board_margin_min_m=0.01, board_margin_max_m=0.08)
@@ -66,8 +66,8 @@ def test_blocks_match_the_dense_normal_equations(rng):
     n = obs.n_boards
     T_e = perturb(obs.T_lidar_cam_true, rng.normal(0, 0.03, 6))
     T_b = board_poses(obs, rng.normal(0, 0.02, (n, 6)))
-    lin = _weighted(obs, T_e, T_b, 0.5, 0.02, True)
-    base = _blocks(obs, _row_offsets(obs), lin, np.ones(len(lin[0])), None, None)
+    lin = normalised_rows(obs, T_e, T_b, 0.5, 0.02, True)
+    base = _blocks(obs, board_row_offsets(obs), lin, np.ones(len(lin[0])), None, None)
     g_e, g_b, H_ee, H_eb, H_bb = with_outline(base, obs, T_e, T_b)
     r, Je, Jb, board = outline_rows(obs, T_e, T_b)
     J = np.zeros((len(r), 6 + 6 * n))

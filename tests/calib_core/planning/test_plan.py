@@ -20,10 +20,11 @@ from calib_core.geometry.beams import points_in_polygon
 from calib_core.geometry.mounting import T_from_params
 from calib_core.geometry.transforms import invert_T
 from calib_core.model.board_error import BoardErrorScale
+from calib_core.model.corners import normalised_rows
 from calib_core.model.residuals import range_residuals
 from calib_core.planning.capture import PlanError, greedy, plan_capture, plan_summary, plan_to_dict, pool, predict
 from calib_core.planning.views import PlanRig, Workspace, board_poses_lidar, feasibility, noise_free_views
-from calib_core.refine.joint import _weighted, board_informations, joint_crlb
+from calib_core.refine.joint import board_informations, joint_crlb
 from calib_core.refine.uncertainty import fisher_information
 from experiments.suites.plan_check import rig_of
 from lidarcam.rig.dataset import DatasetError
@@ -47,7 +48,7 @@ def sim_rig(corner_sigma_px: float = 0.5, workspace: Workspace = SMALL) -> PlanR
 def test_board_informations_add_up_to_the_dense_joint_information():
     obs = generate(SimOptions(n_boards=5, pose_mode="pixel"), 3, 0)
     T_b = np.array(obs.meta["T_cam_board_true"])
-    _, Jc, Je, Jb = _weighted(obs, obs.T_lidar_cam_true, T_b, 0.7, 0.02, True)
+    _, Jc, Je, Jb = normalised_rows(obs, obs.T_lidar_cam_true, T_b, 0.7, 0.02, True)
     N = obs.n_boards
     J = np.zeros((len(Jc) + len(Je), 6 + 6 * N))
     rows_c = np.repeat([i for i, b in enumerate(obs.boards) for _ in range(len(b.corners_px))], 2)

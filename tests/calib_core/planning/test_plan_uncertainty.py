@@ -108,8 +108,8 @@ def test_the_plans_systematic_part_is_the_calibrations(corner_sigma_px):
     """``set_systematic``'s per-board parts add up to the covariance the calibration holds: the joint model's
     (``refine.systematic.with_systematic``) with corners, the range model's (``refinement_covariance``) without."""
     from calib_core.model.board_error import BoardErrorScale
-    from calib_core.model.corners import scan_data_at
-    from calib_core.refine.joint import _row_offsets, _weighted, board_informations
+    from calib_core.model.corners import board_row_offsets, normalised_rows, scan_data_at
+    from calib_core.refine.joint import board_informations
     from calib_core.refine.systematic import with_systematic
     from calib_core.refine.uncertainty import refinement_covariance
 
@@ -121,9 +121,9 @@ def test_the_plans_systematic_part_is_the_calibrations(corner_sigma_px):
     if corner_sigma_px == 0:
         want = refinement_covariance(scan_data_at(obs, T_b), T, "range", sr, board_error=scale)
     else:
-        lin = _weighted(obs, T, T_b, corner_sigma_px, sr, True)
+        lin = normalised_rows(obs, T, T_b, corner_sigma_px, sr, True)
         _, Jc, Je, Jb = lin
-        oc, os = _row_offsets(obs)
+        oc, os = board_row_offsets(obs)
         H_bb = np.add.reduceat(np.einsum("ra,rb->rab", Jc, Jc), oc) + \
             np.add.reduceat(np.einsum("ra,rb->rab", Jb, Jb), os)
         H_eb = np.add.reduceat(np.einsum("ra,rb->rab", Je, Jb), os)

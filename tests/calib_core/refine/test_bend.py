@@ -14,7 +14,7 @@ from calib_core.geometry.metrics import nees
 from calib_core.geometry.transforms import make_T, rotvec_to_matrix
 from calib_core.model.residuals import perturb
 from calib_core.refine.bend import HeldDirection, bent_covariance, weakest_direction
-from calib_core.refine.joint import joint_refine
+from calib_core.refine.joint import JointOptions, joint_refine
 from calib_core.refine.joint_step import bent_joint_covariance
 from simulate import SimOptions, generate
 
@@ -65,7 +65,7 @@ def test_refits_hold_their_direction_and_correction_is_small_where_the_likelihoo
     obs = generate(SimOptions(n_boards=8, pose_mode="pixel", pixel_noise_px=0.3, noise_mm=5.0, dist_min_m=1.0,
                               dist_max_m=2.0), seed=3, trial=1)
     j = joint_refine(obs, obs.T_lidar_cam_true)
-    cov, summary, why = bent_joint_covariance(obs, j, "linear", 3.0, 50, False)
+    cov, summary, why = bent_joint_covariance(obs, j, "linear", JointOptions(f_scale_sigmas=3.0, max_iter=50))
     assert why is None
     assert summary["departure_sigmas"] < 0.3          # a second-order bend of a few percent of a sigma
     np.testing.assert_allclose(np.sqrt(np.diag(cov)), np.sqrt(np.diag(j.covariance)), rtol=0.01)
@@ -123,6 +123,6 @@ def test_a_failed_refit_leaves_the_gaussian_with_a_warning(monkeypatch):
         raise np.linalg.LinAlgError("singular")
 
     monkeypatch.setattr(js, "joint_refine", broken)
-    cov, summary, why = bent_joint_covariance(obs, j, "linear", 3.0, 50, False)
+    cov, summary, why = bent_joint_covariance(obs, j, "linear", JointOptions(f_scale_sigmas=3.0, max_iter=50))
     assert summary == {} and cov is j.covariance
     assert "not computed (singular)" in why

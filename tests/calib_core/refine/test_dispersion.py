@@ -169,13 +169,13 @@ def test_range_model_widens_on_board_level_error(rng):
     for t in range(30):
         obs = planes_moved(generate(opts, seed=5, trial=t), rng, 0.3, 0.005)
         res = calibrate(obs, "zhang_pless+ml", verdict=False)
-        cov, info = widened_range_covariance(obs, res.T_lidar_cam, res.covariance, None)
-        fired += info["board_dispersion"]["widened"]
+        cov, disp, _ = widened_range_covariance(obs, res.T_lidar_cam, res.covariance, None)
+        fired += disp["widened"]
         model.append(nees(res, obs.T_lidar_cam_true))
         wide.append(nees(replace(res, covariance=cov), obs.T_lidar_cam_true))
     assert fired >= 27
     assert np.median(model) > 30
     assert 2.0 < np.median(wide) < 12.0
     few = generate(SimOptions(n_boards=3), seed=5)
-    cov, info = widened_range_covariance(few, few.T_lidar_cam_true, np.eye(6), 0.02)
-    assert info == {} and np.array_equal(cov, np.eye(6))
+    cov, disp, warnings = widened_range_covariance(few, few.T_lidar_cam_true, np.eye(6), 0.02)
+    assert disp is None and warnings == [] and np.array_equal(cov, np.eye(6))
