@@ -10,6 +10,7 @@ import numpy as np
 from .checks.diagnose import data_causes, judge
 from .checks.verdict import check, data_warnings
 from .data.observations import Observations
+from .data.outcome import InfoParts, ObservationsPart, ResidualRmsPart, VerdictPart
 from .data.result import CalibrationResult, observations_fingerprint
 from .errors import CalibrationError, SolveFailure, UncertaintyError
 from .geometry.mounting import MountingPrior
@@ -28,15 +29,17 @@ def _failure(obs: Observations, method: str, reason: str, candidates, t0: float,
         warnings = list(info.get("warnings", []))
         warnings += [w for w in data_warnings(obs) if w not in warnings]
         causes = data_causes(obs)
-        info.update(warnings=warnings, verdict={"consistent": None, "reason": None, "warnings": warnings,
-                                                "causes": list(dict.fromkeys(n for n, _ in causes))})
+        # the warnings keep their place ahead of the verdict, as the entries have always been ordered
+        info = InfoParts(base={**info, "warnings": warnings}, warnings=warnings,
+                         verdict=VerdictPart(None, None, tuple(warnings), tuple(dict.fromkeys(n for n, _ in causes)))
+                         ).to_info()
         reason += "".join(f"; likely cause: {msg}" for _, msg in causes)
     return CalibrationResult(method, False, reason=reason,
                              candidates=np.zeros((0, 4, 4)) if candidates is None else candidates,
                              seconds=time.perf_counter() - t0, info=info)
 
 
-def residual_rms(obs: Observations, T: np.ndarray, info: dict) -> dict:
+def residual_rms(obs: Observations, T: np.ndarray, info: dict) -> ResidualRmsPart:
     """The range residuals' RMS (metres) over every scan point of the boards the answer rests on, at the answer
     and at the start the method refined from (``info["start_T_lidar_cam"]`` or an ``X+s`` method's base answer;
     None where the method has no start): the before and after of a refinement, as the summary prints them."""
@@ -48,7 +51,7 @@ def residual_rms(obs: Observations, T: np.ndarray, info: dict) -> dict:
         return float(np.sqrt(np.mean(e**2))) if e.size and np.all(np.isfinite(e)) else None
 
     start = info.pop("start_T_lidar_cam", info.get("base_T_lidar_cam"))
-    return {"start_m": None if start is None else rms(start), "answer_m": rms(T)}
+    return ResidualRmsPart(None if start is None else rms(start), rms(T))
 
 
 def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: bool = True,
@@ -92,7 +95,7 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
     if not np.all(np.isfinite(T)):
         return CalibrationResult(method, False, reason=f"{method}: the solution is not finite", candidates=cands,
                                  seconds=time.perf_counter() - t0)
-    info["residual_rms"] = residual_rms(observations, T, info)
+    parts = InfoParts(base=info, residual_rms=residual_rms(observations, T, info))
     cov = info.pop("covariance", None)
     cov = None if cov is None else np.asarray(cov, float)
     if verdict:
@@ -105,18 +108,19 @@ def calibrate(observations: Observations, method: str = "lidarcam", *, verdict: 
             full = judge(observations, T)  # the likely cause may lie in the boards left out (a mispaired scan)
             v = replace(v, warnings=tuple(dict.fromkeys([*v.warnings, *full.warnings])),
                         causes=tuple(dict.fromkeys([*v.causes, *full.causes])))
-        info["verdict"] = v.to_dict()
         warnings = list(info.get("warnings", []))
         if not v.consistent:
             warnings.append(f"the data contradict this answer: {v.reason}")
-        info["warnings"] = warnings + [w for w in v.warnings if w not in warnings]
+        warnings += [w for w in v.warnings if w not in warnings]
+        parts = replace(parts, warnings=warnings, verdict=VerdictPart(v.consistent, v.reason, tuple(v.warnings),
+                                                                      tuple(v.causes), v.sigma_m, tuple(v.boards)))
         if not v.consistent and not m.paper:
             causes = [w for w in v.warnings if w.startswith("likely cause")]
-            if prior is not None and any(w.startswith(PRIOR_CONTRADICTS) for w in info["warnings"]):
+            if prior is not None and any(w.startswith(PRIOR_CONTRADICTS) for w in warnings):
                 causes.insert(0, f"likely cause: {PRIOR_CONTRADICTS} (see the warnings; calibrate without it or "
                                  "widen its sigmas)")
             return CalibrationResult(method, False, None, f"{method}: the data contradict the answer: {v.reason}"
                                      + "".join(f"; {c}" for c in causes), cands, time.perf_counter() - t0,
-                                     info=info)
-    info["observations"] = observations_fingerprint(observations)
-    return CalibrationResult(method, True, T, None, cands, time.perf_counter() - t0, cov, info=info)
+                                     info=parts.to_info())
+    parts = replace(parts, observations=ObservationsPart(**observations_fingerprint(observations)))
+    return CalibrationResult(method, True, T, None, cands, time.perf_counter() - t0, cov, info=parts.to_info())

@@ -24,7 +24,9 @@ DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
 """Lengths of an OpenCV distortion vector."""
 
 
-def _fail(msg: str, field: str) -> ObservationError:
+def field_error(msg: str, field: str) -> ObservationError:
+    """The one-line error of a camera's ``field`` (named ``camera.<field>``, as the observation file spells it),
+    saying ``msg``; every camera model's checks raise it."""
     return ObservationError(msg, field=f"camera.{field}")
 
 
@@ -81,22 +83,22 @@ class Camera(CameraModel):
     std_intrinsics: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        K = _checked_core(self)
+        K = checked_core(self)
         try:
             dist = np.array(self.dist if self.dist is not None else [], dtype=float).ravel()
         except (TypeError, ValueError) as exc:
-            raise _fail(f"not a numeric array ({exc})", "dist") from None
+            raise field_error(f"not a numeric array ({exc})", "dist") from None
         if len(dist) not in DIST_LENGTHS:
-            raise _fail(f"length {len(dist)} is not an OpenCV distortion vector ({DIST_LENGTHS[1:]})", "dist")
+            raise field_error(f"length {len(dist)} is not an OpenCV distortion vector ({DIST_LENGTHS[1:]})", "dist")
         if not np.all(np.isfinite(dist)):
-            raise _fail("contains NaN or inf", "dist")
+            raise field_error("contains NaN or inf", "dist")
         if len(dist) == 14 and np.any(dist[12:] != 0):
-            raise _fail("tilted-sensor terms (tx, ty) are not supported; they must be 0", "dist")
+            raise field_error("tilted-sensor terms (tx, ty) are not supported; they must be 0", "dist")
         d12 = np.zeros(12)
         d12[:min(len(dist), 12)] = dist[:12]
         if self.std_intrinsics is not None:
-            object.__setattr__(self, "std_intrinsics", _checked_std(self.std_intrinsics, len(dist),
-                                                                    size_px=max(self.width, self.height)))
+            object.__setattr__(self, "std_intrinsics", checked_std(self.std_intrinsics, len(dist),
+                                                                   size_px=max(self.width, self.height)))
         K.setflags(write=False)
         d12.setflags(write=False)
         object.__setattr__(self, "K", K)
@@ -144,7 +146,7 @@ class Camera(CameraModel):
         P = np.asarray(P_cam, float)
         with np.errstate(divide="ignore", invalid="ignore"):
             r = np.hypot(P[..., 0], P[..., 1]) / P[..., 2]
-            return (P[..., 2] > 0) & (r < _fold(self))
+            return (P[..., 2] > 0) & (r < fold_radius_cached(self))
 
     def unproject(self, uv: np.ndarray):
         """Unit rays (...,3) of pixels ``uv`` (...,2) and the mask of those with one (undistortion converged
@@ -153,12 +155,13 @@ class Camera(CameraModel):
         x, y, ok = undistort(self.dist, (q[..., 0] - self.K[0, 2]) / self.K[0, 0],
                              (q[..., 1] - self.K[1, 2]) / self.K[1, 1])
         ray = np.stack([x, y, np.ones_like(x)], axis=-1)
-        ok &= np.hypot(x, y) < _fold(self)
+        ok &= np.hypot(x, y) < fold_radius_cached(self)
         return ray / np.linalg.norm(ray, axis=-1, keepdims=True), ok
 
 
-def _fold(cam) -> float:
-    """``fold_radius`` of ``cam.dist``, computed once per camera."""
+def fold_radius_cached(cam) -> float:
+    """``fold_radius`` of ``cam.dist`` (a normalised image radius, unitless: metres over metres in the camera frame),
+    computed once per camera and kept on it."""
     if "_fold" not in cam.__dict__:
         object.__setattr__(cam, "_fold", fold_radius(cam.dist))
     return cam.__dict__["_fold"]
@@ -167,67 +170,69 @@ def _fold(cam) -> float:
 _CORE_EXTRA = {5: ("xi",), 6: ("the model's two parameters",)}
 
 
-def _checked_core(cam) -> np.ndarray:
-    """``cam.K`` checked (3x3, finite, positive focal lengths, no skew, plausible aspect, principal point on the
-    image) as a float array; ``cam.width`` and ``cam.height`` checked and set to ints. ObservationError naming the
-    field otherwise."""
+def checked_core(cam) -> np.ndarray:
+    """``cam.K`` (pixels) checked (3x3, finite, positive focal lengths, no skew, plausible aspect, principal point
+    on the image) as a float array; ``cam.width`` and ``cam.height`` (pixels) checked and set to ints.
+    ObservationError naming the field otherwise."""
     try:
         K = np.array(cam.K, dtype=float)
         np.array(cam.dist if cam.dist is not None else [], dtype=float)
     except (TypeError, ValueError) as exc:
-        raise _fail(f"not a numeric array ({exc})", "K") from None
+        raise field_error(f"not a numeric array ({exc})", "K") from None
     if K.shape != (3, 3):
-        raise _fail(f"expected shape 3x3, got {'x'.join(map(str, K.shape)) or 'scalar'}", "K")
+        raise field_error(f"expected shape 3x3, got {'x'.join(map(str, K.shape)) or 'scalar'}", "K")
     if not np.all(np.isfinite(K)):
-        raise _fail("contains NaN or inf", "K")
+        raise field_error("contains NaN or inf", "K")
     for name in ("width", "height"):
         v = getattr(cam, name)
         if isinstance(v, bool) or not isinstance(v, (int, np.integer, float)) or v != int(v) or int(v) < 1:
-            raise _fail(f"must be a positive integer, got {v!r}", name)
+            raise field_error(f"must be a positive integer, got {v!r}", name)
         object.__setattr__(cam, name, int(v))
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     if not (fx > 0 and fy > 0):
-        raise _fail(f"focal lengths must be > 0, got fx={fx:g}, fy={fy:g}", "K")
+        raise field_error(f"focal lengths must be > 0, got fx={fx:g}, fy={fy:g}", "K")
     if not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
-        raise _fail("must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]", "K")
+        raise field_error("must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]", "K")
     if abs(K[0, 1]) > 1e-9 * fx:
-        raise _fail(f"skew {K[0, 1]:g} is not zero (the OpenCV model has no skew)", "K")
+        raise field_error(f"skew {K[0, 1]:g} is not zero (the OpenCV model has no skew)", "K")
     if not (0.2 < fx / fy < 5.0):
-        raise _fail(f"implausible aspect ratio fx/fy = {fx / fy:.3g}", "K")
+        raise field_error(f"implausible aspect ratio fx/fy = {fx / fy:.3g}", "K")
     if not (-0.5 <= cx <= cam.width - 0.5 and -0.5 <= cy <= cam.height - 0.5):
-        raise _fail(f"principal point ({cx:g}, {cy:g}) outside the {cam.width}x{cam.height} image", "K")
+        raise field_error(f"principal point ({cx:g}, {cy:g}) outside the {cam.width}x{cam.height} image", "K")
     return K
 
 
-def _checked_std(std, n_dist: int, n_core: int = 4, size_px: float | None = None) -> np.ndarray:
-    """``std_intrinsics`` as a read-only float array; ObservationError naming the field when it is not a list of
+def checked_std(std, n_dist: int, n_core: int = 4, size_px: float | None = None) -> np.ndarray:
+    """``std_intrinsics`` (1-sigma: fx fy cx cy in pixels, then the model's parameters and distortion coefficients
+    in their own units) as a read-only float array; ObservationError naming the field when it is not a list of
     ``n_core`` or ``n_core`` + ``n_dist`` finite non-negative numbers, or (given ``size_px``, the image's larger
     side) a 1-sigma of fx fy cx cy exceeds 1000 times it or another 1-sigma exceeds 1e4: an intrinsic that
     uncertain is unknown, not a prior (its weight vanishes from the normal equations, which turn singular)."""
     try:
         s = np.array(std, dtype=float).ravel()
     except (TypeError, ValueError) as exc:
-        raise _fail(f"not a numeric array ({exc})", "std_intrinsics") from None
+        raise field_error(f"not a numeric array ({exc})", "std_intrinsics") from None
     if len(s) not in (n_core, n_core + n_dist):
         core = "fx fy cx cy" + "".join(f" {n}" for n in _CORE_EXTRA.get(n_core, ()))
-        raise _fail(f"length {len(s)}: expected {n_core} ({core}) or {n_core + n_dist} (with the {n_dist} "
-                    "coefficients of dist)", "std_intrinsics")
+        raise field_error(f"length {len(s)}: expected {n_core} ({core}) or {n_core + n_dist} (with the {n_dist} "
+                          "coefficients of dist)", "std_intrinsics")
     if not np.all(np.isfinite(s)):
-        raise _fail("contains NaN or inf", "std_intrinsics")
+        raise field_error("contains NaN or inf", "std_intrinsics")
     if np.any(s < 0):
-        raise _fail(f"negative standard deviation {s.min():g}", "std_intrinsics")
+        raise field_error(f"negative standard deviation {s.min():g}", "std_intrinsics")
     if size_px is not None and np.any(s[:4] > 1000 * size_px):
-        raise _fail(f"a 1-sigma of {s[:4].max():g} px exceeds 1000 times the image's {size_px:g} px: the "
-                    "intrinsics would be unknown, not a prior", "std_intrinsics")
+        raise field_error(f"a 1-sigma of {s[:4].max():g} px exceeds 1000 times the image's {size_px:g} px: the "
+                          "intrinsics would be unknown, not a prior", "std_intrinsics")
     if size_px is not None and np.any(s[4:] > 1e4):
-        raise _fail(f"a distortion coefficient's 1-sigma of {s[4:].max():g} exceeds 1e4: the distortion would be "
-                    "unknown, not a prior", "std_intrinsics")
+        raise field_error(f"a distortion coefficient's 1-sigma of {s[4:].max():g} exceeds 1e4: the distortion would be "
+                          "unknown, not a prior", "std_intrinsics")
     s.setflags(write=False)
     return s
 
 
-def _distort(dist: np.ndarray, x: np.ndarray, y: np.ndarray):
-    """OpenCV's distortion (rational radial, tangential, thin prism) of normalised image points ``x``, ``y``:
+def opencv_distort(dist: np.ndarray, x: np.ndarray, y: np.ndarray):
+    """OpenCV's distortion (rational radial, tangential, thin prism; ``dist`` its 12 coefficients) of normalised
+    image points ``x``, ``y`` (unitless: the camera-frame point over its depth):
     ``(r2, a, b, rad, xd, yd)`` with ``r2 = x^2 + y^2``, the radial numerator ``a`` and denominator ``b``,
     ``rad = a / b`` and the distorted normalised point ``(xd, yd)``."""
     k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = dist
@@ -240,8 +245,8 @@ def _distort(dist: np.ndarray, x: np.ndarray, y: np.ndarray):
     return r2, a, b, rad, xd, yd
 
 
-def _distort_jacobian(dist: np.ndarray, x: np.ndarray, y: np.ndarray, r2, a, b, rad) -> np.ndarray:
-    """d(x'', y'')/d(x', y') (...,2,2) of OpenCV's distortion at normalised points ``x``, ``y`` (``_distort``'s
+def opencv_distort_jacobian(dist: np.ndarray, x: np.ndarray, y: np.ndarray, r2, a, b, rad) -> np.ndarray:
+    """d(x'', y'')/d(x', y') (...,2,2) of OpenCV's distortion at normalised points ``x``, ``y`` (``opencv_distort``'s
     ``r2, a, b, rad`` there)."""
     k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = dist
     da = k1 + r2 * (2 * k2 + 3 * k3 * r2)
@@ -257,8 +262,9 @@ def _distort_jacobian(dist: np.ndarray, x: np.ndarray, y: np.ndarray, r2, a, b, 
     return D
 
 
-def _distort_params_jacobian(x, y, r2, a, b):
-    """d(x'', y'')/d(k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4): two lists of 12 arrays (x'' then y'')."""
+def opencv_distort_params_jacobian(x, y, r2, a, b):
+    """d(x'', y'')/d(k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4) at normalised points ``x``, ``y`` (unitless;
+    ``opencv_distort``'s ``r2, a, b`` there): two lists of 12 arrays (x'' then y'')."""
     z = np.zeros_like(x)
     pw = np.stack([r2, r2**2, r2**3])                        # r^2, r^4, r^6
     drad = np.concatenate([pw / b, -pw * a / b**2])          # d rad / d(k1, k2, k3, k4, k5, k6)
@@ -274,7 +280,7 @@ def fold_radius(dist: np.ndarray, r_max: float = 20.0) -> float:
     denominator ``b`` first reaches 0), searched on ``[0, r_max]``: beyond it the model is not one-to-one. ``r_max``
     when it increases throughout."""
     r = np.linspace(0.0, r_max, 20001)[1:]
-    _, a, b, rad, xd, _ = _distort(np.asarray(dist, float), r, np.zeros_like(r))
+    _, a, b, rad, xd, _ = opencv_distort(np.asarray(dist, float), r, np.zeros_like(r))
     bad = np.flatnonzero((np.diff(np.r_[0.0, xd]) <= 0) | (b <= 0))
     return float(r[bad[0] - 1]) if len(bad) and bad[0] > 0 else (0.0 if len(bad) else r_max)
 
@@ -288,7 +294,7 @@ def undistort(dist: np.ndarray, xd: np.ndarray, yd: np.ndarray, iterations: int 
     lo, hi = np.zeros_like(rd), np.full_like(rd, fold_radius(dist))
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        below = _distort(dist, mid, np.zeros_like(mid))[4] < rd
+        below = opencv_distort(dist, mid, np.zeros_like(mid))[4] < rd
         lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
     k = np.where(rd > 0, lo / np.where(rd > 0, rd, 1.0), 1.0)
     x, y = k * xd, k * yd
@@ -298,16 +304,16 @@ def undistort(dist: np.ndarray, xd: np.ndarray, yd: np.ndarray, iterations: int 
 
 def _newton(dist, x, y, xd, yd, iterations):
     for _ in range(iterations):
-        r2, a, b, rad, ex, ey = _distort(dist, x, y)
+        r2, a, b, rad, ex, ey = opencv_distort(dist, x, y)
         ex, ey = ex - xd, ey - yd
-        D = _distort_jacobian(dist, x, y, r2, a, b, rad)
+        D = opencv_distort_jacobian(dist, x, y, r2, a, b, rad)
         det = D[..., 0, 0] * D[..., 1, 1] - D[..., 0, 1] * D[..., 1, 0]
         det = np.where(np.abs(det) > 1e-12, det, 1e-12)
         sx, sy = (D[..., 1, 1] * ex - D[..., 0, 1] * ey) / det, (-D[..., 1, 0] * ex + D[..., 0, 0] * ey) / det
         x, y = x - sx, y - sy
         if np.nanmax(np.abs(np.r_[np.ravel(sx), np.ravel(sy)]), initial=0.0) < 1e-15:
             break
-    _, _, _, _, ex, ey = _distort(dist, x, y)
+    _, _, _, _, ex, ey = opencv_distort(dist, x, y)
     ok = np.hypot(ex - xd, ey - yd) < 1e-10
     return x, y, ok & np.isfinite(x) & np.isfinite(y)
 
@@ -342,9 +348,9 @@ def _radtan_intrinsics_jacobian(camera: Camera, P_cam: np.ndarray) -> np.ndarray
     fx, fy = camera.K[0, 0], camera.K[1, 1]
     iz = 1.0 / P[..., 2]
     x, y = P[..., 0] * iz, P[..., 1] * iz
-    r2, a, b, rad, xd, yd = _distort(camera.dist, x, y)
+    r2, a, b, rad, xd, yd = opencv_distort(camera.dist, x, y)
     z, one = np.zeros_like(x), np.ones_like(x)
-    dx, dy = _distort_params_jacobian(x, y, r2, a, b)
+    dx, dy = opencv_distort_params_jacobian(x, y, r2, a, b)
     ru = [xd, z, one, z] + [fx * v for v in dx]
     rv = [z, yd, z, one] + [fy * v for v in dy]
     return np.stack([np.stack(ru, axis=-1), np.stack(rv, axis=-1)], axis=-2)
@@ -355,11 +361,11 @@ def _radtan_project(camera: Camera, P_cam: np.ndarray, jacobian: bool = False):
     fx, fy = camera.K[0, 0], camera.K[1, 1]
     iz = 1.0 / P[..., 2]
     x, y = P[..., 0] * iz, P[..., 1] * iz
-    r2, a, b, rad, xd, yd = _distort(camera.dist, x, y)
+    r2, a, b, rad, xd, yd = opencv_distort(camera.dist, x, y)
     uv = np.stack([fx * xd + camera.K[0, 2], fy * yd + camera.K[1, 2]], axis=-1)
     if not jacobian:
         return uv
-    D = _distort_jacobian(camera.dist, x, y, r2, a, b, rad)  # d(x'', y'') / d(x', y')
+    D = opencv_distort_jacobian(camera.dist, x, y, r2, a, b, rad)  # d(x'', y'') / d(x', y')
     N = np.zeros(P.shape[:-1] + (2, 3))             # d(x', y') / d(X, Y, Z)
     N[..., 0, 0] = iz
     N[..., 1, 1] = iz

@@ -182,13 +182,54 @@ class VerdictPart:
     reason: str | None = None
     warnings: tuple[str, ...] = ()
     causes: tuple[str, ...] = ()
+    sigma_m: float | None = field(default=None, compare=False)
+    """The noise std the tests used (metres; None where the method failed before the tests)."""
+    boards: tuple[dict, ...] | None = field(default=None, compare=False)
+    """Per board, the test statistics (dicts of plain numbers; None where the method failed first)."""
 
     @classmethod
     def from_info(cls, info: dict) -> VerdictPart | None:
         v = info.get("verdict")
         if v is None:
             return None
-        return cls(v.get("consistent"), v.get("reason"), tuple(v.get("warnings", ())), tuple(v.get("causes", ())))
+        boards = v.get("boards")
+        return cls(v.get("consistent"), v.get("reason"), tuple(v.get("warnings", ())), tuple(v.get("causes", ())),
+                   _float(v.get("sigma_m")), None if boards is None else tuple(boards))
+
+    def to_dict(self) -> dict:
+        """The ``info["verdict"]`` entry (the file's ``verdict`` field); ``sigma_m`` and ``boards`` only where the
+        tests ran."""
+        d = {"consistent": None if self.consistent is None else bool(self.consistent), "reason": self.reason,
+             "warnings": list(self.warnings), "causes": list(self.causes)}
+        if self.sigma_m is not None:
+            d["sigma_m"] = float(self.sigma_m)
+        if self.boards is not None:
+            d["boards"] = list(self.boards)
+        return d
+
+
+@dataclass(frozen=True)
+class ResidualRmsPart:
+    """The range residuals' RMS (metres) over the boards the answer rests on, at the method's start
+    (``start_m``; None where the method has no start) and at its answer (``answer_m``; None where not finite)."""
+
+    start_m: float | None
+    answer_m: float | None
+
+    def to_dict(self) -> dict:
+        return {"start_m": self.start_m, "answer_m": self.answer_m}
+
+
+@dataclass(frozen=True)
+class ObservationsPart:
+    """Which observations a result was computed from (``data.result.observations_fingerprint``): the number of
+    boards and the SHA-256 (hex) over their data."""
+
+    boards: int
+    sha256: str
+
+    def to_dict(self) -> dict:
+        return {"boards": self.boards, "sha256": self.sha256}
 
 
 @dataclass(frozen=True)
@@ -295,6 +336,10 @@ class InfoParts:
         noise_model: the noise model the covariance holds (``NoiseModel``).
         base_T_lidar_cam: a derived method's start, the base method's answer (4x4).
         warnings: the method's warnings (None: no entry, as for a method that gives none).
+        residual_rms: the range residuals' RMS at the start and the answer (``ResidualRmsPart``; added by
+            ``calibrate``, as the next two).
+        verdict: the consistency verdict of the answer (``VerdictPart``).
+        observations: which observations the answer was computed from (``ObservationsPart``).
     """
 
     base: dict = field(default_factory=dict)
@@ -310,6 +355,9 @@ class InfoParts:
     noise_model: NoiseModel | None = None
     base_T_lidar_cam: np.ndarray | None = None
     warnings: list[str] | None = None
+    residual_rms: ResidualRmsPart | None = None
+    verdict: VerdictPart | None = None
+    observations: ObservationsPart | None = None
 
     def to_info(self) -> dict:
         """The ``info`` dict of ``Method.func`` (what ``CalibrationResult.info`` and the ``lidarcam.result/1``
@@ -322,6 +370,9 @@ class InfoParts:
         single = {"prior": self.prior, "degeneracy": self.degeneracy, "alternatives": self.alternatives,
                   "board_error": self.board_error, "base_T_lidar_cam": self.base_T_lidar_cam,
                   "noise_model": None if self.noise_model is None else self.noise_model.to_dict(),
-                  "warnings": None if self.warnings is None else list(self.warnings)}
+                  "residual_rms": None if self.residual_rms is None else self.residual_rms.to_dict(),
+                  "verdict": None if self.verdict is None else self.verdict.to_dict(),
+                  "warnings": None if self.warnings is None else list(self.warnings),
+                  "observations": None if self.observations is None else self.observations.to_dict()}
         info.update({k: v for k, v in single.items() if v is not None})
         return info

@@ -23,7 +23,6 @@ from ..refine.dispersion import widened_covariance
 from ..refine.joint import JointOptions
 from ..refine.joint_step import JointStep, joint_step
 from ..refine.partial import fixed_starts, refine_free
-from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV
 from ..refine.systematic import fold_noise_ratio
 from ..refine.uncertainty import (
     inverse_information,
@@ -31,6 +30,7 @@ from ..refine.uncertainty import (
     refinement_covariance,
     systematic_sandwich,
 )
+from ..robust.choose import ChooseOptions
 
 
 def refuse_undetermined(obs: Observations, T: np.ndarray, candidates: np.ndarray, who: str,
@@ -169,25 +169,24 @@ def widened_range_covariance(obs: Observations, T: np.ndarray, cov: np.ndarray, 
     return cov, disp.to_dict(names), [disp.warning(names)] if disp.widened else []
 
 
-def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray], *,
-                      residual: str = "range", loss: str = "linear", f_scale_m: float | None = None,
-                      f_scale_sigmas: float = F_SCALE_SIGMAS, range_sigma_m: float | None = None,
-                      max_nfev: int = MAX_NFEV, fixed_sigma: np.ndarray | None = None,
+def fixed_calibration(obs: Observations, fixed: dict, full_start: Callable[[], np.ndarray],
+                      choose: ChooseOptions, *, residual: str = "range",
+                      range_sigma_m: float | None = None, fixed_sigma: np.ndarray | None = None,
                       board_error: BoardErrorScale | None = None) -> tuple[np.ndarray, np.ndarray, InfoParts]:
     """Calibrate the free mounting parameters with ``fixed`` ones held (``refine.partial``): from the closed-form
     planar start when roll, pitch and z are given, else from ``full_start()`` (a full calibration's answer);
-    refined on ``residual`` (robust scale ``f_scale_m``, default ``f_scale_sigmas`` noise stds); ``fixed_sigma``
-    (6,): the given values' 1-sigma (radians, metres) where they are uncertain; ``board_error``: the per-board
-    systematic error the covariance holds (``refine.partial.refine_free``). Returns (T_lidar_cam, starts, the
-    info's parts: the refinement's report, covariance included, and the board set's warnings)."""
+    refined on ``residual`` with ``choose``'s loss, robust scale (``ChooseOptions.scale_m`` of the range noise,
+    metres) and evaluation limit; ``fixed_sigma`` (6,): the given values' 1-sigma (radians, metres) where they are
+    uncertain; ``board_error``: the per-board systematic error the covariance holds
+    (``refine.partial.refine_free``). Returns (T_lidar_cam, starts, the info's parts: the refinement's report,
+    covariance included, and the board set's warnings)."""
     mask, values = parse_fixed(fixed)
     sigma = range_sigma(obs, range_sigma_m)
     starts = fixed_starts(obs, mask, values, full_start)
-    T, info = refine_free(obs, mask, values, starts, residual=residual, loss=loss,
-                              f_scale_m=f_scale_m if f_scale_m is not None else f_scale_sigmas * sigma,
-                              range_sigma_m=range_sigma_m, max_nfev=max_nfev, fixed_sigma=fixed_sigma,
-                              board_error=board_error)
-    report = dict(info, sigma_m_selection=sigma, refine_residual=residual, refine_loss=str(loss))
+    T, info = refine_free(obs, mask, values, starts, residual=residual, loss=choose.loss,
+                          f_scale_m=choose.scale_m(sigma), range_sigma_m=range_sigma_m, max_nfev=choose.max_nfev,
+                          fixed_sigma=fixed_sigma, board_error=board_error)
+    report = dict(info, sigma_m_selection=sigma, refine_residual=residual, refine_loss=str(choose.loss))
     return T, np.asarray(starts), InfoParts(refinement=report, warnings=board_set_warnings(obs))
 
 

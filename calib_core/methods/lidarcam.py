@@ -96,9 +96,7 @@ def lidarcam(obs: Observations, *, options: LidarcamOptions | None = None, **key
                                "is known, or give it as the prior)")
     if opts.fixed is not None:
         T, starts, parts = fixed_calibration(obs, opts.fixed, lambda: search_and_refine(obs, opts).best.T,
-                                             loss=opts.choose.loss, f_scale_m=opts.choose.f_scale_m,
-                                             f_scale_sigmas=opts.choose.f_scale_sigmas,
-                                             range_sigma_m=opts.range_sigma_m, max_nfev=opts.choose.max_nfev)
+                                             opts.choose, range_sigma_m=opts.range_sigma_m)
         return T, starts, parts.to_info()
     try:
         found = search_and_refine(obs, opts)                                                     # 1-4
@@ -273,10 +271,8 @@ def prior_decides(found: Found, opts: LidarcamOptions, deg: Degeneracy, est: Boa
     if not deg.aligned:
         raise undetermined_failure(tests.obs_used, deg, np.concatenate([best.T[None], C]), "lidarcam")
     fixed, sigma = prior_fixed(prior, deg)
-    r = opts.choose
-    T, _, parts = fixed_calibration(tests.obs_used, fixed, lambda: best.T, loss=r.loss, f_scale_m=r.f_scale_m,
-                                    f_scale_sigmas=r.f_scale_sigmas, range_sigma_m=opts.range_sigma_m,
-                                    max_nfev=r.max_nfev, fixed_sigma=sigma,
+    T, _, parts = fixed_calibration(tests.obs_used, fixed, lambda: best.T, opts.choose,
+                                    range_sigma_m=opts.range_sigma_m, fixed_sigma=sigma,
                                     board_error=None if est is None else est.scale)
     warnings = tests.warnings + parts.warnings + [deg.message(from_prior=True)]
     cov = CovariancePart(parts.refinement["covariance"], RANGE_ONLY_MODEL, RANGE_ONLY_INTRINSICS)

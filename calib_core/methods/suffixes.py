@@ -20,6 +20,7 @@ from ..refine.refine import F_SCALE_SIGMAS, MAX_NFEV, refine
 from ..refine.systematic import ESTIMATED, board_error_estimate
 from ..refine.uncertainty import conditioning
 from ..registry import Method, derived
+from ..robust.choose import ChooseOptions
 from .last_steps import (
     fixed_calibration,
     fold_covariance,
@@ -75,8 +76,9 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
         ropts = _refine_options(options)
         fixed = ropts.pop("fixed", None)
         if fixed is not None:
-            T, starts, parts = fixed_calibration(obs, fixed, lambda: base.func(obs, **options)[0], residual=residual,
-                                                 **ropts)
+            choose = ChooseOptions(**{k: ropts.pop(k) for k in ("loss", "f_scale_m", "max_nfev") if k in ropts})
+            T, starts, parts = fixed_calibration(obs, fixed, lambda: base.func(obs, **options)[0], choose,
+                                                 residual=residual, **ropts)
             return T, starts, parts.to_info()
         try:
             T0, cands, info = base.func(obs, **options)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..camera import CameraModel, _checked_core, _checked_std, _fail
+from ..camera import CameraModel, checked_core, checked_std, field_error
 
 
 class FieldCamera(CameraModel):
@@ -17,27 +17,28 @@ class FieldCamera(CameraModel):
     dist_lengths: tuple[int, ...] = (0,)
 
     def __post_init__(self) -> None:
-        K = _checked_core(self)
+        K = checked_core(self)
         try:
             dist = np.array(self.dist if self.dist is not None else [], dtype=float).ravel()
             params = [float(getattr(self, n)) for n in self.param_names]
         except (TypeError, ValueError) as exc:
-            raise _fail(f"not a number ({exc})", "dist") from None
+            raise field_error(f"not a number ({exc})", "dist") from None
         if len(dist) not in self.dist_lengths:
-            raise _fail(f"length {len(dist)}: the {self.name} model takes {' or '.join(map(str, self.dist_lengths))} "
-                        "distortion coefficients", "dist")
+            lengths = " or ".join(map(str, self.dist_lengths))
+            raise field_error(f"length {len(dist)}: the {self.name} model takes {lengths} distortion coefficients",
+                              "dist")
         if not np.all(np.isfinite(dist)):
-            raise _fail("contains NaN or inf", "dist")
+            raise field_error("contains NaN or inf", "dist")
         for n, v in zip(self.param_names, params, strict=True):
             if not np.isfinite(v):
-                raise _fail("is NaN or inf", n)
+                raise field_error("is NaN or inf", n)
             object.__setattr__(self, n, v)
         self.check_params()
         full = np.zeros(max(self.dist_lengths))
         full[:len(dist)] = dist
         if self.std_intrinsics is not None:
-            object.__setattr__(self, "std_intrinsics", _checked_std(self.std_intrinsics, len(dist), self.n_core,
-                                                                    max(self.width, self.height)))
+            object.__setattr__(self, "std_intrinsics", checked_std(self.std_intrinsics, len(dist), self.n_core,
+                                                                   max(self.width, self.height)))
         K.setflags(write=False)
         full.setflags(write=False)
         object.__setattr__(self, "K", K)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import _fail
+from ..camera import field_error
 from .base import FieldCamera
 
 
@@ -39,9 +39,9 @@ class DoubleSphere(FieldCamera):
 
     def check_params(self) -> None:
         if not -1 < self.xi:
-            raise _fail(f"must be > -1, got {self.xi:g}", "xi")
+            raise field_error(f"must be > -1, got {self.xi:g}", "xi")
         if not 0 <= self.alpha < 1:
-            raise _fail(f"must be in [0, 1), got {self.alpha:g}", "alpha")
+            raise field_error(f"must be in [0, 1), got {self.alpha:g}", "alpha")
 
     @property
     def _w2(self) -> float:

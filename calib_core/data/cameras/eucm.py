@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import _fail
+from ..camera import field_error
 from .base import FieldCamera
 
 
@@ -37,9 +37,9 @@ class EUCM(FieldCamera):
 
     def check_params(self) -> None:
         if not 0 <= self.alpha < 1:
-            raise _fail(f"must be in [0, 1), got {self.alpha:g}", "alpha")
+            raise field_error(f"must be in [0, 1), got {self.alpha:g}", "alpha")
         if not self.beta > 0:
-            raise _fail(f"must be > 0, got {self.beta:g}", "beta")
+            raise field_error(f"must be > 0, got {self.beta:g}", "beta")
 
     @property
     def _w(self) -> float:

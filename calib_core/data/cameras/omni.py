@@ -16,7 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import DIST_LENGTHS, _distort, _distort_jacobian, _distort_params_jacobian, _fail, _fold, undistort
+from ..camera import (
+    DIST_LENGTHS,
+    field_error,
+    fold_radius_cached,
+    opencv_distort,
+    opencv_distort_jacobian,
+    opencv_distort_params_jacobian,
+    undistort,
+)
 from .base import FieldCamera
 
 
@@ -38,7 +46,7 @@ class Omni(FieldCamera):
 
     def check_params(self) -> None:
         if self.xi < 0:
-            raise _fail(f"must be >= 0, got {self.xi:g}", "xi")
+            raise field_error(f"must be >= 0, got {self.xi:g}", "xi")
 
     @property
     def _w(self) -> float:
@@ -49,7 +57,7 @@ class Omni(FieldCamera):
         d = np.linalg.norm(P, axis=-1)
         with np.errstate(divide="ignore", invalid="ignore"):
             m = np.hypot(P[..., 0], P[..., 1]) / (P[..., 2] + self.xi * d)
-        return (P[..., 2] > -self._w * d) & (d > 0) & (m < _fold(self))
+        return (P[..., 2] > -self._w * d) & (d > 0) & (m < fold_radius_cached(self))
 
     def _sphere(self, P):
         d = np.linalg.norm(P, axis=-1)
@@ -59,11 +67,11 @@ class Omni(FieldCamera):
     def project(self, P_cam: np.ndarray, jacobian: bool = False):
         P = np.asarray(P_cam, float)
         x, y, d, w = self._sphere(P)
-        r2, a, b, rad, xd, yd = _distort(self.dist, x, y)
+        r2, a, b, rad, xd, yd = opencv_distort(self.dist, x, y)
         uv = self._uv(np.stack([xd, yd], axis=-1))
         if not jacobian:
             return uv
-        D = _distort_jacobian(self.dist, x, y, r2, a, b, rad)
+        D = opencv_distort_jacobian(self.dist, x, y, r2, a, b, rad)
         e = P / d[..., None]                                              # d d / dP
         dw = self.xi * e
         dw[..., 2] += 1
@@ -81,10 +89,10 @@ class Omni(FieldCamera):
         """d(u, v)/d(fx, fy, cx, cy, xi, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4) (...,2,17)."""
         P = np.asarray(P_cam, float)
         x, y, d, w = self._sphere(P)
-        r2, a, b, rad, xd, yd = _distort(self.dist, x, y)
-        D = _distort_jacobian(self.dist, x, y, r2, a, b, rad)
+        r2, a, b, rad, xd, yd = opencv_distort(self.dist, x, y)
+        D = opencv_distort_jacobian(self.dist, x, y, r2, a, b, rad)
         dm_dxi = np.stack([-x * d / w, -y * d / w], axis=-1)
-        dx, dy = _distort_params_jacobian(x, y, r2, a, b)
+        dx, dy = opencv_distort_params_jacobian(x, y, r2, a, b)
         cols = [np.einsum("...ab,...b->...a", D, dm_dxi)] + [np.stack([u, v], -1) for u, v in zip(dx, dy, strict=True)]
         return self._k_jacobian(np.stack([xd, yd], axis=-1), cols)
 
@@ -95,7 +103,7 @@ class Omni(FieldCamera):
         x, y, ok = undistort(self.dist, mx, my)
         r2 = x * x + y * y
         disc = 1 + (1 - self.xi**2) * r2
-        ok &= (disc >= 0) & (np.sqrt(r2) < _fold(self))
+        ok &= (disc >= 0) & (np.sqrt(r2) < fold_radius_cached(self))
         k = (self.xi + np.sqrt(np.maximum(disc, 0))) / (1 + r2)
         ray = np.stack([k * x, k * y, k - self.xi], axis=-1)
         ok &= ray[..., 2] > -self._w * np.linalg.norm(ray, axis=-1)

@@ -9,7 +9,16 @@ import pytest
 from scenes import make_observations
 
 from calib_core import calibrate
-from calib_core.data.outcome import CovarianceModel, CovariancePart, InfoParts, JointFitPart, NoiseModel
+from calib_core.data.outcome import (
+    CovarianceModel,
+    CovariancePart,
+    InfoParts,
+    JointFitPart,
+    NoiseModel,
+    ObservationsPart,
+    ResidualRmsPart,
+    VerdictPart,
+)
 from calib_core.data.result import CalibrationResult
 
 
@@ -74,3 +83,18 @@ def test_info_parts_become_entries_in_one_place_and_override_a_base_method_s():
     o = CalibrationResult("m", True, np.eye(4), covariance=np.eye(6), info=info).outcome
     assert o.covariance.model is CovarianceModel.JOINT and o.noise_model.name == "per-beam range noise"
     assert InfoParts(base=base).to_info() == base and "warnings" not in InfoParts().to_info()
+
+
+@pytest.mark.parametrize("method", ["lidarcam", "vasconcelos+ml"])
+def test_calibrate_s_own_entries_are_parts_that_read_back_as_they_went_in(method):
+    """``calibrate`` adds the residual RMS, the verdict and the observations' fingerprint as ``InfoParts``: each
+    entry read back as its part gives the same entry, the fingerprint last; the method's start and covariance
+    are not entries."""
+    obs = make_observations(np.random.default_rng(950), 5, 0.02)
+    info = calibrate(obs, method).info
+    v = VerdictPart.from_info(info)
+    assert v.to_dict() == info["verdict"] and v.sigma_m > 0 and len(v.boards) == 5
+    assert ResidualRmsPart(**info["residual_rms"]).to_dict() == info["residual_rms"]
+    assert info["residual_rms"]["answer_m"] < 0.05 and list(info)[-1] == "observations"
+    assert ObservationsPart(**info["observations"]).to_dict() == info["observations"]
+    assert "start_T_lidar_cam" not in info and "covariance" not in info
