@@ -217,7 +217,7 @@ class ResidualRmsPart:
     answer_m: float | None
 
     def to_dict(self) -> dict:
-        return {"start_m": self.start_m, "answer_m": self.answer_m}
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -229,7 +229,7 @@ class ObservationsPart:
     sha256: str
 
     def to_dict(self) -> dict:
-        return {"boards": self.boards, "sha256": self.sha256}
+        return asdict(self)
 
 
 @dataclass(frozen=True)

@@ -59,6 +59,14 @@ def refine_and_cover(obs: Observations, T0: np.ndarray, residual: str, *, loss: 
     return r, InfoParts(refinement=report, covariance=part, warnings=[deg.message()] if len(deg.directions) else None)
 
 
+def board_error_term(obs: Observations, T0: np.ndarray, range_sigma_m: float | None):
+    """The per-board systematic error at the base method's answer ``T0`` (``refine.systematic.board_error_estimate``,
+    ``range_sigma_m`` metres or None: the scan lines') and the term a suffix's covariance holds: its scale, or None
+    for a zero one (the per-beam path)."""
+    est = board_error_estimate(obs, T0, range_sigma_m)
+    return est, est.scale if est.scale.active else None
+
+
 def _refine_options(options: dict) -> dict:
     """The refinement's options popped from ``options`` (``calibrate`` has checked them against the schema)."""
     return {k: options.pop(k) for k in REFINE_OPTIONS if k in options}
@@ -85,8 +93,7 @@ def refined_method(base: Method, residual: str, suffix: str) -> Method:
         except SolveFailure as fail:
             raise explain_failure(obs, fail, ropts.get("range_sigma_m")) from None
         T0 = np.asarray(T0, float)
-        est = board_error_estimate(obs, T0, ropts.get("range_sigma_m")) if residual == "range" else None
-        term = est.scale if est is not None and est.scale.active else None   # a zero one: the per-beam path
+        est, term = board_error_term(obs, T0, ropts.get("range_sigma_m")) if residual == "range" else (None, None)
         r, parts = refine_and_cover(obs, T0, residual, board_error=term, **ropts)
         warnings = info.get("warnings", []) + (parts.warnings or [])
         return r.T_lidar_cam, cands, replace(parts, base=info, base_T_lidar_cam=T0,
@@ -118,8 +125,7 @@ def joint_method(base: Method) -> Method:
         T0 = np.asarray(T0, float)
         loss, sigma = jopts.pop("loss", "linear"), jopts.pop("range_sigma_m", None)
         jo = JointOptions(**jopts)
-        est = board_error_estimate(obs, T0, sigma) if jo.board_error else None
-        term = est.scale if est is not None and est.scale.active else None   # a zero one: the per-beam path
+        est, term = board_error_term(obs, T0, sigma) if jo.board_error else (None, None)
         held = est is not None and est.source == ESTIMATED
         berr = est.to_dict() if est is not None else None
         joint, why = try_joint(obs, T0, range_sigma_m=sigma, loss=loss, options=jo, board_error=term,
